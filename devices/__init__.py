@@ -1,0 +1,1 @@
+"""Hardware adapters and simulated devices that yield Samples."""
