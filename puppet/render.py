@@ -1,0 +1,567 @@
+"""Offscreen OpenGL renderer for the deforming face, built on moderngl.
+
+The face's topology, albedo and materials never change while it is puppeteered; only vertex
+positions (and therefore normals) do. So the renderer uploads colours, materials and triangle
+indices once into static buffers and, each frame, writes positions and normals into one dynamic
+vertex buffer of fixed size (``Buffer.write``, no reallocation) before drawing and reading the
+image back.
+
+Shading aims to be realistic enough to judge facial motion, not photoreal: per-frame vertex
+normals; a three-light studio rig (warm key, cool fill, rim) attached to the camera; wrapped
+(half-Lambert-like) diffuse whose extra light near the terminator is tinted red, imitating light
+scattered under skin; a normalised Blinn-Phong specular lobe with Schlick Fresnel whose strength
+and sharpness follow a per-vertex ``specular`` material (low for skin, high for wet eyes and
+teeth); and a sky/ground hemisphere ambient. Lighting is computed in linear space and encoded to
+sRGB on output. Back faces are drawn with flipped normals, because the mouth interior is seen
+from inside the mesh.
+
+Coordinates follow the face: +x the face's own left, +y up, +z toward the viewer.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import itertools
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Protocol
+
+import moderngl
+import numpy as np
+
+from puppet.normals import VertexNormals
+
+SKIN_SRGB = (0.80, 0.62, 0.53)
+"""Albedo (sRGB, 0-1) used where a mesh has no colours."""
+
+SKIN_SPECULAR = 0.3
+"""Default per-vertex specular strength: a soft sheen. Eyes and teeth want about 1."""
+
+DEFAULT_FOV = 27.0
+"""Vertical field of view in degrees of ``Renderer.frame``: a portrait lens, little distortion."""
+
+VIEW_DIRECTIONS = {
+    "front": (0.0, 0.0, 1.0),
+    "three_quarter": (np.sin(np.pi / 4), 0.0, np.cos(np.pi / 4)),
+    "profile": (1.0, 0.0, 0.0),
+}
+"""Unit directions from the framed object toward the camera, in the face frame. The angled
+views look at the face's own left side (+x)."""
+
+# Studio rig in camera space (x right, y up, z from the subject toward the camera): direction
+# toward each light and its linear colour. Rotated into the world whenever the camera moves.
+_LIGHT_DIRECTIONS_CAMERA = np.array(
+    [
+        [-0.65, 0.50, 0.57],  # key: upper left of the camera, warm
+        [0.80, 0.05, 0.60],  # fill: right, cool and weak
+        [0.35, 0.60, -0.72],  # rim: behind and above, outlines the silhouette
+    ]
+)
+_LIGHT_COLORS = np.array(
+    [
+        [1.30, 1.18, 1.05],
+        [0.20, 0.24, 0.31],
+        [0.85, 0.85, 0.90],
+    ]
+)
+_SKY_COLOR = (0.11, 0.12, 0.14)
+_GROUND_COLOR = (0.05, 0.04, 0.035)
+
+_MESH_VERTEX_SHADER = """
+#version 330
+uniform mat4 view_projection;
+in vec3 in_position;
+in vec3 in_normal;
+in vec3 in_albedo;
+in float in_specular;
+out vec3 v_position;
+out vec3 v_normal;
+out vec3 v_albedo;
+out float v_specular;
+
+void main() {
+    v_position = in_position;
+    v_normal = in_normal;
+    v_albedo = in_albedo;
+    v_specular = in_specular;
+    gl_Position = view_projection * vec4(in_position, 1.0);
+}
+"""
+
+_MESH_FRAGMENT_SHADER = """
+#version 330
+const int N_LIGHTS = 3;
+const float WRAP = 0.5;                           // how far light wraps past the terminator
+const vec3 SCATTER_TINT = vec3(1.0, 0.38, 0.26);  // colour of the wrapped (scattered) light
+const float F0 = 0.04;                            // dielectric reflectance at normal incidence
+
+uniform vec3 light_direction[N_LIGHTS];  // world space, unit, toward the light
+uniform vec3 light_color[N_LIGHTS];      // linear
+uniform vec3 eye;
+uniform vec3 sky_color;
+uniform vec3 ground_color;
+
+in vec3 v_position;
+in vec3 v_normal;
+in vec3 v_albedo;
+in float v_specular;
+out vec4 f_color;
+
+// Lambert plus the extra light of wrapped diffuse, tinted: skin's reddish terminator.
+vec3 skin_diffuse(float n_dot_l) {
+    float lambert = max(n_dot_l, 0.0);
+    float wrapped = max((n_dot_l + WRAP) / (1.0 + WRAP), 0.0);
+    return vec3(lambert) + SCATTER_TINT * (wrapped - lambert);
+}
+
+// Normalised Blinn-Phong with Schlick Fresnel; strength also sharpens the lobe.
+float specular(vec3 n, vec3 l, vec3 v, float strength) {
+    vec3 h = normalize(l + v);
+    float shininess = mix(24.0, 512.0, strength * strength);
+    float fresnel = F0 + (1.0 - F0) * pow(1.0 - max(dot(h, v), 0.0), 5.0);
+    float lobe = (shininess + 8.0) / 8.0 * pow(max(dot(n, h), 0.0), shininess);
+    return strength * fresnel * lobe * max(dot(n, l), 0.0);
+}
+
+vec3 srgb_encode(vec3 c) {
+    c = clamp(c, 0.0, 1.0);
+    return mix(c * 12.92, 1.055 * pow(c, vec3(1.0 / 2.4)) - 0.055, step(0.0031308, c));
+}
+
+void main() {
+    vec3 n = normalize(v_normal);
+    if (!gl_FrontFacing) {
+        n = -n;
+    }
+    vec3 v = normalize(eye - v_position);
+    vec3 color = v_albedo * mix(ground_color, sky_color, 0.5 + 0.5 * n.y);
+    for (int i = 0; i < N_LIGHTS; ++i) {
+        vec3 l = light_direction[i];
+        vec3 diffuse = v_albedo * skin_diffuse(dot(n, l));
+        color += light_color[i] * (diffuse + specular(n, l, v, v_specular));
+    }
+    f_color = vec4(srgb_encode(color), 1.0);
+}
+"""
+
+# Full-screen triangle from gl_VertexID: a vertical grey gradient with a soft vignette, sRGB.
+_BACKGROUND_VERTEX_SHADER = """
+#version 330
+out vec2 v_uv;
+
+void main() {
+    vec2 corner = vec2((gl_VertexID << 1) & 2, gl_VertexID & 2);
+    v_uv = corner;
+    gl_Position = vec4(corner * 2.0 - 1.0, 1.0, 1.0);
+}
+"""
+
+_BACKGROUND_FRAGMENT_SHADER = """
+#version 330
+in vec2 v_uv;
+out vec4 f_color;
+
+void main() {
+    vec3 top = vec3(0.50, 0.51, 0.53);
+    vec3 bottom = vec3(0.26, 0.265, 0.28);
+    vec3 color = mix(bottom, top, v_uv.y);
+    float vignette = 1.0 - 0.25 * dot(v_uv - 0.5, v_uv - 0.5);
+    f_color = vec4(color * vignette, 1.0);
+}
+"""
+
+
+class FaceLike(Protocol):
+    """What ``render_face`` needs of a face: rest vertices, triangles and optional colours."""
+
+    vertices: np.ndarray
+    triangles: np.ndarray
+    colors: np.ndarray | None
+
+
+@dataclass(frozen=True)
+class Camera:
+    """A perspective pin-hole camera: position, aim, vertical field of view and clip planes."""
+
+    eye: np.ndarray
+    target: np.ndarray
+    up: np.ndarray
+    fov: float
+    near: float
+    far: float
+
+    def basis(self) -> np.ndarray:
+        """Rows: the camera's right, up and back (target-to-eye) unit axes in world space."""
+        back = _unit(self.eye - self.target)
+        right = _unit(np.cross(self.up, back))
+        return np.stack([right, np.cross(back, right), back])
+
+    def view_matrix(self) -> np.ndarray:
+        """World-to-camera rigid transform (4x4)."""
+        view = np.eye(4)
+        view[:3, :3] = self.basis()
+        view[:3, 3] = -view[:3, :3] @ self.eye
+        return view
+
+    def projection_matrix(self, aspect: float) -> np.ndarray:
+        """OpenGL perspective projection (4x4) for a width/height ``aspect``."""
+        f = 1.0 / np.tan(np.radians(self.fov) / 2.0)
+        near, far = self.near, self.far
+        return np.array(
+            [
+                [f / aspect, 0.0, 0.0, 0.0],
+                [0.0, f, 0.0, 0.0],
+                [0.0, 0.0, (far + near) / (near - far), 2.0 * far * near / (near - far)],
+                [0.0, 0.0, -1.0, 0.0],
+            ]
+        )
+
+
+class Renderer:
+    """Draws one fixed-topology triangle mesh with changing vertex positions to RGB images.
+
+    The renderer owns its GL objects (buffers, programs, framebuffers) and, unless given an
+    existing ``ctx`` (a window's), a standalone headless context that it also releases. Use it
+    as a context manager or call ``release()``.
+
+    OpenGL calls go to whichever context is current on the thread, so a renderer that owns its
+    context makes it current around its own GL work (several renderers may coexist); with a
+    borrowed ``ctx`` the caller (the window) keeps its context current.
+    """
+
+    def __init__(
+        self,
+        triangles: np.ndarray,
+        n_vertices: int,
+        colors: np.ndarray | None = None,
+        *,
+        materials: np.ndarray | None = None,
+        width: int = 640,
+        height: int = 640,
+        backend: str = "egl",
+        samples: int = 4,
+        ctx: moderngl.Context | None = None,
+    ) -> None:
+        """Upload topology, albedo (sRGB 0-1, per vertex) and specular strengths (0-1).
+
+        ``colors`` None paints the mesh in a skin tone; ``materials`` None gives every vertex
+        ``SKIN_SPECULAR``. ``samples`` > 1 antialiases with multisampling where supported.
+        """
+        self.n_vertices = int(n_vertices)
+        self.size = (int(width), int(height))
+        self._owns_ctx = ctx is None
+        self.ctx = ctx or moderngl.create_context(standalone=True, backend=backend)
+        self._normals = VertexNormals(triangles, self.n_vertices)
+        self._normal_out = np.empty((self.n_vertices, 3))
+        self._staging = np.empty((self.n_vertices, 6), dtype="f4")
+        self.camera: Camera | None = None
+        with self._current():
+            self._create_gl_objects(triangles, colors, materials, samples)
+
+    def _create_gl_objects(
+        self,
+        triangles: np.ndarray,
+        colors: np.ndarray | None,
+        materials: np.ndarray | None,
+        samples: int,
+    ) -> None:
+        """Programs, static and dynamic buffers, vertex arrays, constant uniforms, targets."""
+        self._mesh_program = self.ctx.program(
+            vertex_shader=_MESH_VERTEX_SHADER, fragment_shader=_MESH_FRAGMENT_SHADER
+        )
+        self._background_program = self.ctx.program(
+            vertex_shader=_BACKGROUND_VERTEX_SHADER, fragment_shader=_BACKGROUND_FRAGMENT_SHADER
+        )
+        self._dynamic = self.ctx.buffer(reserve=self._staging.nbytes, dynamic=True)
+        self._static = self.ctx.buffer(_material_data(self.n_vertices, colors, materials))
+        self._indices = self.ctx.buffer(np.ascontiguousarray(triangles, dtype="u4"))
+        self._mesh = self.ctx.vertex_array(
+            self._mesh_program,
+            [
+                (self._dynamic, "3f 3f", "in_position", "in_normal"),
+                (self._static, "3f 1f", "in_albedo", "in_specular"),
+            ],
+            index_buffer=self._indices,
+            index_element_size=4,
+        )
+        self._background = self.ctx.vertex_array(self._background_program, [])
+        self._set_uniform("sky_color", np.array(_SKY_COLOR))
+        self._set_uniform("ground_color", np.array(_GROUND_COLOR))
+        self._set_uniform("light_color", _LIGHT_COLORS)
+        self._draw_target, self._read_target, self._attachments = self._make_framebuffers(samples)
+
+    def __enter__(self) -> Renderer:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.release()
+
+    @property
+    def samples(self) -> int:
+        """Multisample count actually in use (0: no multisampling)."""
+        return self._draw_target.samples
+
+    def look_at(
+        self,
+        eye: np.ndarray,
+        target: np.ndarray,
+        up: np.ndarray = (0.0, 1.0, 0.0),
+        fov: float = DEFAULT_FOV,
+        near: float | None = None,
+        far: float | None = None,
+    ) -> Camera:
+        """Place the camera at ``eye`` aimed at ``target``; fov is vertical, in degrees.
+
+        Clip planes default to 1/20 and 20 times the eye-target distance.
+        """
+        eye, target = np.asarray(eye, dtype=float), np.asarray(target, dtype=float)
+        distance = float(np.linalg.norm(eye - target))
+        self.camera = Camera(
+            eye=eye,
+            target=target,
+            up=np.asarray(up, dtype=float),
+            fov=float(fov),
+            near=distance / 20.0 if near is None else float(near),
+            far=distance * 20.0 if far is None else float(far),
+        )
+        return self.camera
+
+    def frame(
+        self,
+        vertices: np.ndarray,
+        view: str = "front",
+        margin: float = 1.15,
+        fov: float = DEFAULT_FOV,
+    ) -> Camera:
+        """Aim a perspective camera at ``vertices`` (e.g. the head) from a named view.
+
+        The camera looks at the centre of their bounding box along ``VIEW_DIRECTIONS[view]``
+        and backs off just far enough that every vertex projects inside the image shrunk by
+        ``margin`` (1.15: 15% breathing room).
+        """
+        points = np.asarray(vertices, dtype=float)
+        direction = np.asarray(VIEW_DIRECTIONS[view])
+        target = (points.min(axis=0) + points.max(axis=0)) / 2.0
+        probe = Camera(target + direction, target, np.array([0.0, 1.0, 0.0]), fov, 1.0, 2.0)
+        local = (points - target) @ probe.basis().T
+        tan_y = np.tan(np.radians(fov) / 2.0)
+        tan_x = tan_y * self.size[0] / self.size[1]
+        reach = np.maximum(np.abs(local[:, 0]) / tan_x, np.abs(local[:, 1]) / tan_y)
+        distance = float(np.max(local[:, 2] + margin * reach))
+        depth = float(np.ptp(local[:, 2])) + 1e-9
+        return self.look_at(
+            target + distance * direction,
+            target,
+            fov=fov,
+            near=max(distance - local[:, 2].max() - depth, distance / 100.0),
+            far=distance + 2.0 * depth,
+        )
+
+    def project(self, points: np.ndarray) -> np.ndarray:
+        """Pixel coordinates (M, 2) as (column, row), row 0 at the top, of world ``points``."""
+        clip = self._view_projection() @ np.c_[points, np.ones(len(points))].T
+        ndc = clip[:2] / clip[3]
+        width, height = self.size
+        return np.stack([(ndc[0] + 1.0) / 2.0 * width, (1.0 - ndc[1]) / 2.0 * height], axis=1)
+
+    def draw(
+        self,
+        vertices: np.ndarray,
+        normals: np.ndarray | None = None,
+        framebuffer: moderngl.Framebuffer | None = None,
+    ) -> None:
+        """Draw background and mesh into ``framebuffer`` (default: the offscreen one).
+
+        A window passes ``ctx.screen`` (of the renderer's size, since the camera's aspect
+        follows it) and skips the readback of ``render``. Without a
+        camera yet, the first call frames ``vertices`` from the front.
+        """
+        self._prepare(vertices)
+        with self._current():
+            self._draw(vertices, normals, framebuffer or self._draw_target)
+
+    def render(self, vertices: np.ndarray, normals: np.ndarray | None = None) -> np.ndarray:
+        """Render one frame and return it as (height, width, 3) uint8 sRGB, top row first.
+
+        ``normals`` None computes unit vertex normals from ``vertices``.
+        """
+        self._prepare(vertices)
+        with self._current():
+            self._draw(vertices, normals, self._draw_target)
+            if self._read_target is not self._draw_target:
+                self.ctx.copy_framebuffer(self._read_target, self._draw_target)
+            data = self._read_target.read(components=3, alignment=1)
+        width, height = self.size
+        return np.frombuffer(data, dtype=np.uint8).reshape(height, width, 3)[::-1].copy()
+
+    def release(self) -> None:
+        """Free every GL object this renderer made, and its context if it created it."""
+        with self._current():
+            for obj in (
+                self._mesh,
+                self._background,
+                self._dynamic,
+                self._static,
+                self._indices,
+                self._mesh_program,
+                self._background_program,
+                self._draw_target,
+                self._read_target,
+                *self._attachments,
+            ):
+                obj.release()
+        if self._owns_ctx:
+            self.ctx.release()
+
+    def _current(self) -> contextlib.AbstractContextManager:
+        """Make an owned context current for a ``with`` block; never nest these blocks, since
+        glcontext keeps one saved context per context and a nested exit loses the outer one."""
+        return self.ctx if self._owns_ctx else contextlib.nullcontext()
+
+    def _make_framebuffers(
+        self, samples: int
+    ) -> tuple[moderngl.Framebuffer, moderngl.Framebuffer, list[moderngl.Renderbuffer]]:
+        """Offscreen draw and read targets: one plain FBO, or a multisampled one resolved
+        into a plain one. Falls back to no multisampling if the driver refuses it."""
+        plain = self._framebuffer(0)
+        samples = min(samples, self.ctx.max_samples) if samples > 1 else 0
+        if samples == 0:
+            return plain[0], plain[0], plain[1]
+        try:
+            multi = self._framebuffer(samples)
+        except moderngl.Error:
+            return plain[0], plain[0], plain[1]
+        return multi[0], plain[0], multi[1] + plain[1]
+
+    def _framebuffer(
+        self, samples: int
+    ) -> tuple[moderngl.Framebuffer, list[moderngl.Renderbuffer]]:
+        """An RGBA8 + depth framebuffer of the image size, and its renderbuffers."""
+        color = self.ctx.renderbuffer(self.size, components=4, samples=samples)
+        depth = self.ctx.depth_renderbuffer(self.size, samples=samples)
+        framebuffer = self.ctx.framebuffer(color_attachments=[color], depth_attachment=depth)
+        return framebuffer, [color, depth]
+
+    def _prepare(self, vertices: np.ndarray) -> None:
+        """Check the vertex array's shape; frame it from the front if there is no camera yet."""
+        shape = np.shape(vertices)
+        if shape != (self.n_vertices, 3):
+            raise ValueError(f"expected vertices of shape ({self.n_vertices}, 3), got {shape}")
+        if self.camera is None:
+            self.frame(vertices)
+
+    def _draw(
+        self, vertices: np.ndarray, normals: np.ndarray | None, target: moderngl.Framebuffer
+    ) -> None:
+        """Upload the frame's data and draw background then mesh; the context is current."""
+        self._upload(vertices, normals)
+        self._set_uniform("view_projection", self._view_projection().T)
+        self._set_uniform("eye", self.camera.eye)
+        self._set_uniform("light_direction", _LIGHT_DIRECTIONS_CAMERA @ self.camera.basis())
+        target.use()
+        target.clear(depth=1.0)
+        self.ctx.disable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
+        self._background.render(moderngl.TRIANGLES, vertices=3)
+        self.ctx.enable(moderngl.DEPTH_TEST)
+        self._mesh.render(moderngl.TRIANGLES)
+
+    def _upload(self, vertices: np.ndarray, normals: np.ndarray | None) -> None:
+        """Write positions and normals into the dynamic vertex buffer in place."""
+        vertices = np.asarray(vertices)
+        if normals is None:
+            normals = self._normals(vertices, out=self._normal_out)
+        self._staging[:, :3] = vertices
+        self._staging[:, 3:] = normals
+        self._dynamic.write(self._staging)
+
+    def _view_projection(self) -> np.ndarray:
+        if self.camera is None:
+            raise RuntimeError("no camera: call frame() or look_at() first")
+        aspect = self.size[0] / self.size[1]
+        return self.camera.projection_matrix(aspect) @ self.camera.view_matrix()
+
+    def _set_uniform(self, name: str, value: np.ndarray) -> None:
+        """Write a float uniform; matrices must already be transposed to column-major."""
+        self._mesh_program[name].write(np.ascontiguousarray(value, dtype="f4"))
+
+
+def render_face(
+    face: FaceLike,
+    vertices: np.ndarray | None = None,
+    *,
+    view: str = "front",
+    width: int = 640,
+    height: int = 640,
+) -> np.ndarray:
+    """One-shot render of ``face`` (its rest pose unless ``vertices`` given), framed on the
+    whole face from ``view``. Uses ``face.colors``, or a skin tone where it has none."""
+    vertices = face.vertices if vertices is None else vertices
+    with Renderer(face.triangles, len(face.vertices), face.colors, width=width, height=height) as r:
+        r.frame(vertices, view=view)
+        return r.render(vertices)
+
+
+def save_png(image: np.ndarray, path: str | Path) -> None:
+    """Write an (H, W, 3) uint8 image as PNG."""
+    from PIL import Image
+
+    Image.fromarray(np.asarray(image, dtype=np.uint8)).save(path, format="PNG")
+
+
+def write_video(frames: Iterable[np.ndarray], path: str | Path, fps: float = 30.0) -> int:
+    """Encode (H, W, 3) uint8 frames to an H.264 MP4 (yuv420p) and return the frame count.
+
+    yuv420p needs even dimensions, so an odd last row or column is duplicated. Every frame
+    must have the first frame's size.
+    """
+    import imageio_ffmpeg
+
+    iterator: Iterator[np.ndarray] = iter(frames)
+    first = _even(next(iterator))
+    height, width = first.shape[:2]
+    writer = imageio_ffmpeg.write_frames(
+        str(path),
+        (width, height),
+        fps=fps,
+        codec="libx264",
+        pix_fmt_out="yuv420p",
+        macro_block_size=2,
+    )
+    writer.send(None)
+    count = 0
+    try:
+        for frame in itertools.chain([first], iterator):
+            frame = _even(frame)
+            if frame.shape != first.shape:
+                raise ValueError(f"frame {count} has shape {frame.shape}, expected {first.shape}")
+            writer.send(np.ascontiguousarray(frame, dtype=np.uint8))
+            count += 1
+    finally:
+        writer.close()
+    return count
+
+
+def _even(image: np.ndarray) -> np.ndarray:
+    """Pad an odd height or width by repeating the last row or column."""
+    height, width = image.shape[:2]
+    return np.pad(image, ((0, height % 2), (0, width % 2), (0, 0)), mode="edge")
+
+
+def _material_data(
+    n_vertices: int, colors: np.ndarray | None, materials: np.ndarray | None
+) -> np.ndarray:
+    """Static per-vertex attributes (N, 4) float32: linear albedo and specular strength."""
+    data = np.empty((n_vertices, 4), dtype="f4")
+    srgb = np.broadcast_to(SKIN_SRGB if colors is None else np.asarray(colors), (n_vertices, 3))
+    data[:, :3] = _srgb_to_linear(np.clip(srgb, 0.0, 1.0))
+    data[:, 3] = SKIN_SPECULAR if materials is None else np.asarray(materials)
+    return data
+
+
+def _srgb_to_linear(c: np.ndarray) -> np.ndarray:
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / np.linalg.norm(v)
