@@ -1,0 +1,33 @@
+"""Rigid motions of the face's parts as 3x4 matrices [R | t]: x' = R x + t."""
+
+from __future__ import annotations
+
+import numpy as np
+
+IDENTITY = np.hstack([np.eye(3), np.zeros((3, 1))])
+
+
+def rotation(axis: np.ndarray, angle: float) -> np.ndarray:
+    """3x3 rotation by ``angle`` radians about the unit vector ``axis`` (right-hand rule)."""
+    x, y, z = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
+    c, s = np.cos(angle), np.sin(angle)
+    C = 1.0 - c
+    return np.array([
+        [c + x * x * C, x * y * C - z * s, x * z * C + y * s],
+        [y * x * C + z * s, c + y * y * C, y * z * C - x * s],
+        [z * x * C - y * s, z * y * C + x * s, c + z * z * C],
+    ])
+
+
+def about(pivot: np.ndarray, R: np.ndarray, translation: np.ndarray | None = None) -> np.ndarray:
+    """Motion rotating by R about ``pivot``, then translating: x' = R (x - pivot) + pivot + t."""
+    pivot = np.asarray(pivot, dtype=float)
+    t = pivot - R @ pivot
+    if translation is not None:
+        t = t + translation
+    return np.hstack([R, t[:, None]])
+
+
+def apply(motion: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """The points moved by a 3x4 motion."""
+    return points @ motion[:, :3].T + motion[:, 3]
