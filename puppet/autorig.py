@@ -1,0 +1,370 @@
+"""Generate a face's rig from its MPEG-4 feature points.
+
+The rig is built by rules stated in terms of the feature points (FDP ids, ISO/IEC 14496-2
+Annex C), so any face that has them gets a rig the same way; the default face's shipped rig is
+the output of this module (``tools/build_default_face.py`` writes it).
+
+Regions (Zhang & Chen's functional regions), decided per skin vertex, first rule that matches:
+
+* ``rest``: behind the face (z below the jaw angle 2.13), above the hairline band, below the neck
+  line: neck, scalp, ears; still except for head rotation.
+* ``upper_mouth`` / ``lower_mouth``: the mouth bag (the skin reached from the lips' meeting line
+  without crossing it) split at the lip line; the skin between the nose base and the lip line,
+  and between the lip line and the chin/throat, inside the nasolabial and chin lines.
+* ``nose``: between the nasion and the nose base, inside a width growing from the nasal bone to
+  the alae.
+* ``forehead``: above the lower eyelids: brows, lids, glabella, forehead.
+* ``cheek_l`` / ``cheek_r``: the rest of the front, split at the mid-line; it reaches down over the
+  jaw line to the neck so that the jaw drags it smoothly.
+* Parts: eyeballs rigid about their centres, lower teeth and tongue rigid with the jaw, upper
+  teeth still.
+
+Control points per region: the feature points the FAPs move (active, direct: on their vertex),
+extra lid-margin points (the hybrid eyelids turn them about the eyeball centre), lip lines (the
+lip FDPs are keys; points between them along the vermilion border and the lips' meeting line are
+interpolated), and jaw-line points attached to the jaw. Borders decide the rest, along the mesh
+edges between regions:
+
+* where a region is *driven* by its neighbour (cheeks by both mouth regions, the nose by the upper
+  mouth), its border vertices carry passive points, spaced about ``BORDER_SPACING`` apart,
+  that follow the neighbour's DFFD: the jaw drags the cheeks and the border cannot fold or gape;
+* where it drives its neighbour, its border is free (nothing pins the chin's sides while the jaw
+  opens);
+* elsewhere (the still neck and scalp, regions that meet without driving each other) the border
+  vertices carry fixed anchors.
+
+A few indirect anchors under the skin (off the surface, weight 0.5: softer) steady each region's
+interior; under the lower mouth they ride on the jaw. Weights: 1 for points on the skin; the 8 box
+corners weigh 0 (see ``puppet.dffd``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+
+from .rig import ControlPoint, LipLine, Region, Rig, RigidPart, RigError
+
+INDIRECT_WEIGHT = 0.5
+BORDER_SPACING = 0.12  # border point spacing, as a fraction of the eye separation
+DRIVERS = {"cheek_l": ("upper_mouth", "lower_mouth"), "cheek_r": ("upper_mouth", "lower_mouth"),
+           "nose": ("upper_mouth",)}
+UNPINNED = {frozenset(("upper_mouth", "lower_mouth"))}  # the lips part; neither pins the other
+DFFD_REGIONS = ("forehead", "nose", "upper_mouth", "lower_mouth", "cheek_l", "cheek_r")
+BOX_SCALE = 1.5
+
+# Lip lines: FDP keys in order along each contour, from the right corner to the left.
+LIP_LINES = {
+    "upper_outer": ("vermilion_border", ["8.4", "8.6", "8.9", "8.1", "8.10", "8.5", "8.3"]),
+    "lower_outer": ("vermilion_border", ["8.4", "8.8", "8.2", "8.7", "8.3"]),
+    "upper_inner": ("mouth_opening", ["2.5", "2.7", "2.2", "2.6", "2.4"]),
+    "lower_inner": ("mouth_opening", ["2.5", "2.9", "2.3", "2.8", "2.4"]),
+}
+FOREHEAD_ACTIVE = ["4.1", "4.2", "4.3", "4.4", "4.5", "4.6", "3.1", "3.2", "3.3", "3.4", "3.13", "3.14"]
+FOREHEAD_FIXED = ["3.7", "3.8", "3.11", "3.12", "3.9", "3.10", "11.1", "11.2", "11.3"]
+NOSE_ACTIVE = ["9.1", "9.2", "9.3"]
+NOSE_FIXED = ["9.6", "9.7", "9.12", "9.13", "9.14"]
+LOWER_JAW = ["8.2", "8.7", "8.8", "2.3", "2.8", "2.9", "2.10", "2.1", "2.11", "2.12"]
+UPPER_ACTIVE = ["8.1", "8.5", "8.6", "8.9", "8.10", "2.2", "2.6", "2.7"]
+CORNERS = ["8.3", "8.4", "2.4", "2.5"]
+REQUIRED = sorted(set(FOREHEAD_ACTIVE + FOREHEAD_FIXED + NOSE_ACTIVE + NOSE_FIXED
+                      + LOWER_JAW + UPPER_ACTIVE + CORNERS
+                      + ["2.13", "2.14", "5.1", "5.2", "5.3", "5.4", "3.5", "3.6", "7.1"]))
+
+
+def rig_for_face(face) -> Rig:
+    """The packaged rig for the default face, else a rig generated from the face's feature points."""
+    if getattr(face, "name", None) == "default":
+        from .face import load_default_rig
+
+        return load_default_rig()
+    return build_rig(face)
+
+
+def build_rig(face) -> Rig:
+    """Build the rig of a face with feature points, parts and contours (see module docstring)."""
+    missing = [f for f in REQUIRED if f not in face.feature_points]
+    if missing:
+        raise RigError(f"face {face.name!r}: cannot rig without feature points {missing}")
+    builder = _Builder(face)
+    return builder.build()
+
+
+class _Builder:
+    def __init__(self, face) -> None:
+        self.face = face
+        self.v = np.asarray(face.vertices, dtype=float)
+        self.fp = {k: np.asarray(p, dtype=float) for k, p in face.feature_points.items()}
+        self.fv = dict(face.feature_vertices)
+        self.points: list[ControlPoint] = []
+        self.region_of = np.full(len(self.v), "", dtype=object)
+
+    # -- regions ------------------------------------------------------------------------
+
+    def build(self) -> Rig:
+        self._segment()
+        regions = self._regions_with_points()
+        rig = Rig(
+            n_vertices=len(self.v),
+            control_points=self.points,
+            regions=regions,
+            rigid_parts=self._rigid_parts(),
+            lip_lines=self.lip_lines,
+            box_scale=BOX_SCALE,
+        )
+        rig.validate()
+        return rig
+
+    def _segment(self) -> None:
+        fp, v = self.fp, self.v
+        skin = self.face.parts["skin"]
+        x, y, z = v[skin, 0], v[skin, 1], v[skin, 2]
+        ax = np.abs(x)
+        lip_y = (fp["2.2"][1] + fp["2.3"][1]) / 2
+        nose_base = fp["9.15"][1]
+        nasion = fp["9.7"][1]
+        chin = fp["2.1"][1]
+        neck_y = chin - 0.5 * (fp["9.15"][1] - chin)
+        hair_y = fp["11.1"][1] + 0.3 * (fp["11.1"][1] - fp["4.3"][1])
+        lid_y = fp["3.9"][1] - 0.25 * (fp["3.3"][1] - fp["3.9"][1])
+        mouth_w = fp["8.3"][0]
+        z_front = fp["2.13"][2]
+
+        label = np.full(len(skin), "rest", dtype=object)
+        front = (z > z_front) & (y > neck_y) & (y < hair_y)
+        label[front & (x >= 0)] = "cheek_l"
+        label[front & (x < 0)] = "cheek_r"
+        label[front & (y >= lid_y)] = "forehead"
+        t = np.clip((y - nose_base) / (nasion - nose_base), 0, 1)
+        nose_w = (1 - t) * 1.25 * fp["9.1"][0] + t * 1.3 * fp["9.7"][0]
+        label[front & (y >= nose_base) & (y < nasion) & (ax < nose_w)] = "nose"
+        s = np.clip((nose_base - y) / (nose_base - lip_y), 0, 1)
+        upper_w = (1 - s) * 1.25 * fp["9.1"][0] + s * 1.3 * mouth_w
+        label[front & (y < nose_base) & (y >= lip_y) & (ax < upper_w)] = "upper_mouth"
+        r = np.clip((lip_y - y) / (lip_y - chin), 0, 1)
+        lower_w = (1 - r) * 1.3 * mouth_w + r * 1.2 * fp["2.11"][0]
+        label[front & (y < lip_y) & (ax < lower_w)] = "lower_mouth"
+        bag = self._mouth_bag(skin)
+        label[bag & (y >= lip_y)] = "upper_mouth"
+        label[bag & (y < lip_y)] = "lower_mouth"
+        self.region_of[skin] = label
+        for part, region in (("eye_l", "eyeball_l"), ("eye_r", "eyeball_r"), ("teeth_upper", "upper_teeth"),
+                             ("teeth_lower", "lower_teeth"), ("tongue", "tongue")):
+            if part in self.face.parts:
+                self.region_of[self.face.parts[part]] = region
+        if "mouth" in self.face.parts:
+            m = self.face.parts["mouth"]
+            self.region_of[m] = np.where(v[m, 1] >= lip_y, "upper_mouth", "lower_mouth")
+
+    def _mouth_bag(self, skin: np.ndarray) -> np.ndarray:
+        """Skin vertices reachable from inside the mouth without crossing the lips' meeting line."""
+        loop = np.asarray(self.face.contours["mouth_opening"])
+        tri = np.asarray(self.face.triangles)
+        n = len(self.v)
+        blocked = np.zeros(n, dtype=bool)
+        blocked[loop] = True
+        on_skin = np.zeros(n, dtype=bool)
+        on_skin[skin] = True
+        edges = np.vstack([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
+        keep = on_skin[edges].all(axis=1) & ~blocked[edges].any(axis=1)
+        e = edges[keep]
+        graph = sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
+        _, comp = connected_components(graph, directed=False)
+        outside = comp[self.fv["11.4"]] if "11.4" in self.fv else comp[self.fv["9.3"]]
+        return (comp[skin] != outside) & ~blocked[skin]
+
+    def _regions_with_points(self) -> list[Region]:
+        self.members: dict[str, list[str]] = {}
+        self.lip_lines: list[LipLine] = []
+        self._forehead()
+        self._nose()
+        self._mouth()
+        self._cheeks()
+        self._borders()
+        regions = []
+        for name in DFFD_REGIONS:
+            verts = np.flatnonzero(self.region_of == name).astype(np.int32)
+            regions.append(Region(name, "dffd", verts, self.members[name]))
+        for name, part in (("eyeball_l", "eye_l"), ("eyeball_r", "eye_r"),
+                           ("lower_teeth", "jaw"), ("tongue", "jaw")):
+            verts = np.flatnonzero(self.region_of == name).astype(np.int32)
+            if len(verts):
+                regions.append(Region(name, "rigid", verts, part=part))
+        for name in ("upper_teeth", "rest"):
+            verts = np.flatnonzero(self.region_of == name).astype(np.int32)
+            if len(verts):
+                regions.append(Region(name, "still", verts))
+        return regions
+
+    # -- control points -------------------------------------------------------------------
+
+    def _add(self, region: str, name: str, role: str, *, vertex: int | None = None,
+             position: np.ndarray | None = None, **kw) -> str:
+        existing = {p.name for p in self.points}
+        if name not in existing:
+            if position is None:
+                position = self.v[vertex]
+            weight = INDIRECT_WEIGHT if vertex is None else 1.0
+            self.points.append(ControlPoint(name, np.asarray(position, float), role, weight, vertex, **kw))
+        self.members.setdefault(region, [])
+        if name not in self.members[region]:
+            self.members[region].append(name)
+        return name
+
+    def _fdp(self, region: str, fdp: str, role: str, **kw) -> str:
+        if fdp in self.fv:
+            return self._add(region, fdp, role, vertex=int(self.fv[fdp]), **kw)
+        return self._add(region, fdp, role, position=self.fp[fdp], **kw)
+
+    def _nearest(self, region: str, xyz: np.ndarray) -> int:
+        verts = np.flatnonzero(self.region_of == region)
+        return int(verts[np.argmin(np.linalg.norm(self.v[verts] - xyz, axis=1))])
+
+    def _borders(self) -> None:
+        """Passive points, fixed anchors or nothing on each border (see module docstring)."""
+        tri = np.asarray(self.face.triangles)
+        edges = np.vstack([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
+        region = self.region_of
+        spacing = self._scale(BORDER_SPACING)
+        for name in DFFD_REGIONS:
+            for side in (0, 1):
+                mine = edges[(region[edges[:, side]] == name) & (region[edges[:, 1 - side]] != name)]
+                for other in sorted(set(region[mine[:, 1 - side]])):
+                    if name in DRIVERS.get(other, ()) or frozenset((name, other)) in UNPINNED:
+                        continue
+                    verts = np.unique(mine[region[mine[:, 1 - side]] == other, side])
+                    self._border_points(name, other, verts, spacing)
+
+    def _border_points(self, name: str, other: str, verts: np.ndarray, spacing: float) -> None:
+        driven = other in DRIVERS.get(name, ())
+        positions = {p.name: p.position for p in self.points}
+        taken = [positions[n] for n in self.members.get(name, [])]
+        for vertex in _spread_out(self.v, verts, taken, spacing):
+            if driven:
+                self._add(name, f"{name}_from_{other}_{vertex}", "passive", vertex=int(vertex), driver=other)
+            else:
+                self._add(name, f"{name}_edge_{vertex}", "fixed", vertex=int(vertex))
+
+    def _deep_anchors(self, region: str, prefix: str, depth: float, attach: str | None = None) -> None:
+        """Indirect anchors under the region's skin (its centre pushed back along -z); fixed, or
+        carried by a rigid part (then they are active points the part moves)."""
+        verts = np.flatnonzero(self.region_of == region)
+        p = self.v[verts]
+        lo, hi = p.min(axis=0), p.max(axis=0)
+        for i, fx in enumerate((0.25, 0.75)):
+            xyz = np.array([lo[0] + fx * (hi[0] - lo[0]), (lo[1] + hi[1]) / 2, lo[2] - depth])
+            self._add(region, f"{prefix}{i}", "active" if attach else "fixed", position=xyz, attach=attach)
+
+    def _forehead(self) -> None:
+        for f in FOREHEAD_ACTIVE:
+            self._fdp("forehead", f, "active", group=_lid_group(f))
+        for f in FOREHEAD_FIXED:
+            self._fdp("forehead", f, "fixed")
+        self._lid_margins()
+        self._deep_anchors("forehead", "forehead_deep_", self._scale(0.25))
+
+    def _lid_margins(self) -> None:
+        """Two more points on each lid margin, between the lid centre and the eye corners."""
+        for side, loop_name, centre_up, centre_down, corners in (
+            ("l", "left_lid_opening", "3.1", "3.3", ("3.7", "3.11")),
+            ("r", "right_lid_opening", "3.2", "3.4", ("3.12", "3.8")),
+        ):
+            loop = np.asarray(self.face.contours[loop_name])
+            for centre, lid in ((centre_up, "upper"), (centre_down, "lower")):
+                c = self.fp[centre]
+                for corner in corners:
+                    target = (c + self.fp[corner]) / 2
+                    target[1] = c[1] + 0.6 * (self.fp[corner][1] - c[1])
+                    vertex = int(loop[np.argmin(np.linalg.norm(self.v[loop] - target, axis=1))])
+                    self._add("forehead", f"{lid}_lid_{side}_{corner}", "active", vertex=vertex,
+                              group=f"{lid}_lid_{side}")
+
+    def _nose(self) -> None:
+        for f in NOSE_ACTIVE:
+            self._fdp("nose", f, "active")
+        for f in NOSE_FIXED:
+            self._fdp("nose", f, "fixed")
+        self._deep_anchors("nose", "nose_deep_", self._scale(0.2))
+
+    def _mouth(self) -> None:
+        for f in UPPER_ACTIVE:
+            self._fdp("upper_mouth", f, "active")
+        for f in CORNERS:
+            self._fdp("upper_mouth", f, "active")
+            self._fdp("lower_mouth", f, "active")
+        for f in LOWER_JAW:
+            self._fdp("lower_mouth", f, "active", attach="jaw")
+        for name, (contour, keys) in LIP_LINES.items():
+            region = "upper_mouth" if name.startswith("upper") else "lower_mouth"
+            points = self._lip_points(name, contour, keys, region)
+            self.lip_lines.append(LipLine(name, keys, points))
+        self._deep_anchors("upper_mouth", "upper_mouth_deep_", self._scale(0.35))
+        self._deep_anchors("lower_mouth", "lower_mouth_deep_", self._scale(0.35), attach="jaw")
+
+    def _lip_points(self, name: str, contour: str, keys: list[str], region: str) -> list[str]:
+        """One interpolated point on the contour midway between each pair of consecutive keys."""
+        loop = list(np.asarray(self.face.contours[contour]))
+        pos = {k: loop.index(self.fv[k]) for k in keys}
+        points = []
+        for a, b in zip(keys[:-1], keys[1:]):
+            i, j = pos[a], pos[b]
+            path = _loop_path(loop, i, j)
+            if len(path) < 3:
+                continue
+            vertex = int(path[len(path) // 2])
+            points.append(self._add(region, f"{name}_{a}_{b}", "interpolated", vertex=vertex))
+        return points
+
+    def _cheeks(self) -> None:
+        for side, cheek, bone, angle, chin_corner in (("l", "5.1", "5.3", "2.13", "2.11"),
+                                                       ("r", "5.2", "5.4", "2.14", "2.12")):
+            region = f"cheek_{side}"
+            self._fdp(region, cheek, "active")
+            self._fdp(region, bone, "active")
+            self._fdp(region, angle, "active", attach="jaw")
+            for i, f in enumerate((1 / 3, 2 / 3)):
+                xyz = (1 - f) * self.fp[chin_corner] + f * self.fp[angle]
+                self._add(region, f"jaw_line_{side}{i}", "active", vertex=self._nearest(region, xyz), attach="jaw")
+            self._deep_anchors(region, f"{region}_deep_", self._scale(0.3))
+
+    def _scale(self, f: float) -> float:
+        """A length as a fraction of the eye separation (the face's own scale)."""
+        return f * abs(self.fp["3.5"][0] - self.fp["3.6"][0])
+
+    def _rigid_parts(self) -> dict[str, RigidPart]:
+        pivots = self.face.pivots
+        skin = self.v[self.face.parts["skin"]]
+        cut = self.face.contours.get("neck_cut")
+        neck_lo = self.v[cut, 1].max() if cut is not None else skin[:, 1].min()
+        neck = (float(neck_lo), float(self.fp["2.1"][1]))
+        return {
+            "head": RigidPart("head", self.fp["7.1"], neck=neck),
+            "jaw": RigidPart("jaw", np.asarray(pivots["jaw"], float),
+                             axis=np.asarray(pivots.get("jaw_axis", (1.0, 0.0, 0.0)), float)),
+            "eye_l": RigidPart("eye_l", np.asarray(pivots["eye_l"], float)),
+            "eye_r": RigidPart("eye_r", np.asarray(pivots["eye_r"], float)),
+        }
+
+
+def _lid_group(fdp: str) -> str | None:
+    return {"3.1": "upper_lid_l", "3.2": "upper_lid_r", "3.3": "lower_lid_l", "3.4": "lower_lid_r"}.get(fdp)
+
+
+def _loop_path(loop: list[int], i: int, j: int) -> list[int]:
+    """The vertices from loop[i] to loop[j] the shorter way round the closed loop."""
+    n = len(loop)
+    forward = [loop[(i + k) % n] for k in range((j - i) % n + 1)]
+    backward = [loop[(i - k) % n] for k in range((i - j) % n + 1)]
+    return forward if len(forward) <= len(backward) else backward
+
+
+def _spread_out(v: np.ndarray, candidates: np.ndarray, taken: list[np.ndarray], spacing: float) -> list[int]:
+    """Greedily pick candidate vertices at least ``spacing`` from each other and from ``taken``."""
+    chosen: list[int] = []
+    placed = list(taken)
+    for vertex in candidates:
+        if all(np.linalg.norm(v[vertex] - p) >= spacing for p in placed):
+            chosen.append(int(vertex))
+            placed.append(v[vertex])
+    return chosen

@@ -1,0 +1,38 @@
+"""The ``puppet`` command."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="puppet", description="facepuppet: live facial puppeteering")
+    commands = parser.add_subparsers(dest="command", required=True)
+
+    demo = commands.add_parser("demo", help="render the default face, neutral and deformed, to PNG")
+    demo.add_argument("--out", default="out", help="output folder (default: out)")
+    demo.add_argument("--size", type=int, default=720, help="image size in pixels")
+
+    bench = commands.add_parser("bench", help="measure Sibson precompute, rig load and per-frame deform")
+    bench.add_argument("--json", action="store_true", help="print the results as JSON")
+    bench.add_argument("--frames", type=int, default=300, help="frames per measurement")
+    bench.add_argument("--no-ict", action="store_true", help="skip the ICT face even when present")
+
+    args = parser.parse_args(argv)
+    if args.command == "demo":
+        from .demo import run_demo
+
+        for path in run_demo(Path(args.out), size=args.size):
+            print(path)
+        return 0
+    if args.command == "bench":
+        from .bench import run_bench
+
+        return run_bench(frames=args.frames, as_json=args.json, ict=not args.no_ict)
+    return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

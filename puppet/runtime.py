@@ -1,0 +1,280 @@
+"""The face runtime: control point displacements and rigid motions in, vertex positions out.
+
+Per frame (``deform``):
+
+1. The caller gives displacements of the rig's active control points (``control_points``, in
+   order) and rigid motions (3x4 ``[R | t]``) for ``jaw``, ``eye_l``, ``eye_r`` and ``head``.
+2. Points attached to a rigid part ride on it: the lower lip and chin points move with the jaw
+   (their own displacement applied first, in the jaw's frame), which is how the jaw opens the mouth.
+3. Fixed, interpolated (lip line) and passive points follow by one small dense product.
+4. Every DFFD region moves its vertices by its weighted Sibson coefficients. In the precomputed
+   mode all of this is folded into one sparse matrix B (vertices x active points), so the skin
+   costs a single sparse product written into the output; in real-time mode each region applies
+   its own coefficients and rebases them when a control point drifts farther than ``threshold``.
+5. Rigid regions (eyeballs, lower teeth, tongue) take their part's motion; then the whole head
+   turns about 7.1, fading to nothing across the neck band so the bust base stays put.
+
+Normals are recomputed only around vertices that can move other than with the head; the rest
+keep their rest normals (turned with the head).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse import _sparsetools
+
+from . import coefcache
+from .controls import spread_matrix
+from .dffd import RegionDeformer
+from .normals import VertexNormals
+from .rig import Rig, rig_to_dict
+
+MODES = ("precomputed", "realtime")
+RIGID_MOTIONS = ("jaw", "eye_l", "eye_r", "head")
+
+
+class Runtime:
+    """A face and its rig, ready to deform every frame."""
+
+    def __init__(self, face, rig: Rig | None = None, *, mode: str = "precomputed",
+                 threshold: float | None = None, dtype=np.float32, cache: bool = True) -> None:
+        if mode not in MODES:
+            raise ValueError(f"mode {mode!r}: expected one of {MODES}")
+        self.face = face
+        self.rig = rig if rig is not None else _rig_for(face)
+        self.rig.validate()
+        if self.rig.n_vertices != len(face.vertices):
+            raise ValueError(f"rig is for {self.rig.n_vertices} vertices, face has {len(face.vertices)}")
+        self.mode = mode
+        self.dtype = np.dtype(dtype)
+        self.rest = np.ascontiguousarray(face.vertices, dtype=self.dtype)
+        self.threshold = threshold if threshold is not None else _default_threshold(face)
+        self._init_points()
+        self._init_regions(cache)
+        self._init_rigid()
+        self._init_normals()
+
+    # -- set-up ---------------------------------------------------------------------------
+
+    def _init_points(self) -> None:
+        rig = self.rig
+        self._p0 = np.array([p.position for p in rig.control_points], dtype=float)
+        index = rig.point_index()
+        self.control_points: list[str] = rig.active_points
+        self._active = np.array([index[n] for n in self.control_points], dtype=np.int64)
+        self._attached = {
+            part: np.array([i for i, n in enumerate(self.control_points) if rig.point(n).attach == part],
+                           dtype=np.int64)
+            for part in rig.rigid_parts
+        }
+
+    def _init_regions(self, cache: bool) -> None:
+        rig = self.rig
+        index = rig.point_index()
+        self._regions = [r for r in rig.regions if r.kind == "dffd"]
+        self._region_cps = {r.name: np.array([index[c] for c in r.control_points]) for r in self._regions}
+        self._driven = {
+            r.name: np.array([i for i, p in enumerate(rig.control_points)
+                              if p.role == "passive" and p.driver == r.name], dtype=np.int64)
+            for r in self._regions
+        }
+        self.deformers = self._load_or_compute(cache)
+        self._order = self._region_order()
+        self._spread = spread_matrix(rig, self._passive_rows())
+        self._interp = np.array([i for i, p in enumerate(rig.control_points) if p.role == "interpolated"],
+                                dtype=np.int64)
+        self._fold()
+        self._ref_points = self._p0.copy()
+
+    def _queries(self, region) -> np.ndarray:
+        return np.vstack([self.face.vertices[region.vertices], self._p0[self._driven[region.name]]])
+
+    def _load_or_compute(self, cache: bool) -> dict[str, RegionDeformer]:
+        key = coefcache.cache_key(self.face.content_hash, rig_to_dict(self.rig))
+        cached = coefcache.load(key) if cache else None
+        deformers = {}
+        for region in self._regions:
+            cps = self._region_cps[region.name]
+            weights = [self.rig.control_points[i].weight for i in cps]
+            queries = self._queries(region)
+            if cached is not None and region.name in cached:
+                box, sibson = cached[region.name]
+                deformers[region.name] = RegionDeformer.from_matrices(
+                    region.name, queries, self._p0[cps], weights, box, sibson)
+            else:
+                deformers[region.name] = RegionDeformer(
+                    region.name, queries, self._p0[cps], weights, self.rig.box_scale)
+        if cache and cached is None:
+            coefcache.store(key, {n: (d.box, d.sibson) for n, d in deformers.items()})
+        return deformers
+
+    def _passive_rows(self) -> dict[str, dict[str, float]]:
+        rows = {}
+        names = [p.name for p in self.rig.control_points]
+        for region in self._regions:
+            deformer = self.deformers[region.name]
+            cps = self._region_cps[region.name]
+            nv = len(region.vertices)
+            for j, point in enumerate(self._driven[region.name]):
+                row = deformer.coefficients.getrow(nv + j)
+                rows[names[point]] = {names[cps[c]]: float(w) for c, w in zip(row.indices, row.data)}
+        return rows
+
+    def _region_order(self) -> list:
+        """DFFD regions ordered so that every passive point's driver comes before its users."""
+        drivers = {r.name: {self.rig.control_points[i].driver for i in self._region_cps[r.name]
+                            if self.rig.control_points[i].role == "passive"} for r in self._regions}
+        order, done = [], set()
+        while len(order) < len(self._regions):
+            ready = [r for r in self._regions if r.name not in done and drivers[r.name] <= done]
+            if not ready:
+                raise ValueError(f"passive points make a cycle among regions {sorted(set(drivers) - done)}")
+            order += ready
+            done |= {r.name for r in ready}
+        return order
+
+    def _fold(self) -> None:
+        """B = sum over regions of (its coefficients) @ (its rows of M), as one CSR matrix."""
+        n = len(self.rest)
+        blocks = []
+        for region in self._regions:
+            coef = self.deformers[region.name].coefficients[: len(region.vertices)]
+            folded = sp.csr_matrix(coef @ self._spread[self._region_cps[region.name]])
+            folded.data[np.abs(folded.data) < 1e-12] = 0.0
+            folded.eliminate_zeros()
+            place = sp.csr_matrix((np.ones(len(region.vertices)), (region.vertices, np.arange(len(region.vertices)))),
+                                  shape=(n, len(region.vertices)))
+            blocks.append(place @ folded)
+        B = sum(blocks[1:], blocks[0]) if blocks else sp.csr_matrix((n, len(self.control_points)))
+        B = sp.csr_matrix(B, dtype=self.dtype)
+        B.sort_indices()
+        self.B = B
+
+    def _init_rigid(self) -> None:
+        self._rigid_vertices = {}
+        for region in self.rig.regions:
+            if region.kind == "rigid":
+                prev = self._rigid_vertices.get(region.part, np.zeros(0, dtype=np.int64))
+                self._rigid_vertices[region.part] = np.concatenate([prev, region.vertices]).astype(np.int64)
+        head = self.rig.rigid_parts.get("head")
+        self._neck_weight = np.ones(len(self.rest), dtype=self.dtype)
+        if head is not None and head.neck is not None:
+            lo, hi = head.neck
+            s = np.clip((self.face.vertices[:, 1] - lo) / (hi - lo), 0.0, 1.0)
+            self._neck_weight[:] = s * s * (3 - 2 * s)
+        self._tmp = np.empty_like(self.rest)
+
+    def _init_normals(self) -> None:
+        tri = np.asarray(self.face.triangles, dtype=np.int64)
+        moving = np.zeros(len(self.rest), dtype=bool)
+        moving[np.diff(self.B.indptr) > 0] = True
+        for region in self._regions:
+            moving[region.vertices] = True
+        for verts in self._rigid_vertices.values():
+            moving[verts] = True
+        touched = np.zeros(len(self.rest), dtype=bool)
+        touched[tri[moving[tri].any(axis=1)].ravel()] = True
+        sub_tri = tri[touched[tri].any(axis=1)]
+        self._normal_vertices = np.unique(sub_tri)
+        local = np.searchsorted(self._normal_vertices, sub_tri)
+        self._affected = np.flatnonzero(touched)
+        self._affected_local = np.searchsorted(self._normal_vertices, self._affected)
+        self._sub_normals = VertexNormals(local, len(self._normal_vertices))
+        self._sub_positions = np.empty((len(self._normal_vertices), 3), dtype=self.dtype)
+        self.rest_normals = VertexNormals(tri, len(self.rest))(self.face.vertices).astype(self.dtype)
+
+    # -- per frame ------------------------------------------------------------------------
+
+    def deform(self, displacements: np.ndarray, rigid: Mapping[str, np.ndarray] | None = None,
+               *, out: np.ndarray | None = None) -> np.ndarray:
+        """Vertex positions (N, 3) for active control point displacements (K, 3) and rigid motions."""
+        rigid = rigid or {}
+        unknown = set(rigid) - set(RIGID_MOTIONS)
+        if unknown:
+            raise ValueError(f"unknown rigid motions {sorted(unknown)}; expected {RIGID_MOTIONS}")
+        d = self._effective(np.asarray(displacements, dtype=float), rigid)
+        if out is None:
+            out = np.empty_like(self.rest)
+        if self.mode == "precomputed":
+            np.copyto(out, self.rest)
+            B = self.B
+            _sparsetools.csr_matvecs(B.shape[0], B.shape[1], 3, B.indptr, B.indices, B.data,
+                                     d.astype(self.dtype, copy=False).ravel(), out.ravel())
+        else:
+            self._deform_realtime(d, out)
+        for part, verts in self._rigid_vertices.items():
+            if part in rigid:
+                out[verts] = self.rest[verts] @ rigid[part][:, :3].T.astype(self.dtype) + rigid[part][:, 3]
+        if "head" in rigid:
+            self._turn_head(rigid["head"], out)
+        return out
+
+    def deform_with_normals(self, displacements: np.ndarray, rigid: Mapping[str, np.ndarray] | None = None,
+                            *, out: np.ndarray | None = None,
+                            normals_out: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Positions and unit vertex normals for one frame."""
+        vertices = self.deform(displacements, rigid, out=out)
+        return vertices, self.normals(vertices, (rigid or {}).get("head"), out=normals_out)
+
+    def normals(self, vertices: np.ndarray, head: np.ndarray | None = None,
+                *, out: np.ndarray | None = None) -> np.ndarray:
+        """Unit normals of deformed vertices; only the region that can deform is recomputed."""
+        if out is None:
+            out = np.empty_like(self.rest)
+        if head is None:
+            np.copyto(out, self.rest_normals)
+        else:
+            np.matmul(self.rest_normals, head[:, :3].T.astype(self.dtype), out=out)
+        np.take(vertices, self._normal_vertices, axis=0, out=self._sub_positions)
+        local = self._sub_normals(self._sub_positions)
+        out[self._affected] = local[self._affected_local]
+        return out
+
+    def _effective(self, d: np.ndarray, rigid: Mapping[str, np.ndarray]) -> np.ndarray:
+        if d.shape != (len(self.control_points), 3):
+            raise ValueError(f"displacements must be ({len(self.control_points)}, 3), got {d.shape}")
+        for part, idx in self._attached.items():
+            if part in rigid and part != "head" and len(idx):
+                p0 = self._p0[self._active[idx]]
+                d[idx] = (p0 + d[idx]) @ rigid[part][:, :3].T + rigid[part][:, 3] - p0
+        return d
+
+    def _turn_head(self, motion: np.ndarray, out: np.ndarray) -> None:
+        tmp = self._tmp
+        np.matmul(out, motion[:, :3].T.astype(self.dtype), out=tmp)
+        tmp += motion[:, 3].astype(self.dtype)
+        tmp -= out
+        tmp *= self._neck_weight[:, None]
+        out += tmp
+
+    def _deform_realtime(self, d: np.ndarray, out: np.ndarray) -> None:
+        """Each region from its reference state; rebase regions whose points drifted past T."""
+        points = self._p0.copy()
+        points[self._active] += d
+        points[self._interp] = self._p0[self._interp] + self._spread[self._interp] @ d
+        np.copyto(out, self.rest)
+        for region in self._order:
+            deformer = self.deformers[region.name]
+            cps = self._region_cps[region.name]
+            q = deformer.queries + deformer.coefficients @ (points[cps] - deformer.sites)
+            nv = len(region.vertices)
+            out[region.vertices] = q[:nv]
+            points[self._driven[region.name]] = q[nv:]
+            drift = np.linalg.norm(points[cps] - deformer.sites, axis=1)
+            if drift.max(initial=0.0) > self.threshold:
+                deformer.rebase(q, points[cps])
+
+
+def _default_threshold(face) -> float:
+    """T for real-time mode: 2% of the face's height."""
+    extent = np.ptp(np.asarray(face.vertices), axis=0)
+    return 0.02 * float(extent[1])
+
+
+def _rig_for(face) -> Rig:
+    from .autorig import rig_for_face
+
+    return rig_for_face(face)

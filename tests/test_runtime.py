@@ -1,0 +1,175 @@
+"""The default face's rig deforms as the paper's weighted DFFD says it must."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from puppet import rigid
+from puppet.face import load_default_rig, load_face
+from puppet.rig import load_rig, save_rig
+from puppet.runtime import Runtime
+from puppet.sibson import sibson_coordinates
+
+
+@pytest.fixture(scope="module")
+def face():
+    return load_face()
+
+
+@pytest.fixture(scope="module")
+def runtime(face):
+    return Runtime(face, dtype=np.float64)
+
+
+def _displace(rt: Runtime, moves: dict[str, tuple[float, float, float]]) -> np.ndarray:
+    d = np.zeros((len(rt.control_points), 3))
+    for name, move in moves.items():
+        d[rt.control_points.index(name)] = move
+    return d
+
+
+def _region(rt: Runtime, name: str) -> np.ndarray:
+    return rt.rig.region(name).vertices
+
+
+def test_zero_displacement_gives_the_neutral_mesh_exactly(runtime, face):
+    out = runtime.deform(np.zeros((len(runtime.control_points), 3)))
+    assert np.array_equal(out, face.vertices)
+
+
+def test_a_direct_control_point_moves_its_vertex_by_exactly_its_displacement(runtime, face):
+    for name in ("8.3", "4.3", "9.3", "5.1", "2.10"):
+        point = runtime.rig.point(name)
+        assert point.direct
+        move = np.array([0.011, -0.007, 0.005])
+        out = runtime.deform(_displace(runtime, {name: move}))
+        np.testing.assert_allclose(out[point.vertex] - face.vertices[point.vertex], move, atol=1e-12)
+
+
+def test_translating_every_control_point_of_a_region_translates_the_region(face):
+    rig = load_default_rig()
+    nose = rig.region("nose")
+    index = rig.point_index()
+    for name in nose.control_points:
+        rig.control_points[index[name]].role = "active"
+        rig.control_points[index[name]].driver = None
+    rt = Runtime(face, rig, dtype=np.float64, cache=False)
+    move = np.array([0.01, 0.02, -0.015])
+    out = rt.deform(_displace(rt, {n: move for n in nose.control_points}))
+    np.testing.assert_allclose(out[nose.vertices] - face.vertices[nose.vertices], np.broadcast_to(move, (len(nose.vertices), 3)), atol=1e-12)
+
+
+def test_moving_the_nose_moves_no_forehead_vertex(runtime, face):
+    out = runtime.deform(_displace(runtime, {"9.3": (0.0, 0.03, 0.02), "9.1": (0.02, 0, 0), "9.2": (-0.02, 0, 0)}))
+    moved = np.linalg.norm(out - face.vertices, axis=1) > 0
+    assert moved[_region(runtime, "nose")].any()
+    for other in ("forehead", "cheek_l", "cheek_r", "upper_mouth", "lower_mouth", "rest"):
+        assert not moved[_region(runtime, other)].any(), other
+
+
+def test_passive_points_carry_motion_across_their_border_one_way(runtime, face):
+    lower_lip = runtime.deform(_displace(runtime, {"8.2": (0, -0.04, 0), "8.7": (0, -0.03, 0), "8.8": (0, -0.03, 0)}))
+    moved = np.linalg.norm(lower_lip - face.vertices, axis=1) > 1e-9
+    assert moved[_region(runtime, "cheek_l")].any() and moved[_region(runtime, "cheek_r")].any()
+    assert not moved[_region(runtime, "forehead")].any()
+    cheek = runtime.deform(_displace(runtime, {"5.1": (0.02, 0, 0.02)}))
+    moved = np.linalg.norm(cheek - face.vertices, axis=1) > 0
+    assert moved[_region(runtime, "cheek_l")].any()
+    for other in ("upper_mouth", "lower_mouth", "nose", "forehead", "cheek_r"):
+        assert not moved[_region(runtime, other)].any(), other
+
+
+def test_rigid_parts_keep_their_distances(runtime, face):
+    jaw = runtime.rig.rigid_parts["jaw"]
+    eye = runtime.rig.rigid_parts["eye_l"]
+    motions = {
+        "jaw": rigid.about(jaw.pivot, rigid.rotation(jaw.axis, np.radians(15))),
+        "eye_l": rigid.about(eye.pivot, rigid.rotation((0, 1, 0), np.radians(20))),
+    }
+    out = runtime.deform(np.zeros((len(runtime.control_points), 3)), motions)
+    for region in ("lower_teeth", "eyeball_l", "tongue"):
+        v = _region(runtime, region)
+        before = np.linalg.norm(face.vertices[v][:, None] - face.vertices[v][None], axis=2)
+        after = np.linalg.norm(out[v][:, None] - out[v][None], axis=2)
+        np.testing.assert_allclose(after, before, atol=1e-9)
+        assert np.abs(out[v] - face.vertices[v]).max() > 1e-3
+
+
+def test_the_jaw_opens_the_mouth_through_control_points(runtime, face):
+    jaw = runtime.rig.rigid_parts["jaw"]
+    out = runtime.deform(np.zeros((len(runtime.control_points), 3)),
+                         {"jaw": rigid.about(jaw.pivot, rigid.rotation(jaw.axis, np.radians(12)))})
+    chin = face.feature_vertices["2.1"]
+    lower_lip = face.feature_vertices["8.2"]
+    upper_lip = face.feature_vertices["8.1"]
+    assert out[chin, 1] < face.vertices[chin, 1] - 0.05
+    assert out[lower_lip, 1] < face.vertices[lower_lip, 1] - 0.05
+    assert abs(out[upper_lip, 1] - face.vertices[upper_lip, 1]) < 0.01
+
+
+def test_head_rotation_turns_the_head_and_leaves_the_neck_base(runtime, face):
+    head = runtime.rig.rigid_parts["head"]
+    motion = rigid.about(head.pivot, rigid.rotation((0, 1, 0), np.radians(30)))
+    out = runtime.deform(np.zeros((len(runtime.control_points), 3)), {"head": motion})
+    nose = face.feature_vertices["9.3"]
+    np.testing.assert_allclose(out[nose], rigid.apply(motion, face.vertices[nose:nose + 1])[0], atol=1e-12)
+    base = face.vertices[:, 1] < head.neck[0]
+    assert base.any() and np.array_equal(out[base], face.vertices[base])
+
+
+def test_realtime_recompute_equals_a_fresh_precompute(face):
+    rt = Runtime(face, mode="realtime", threshold=0.01, dtype=np.float64, cache=False)
+    rest_sites = rt.deformers["upper_mouth"].sites.copy()
+    d = _displace(rt, {"8.3": (0.03, 0.02, 0), "2.4": (0.03, 0.02, 0), "4.3": (0, 0.03, 0)})
+    rt.deform(d)
+    assert not np.allclose(rt.deformers["upper_mouth"].sites, rest_sites), "no rebase happened"
+    for region in ("upper_mouth", "forehead", "cheek_l"):
+        deformer = rt.deformers[region]
+        fresh = sibson_coordinates(deformer.queries, np.vstack([deformer.sites, deformer.box]))
+        np.testing.assert_allclose(deformer.sibson.toarray(), fresh.toarray(), atol=1e-12)
+
+
+def test_realtime_matches_precomputed_below_the_threshold(face, runtime):
+    rt = Runtime(face, mode="realtime", threshold=1.0, dtype=np.float64)
+    d = _displace(rt, {"8.3": (0.02, 0.01, 0), "8.2": (0, -0.02, 0), "4.3": (0, 0.02, 0)})
+    np.testing.assert_allclose(rt.deform(d), runtime.deform(d), atol=1e-12)
+
+
+def test_rig_file_round_trip(runtime, tmp_path):
+    path = tmp_path / "face.rig.json"
+    save_rig(runtime.rig, path)
+    again = load_rig(path)
+    assert [p.name for p in again.control_points] == [p.name for p in runtime.rig.control_points]
+    for a, b in zip(again.regions, runtime.rig.regions):
+        assert a.name == b.name and np.array_equal(a.vertices, b.vertices)
+
+
+def test_cached_coefficients_load_the_same_rig(face, tmp_path, monkeypatch):
+    monkeypatch.setenv("FACEPUPPET_CACHE", str(tmp_path))
+    first = Runtime(face, dtype=np.float64)
+    assert list(tmp_path.glob("*.npz"))
+    second = Runtime(face, dtype=np.float64)
+    assert (first.B != second.B).nnz == 0
+
+
+def test_normals_follow_the_deformation(runtime, face):
+    jaw = runtime.rig.rigid_parts["jaw"]
+    d = np.zeros((len(runtime.control_points), 3))
+    v, n = runtime.deform_with_normals(d, {"jaw": rigid.about(jaw.pivot, rigid.rotation(jaw.axis, np.radians(15)))})
+    from puppet.normals import VertexNormals
+
+    np.testing.assert_allclose(n, VertexNormals(face.triangles, len(face.vertices))(v), atol=1e-9)
+    np.testing.assert_allclose(np.linalg.norm(n, axis=1), 1.0, atol=1e-9)
+
+
+def test_the_shipped_rig_is_what_autorig_builds_today(face):
+    from puppet.autorig import build_rig
+    from puppet.rig import rig_to_dict
+
+    shipped = rig_to_dict(load_default_rig())
+    built = build_rig(face)
+    built.face_hash = face.content_hash
+    assert shipped == json.loads(json.dumps(rig_to_dict(built))), "run tools/build_default_rig.py"
