@@ -1,49 +1,81 @@
-"""Per-frame vertex normals of a triangle mesh as one sparse product.
+"""Per-frame vertex normals of a triangle mesh: one gather, a few vector ops, three sparse products.
 
 A vertex normal is the sum of its triangles' area-weighted normals (the un-normalised cross
 product), normalised. The vertex-triangle incidence never changes while a face deforms, so it is
-built once as a sparse matrix; each frame is then one cross product per triangle and one sparse
-product, with no Python loop and no allocation beyond reusable buffers.
+built once as a sparse matrix. Each frame gathers all triangle corners with a single ``np.take``
+into a components-first (structure of arrays) buffer, so the cross products run on contiguous
+rows, and sums them per vertex with one sparse product per component. Buffers are allocated once.
+
+``rows`` restricts the work to some vertices (and the triangles around them): the runtime only
+recomputes normals where the skin can bend.
 """
 
 from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.sparse import _sparsetools  # csr_matvec accumulating into a given buffer
 
 
 class VertexNormals:
-    """Callable that maps vertex positions (N, 3) to unit vertex normals (N, 3)."""
+    """Callable mapping vertex positions (N, 3) to unit normals of ``rows`` (all vertices by default)."""
 
-    def __init__(self, triangles: np.ndarray, n_vertices: int) -> None:
+    def __init__(self, triangles: np.ndarray, n_vertices: int, rows: np.ndarray | None = None,
+                 dtype=np.float64) -> None:
         tri = np.asarray(triangles, dtype=np.int64)
-        n_tri = len(tri)
-        rows = tri.ravel()
-        cols = np.repeat(np.arange(n_tri), 3)
+        self.n_vertices = int(n_vertices)
+        self.rows = np.arange(n_vertices) if rows is None else np.asarray(rows, dtype=np.int64)
+        local = np.full(n_vertices, -1, dtype=np.int64)
+        local[self.rows] = np.arange(len(self.rows))
+        tri = tri[(local[tri] >= 0).any(axis=1)]
         self.triangles = tri
+        corner_rows, corner_tris = local[tri.ravel()], np.repeat(np.arange(len(tri)), 3)
+        keep = corner_rows >= 0
         self.incidence = sp.csr_matrix(
-            (np.ones(len(rows)), (rows, cols)), shape=(n_vertices, n_tri)
+            (np.ones(int(keep.sum()), dtype=dtype), (corner_rows[keep], corner_tris[keep])),
+            shape=(len(self.rows), len(tri)),
         )
-        self._face_normals = np.empty((n_tri, 3))
-        self._edge1 = np.empty((n_tri, 3))
-        self._edge2 = np.empty((n_tri, 3))
+        self.incidence.sort_indices()
+        self._gather = (3 * tri.T[:, None, :] + np.arange(3)[None, :, None]).astype(np.intp)
+        f = len(tri)
+        self._corners = np.empty((3, 3, f), dtype=dtype)
+        self._edges = np.empty((2, 3, f), dtype=dtype)
+        self._cross = np.empty((3, f), dtype=dtype)
+        self._scratch = np.empty(f, dtype=dtype)
+        self._sums = np.empty((3, len(self.rows)), dtype=dtype)
+        self._length = np.empty(len(self.rows), dtype=dtype)
 
-    def __call__(self, vertices: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-        tri = self.triangles
-        np.subtract(vertices[tri[:, 1]], vertices[tri[:, 0]], out=self._edge1)
-        np.subtract(vertices[tri[:, 2]], vertices[tri[:, 0]], out=self._edge2)
-        _cross(self._edge1, self._edge2, self._face_normals)
-        normals = self.incidence @ self._face_normals
-        length = np.linalg.norm(normals, axis=1, keepdims=True)
-        np.maximum(length, 1e-30, out=length)
+    def __call__(self, vertices: np.ndarray, out: np.ndarray | None = None, *, scatter: bool = False) -> np.ndarray:
+        """Unit normals (len(rows), 3) of the given positions, written into ``out`` if given.
+
+        With ``scatter`` the normals go straight into ``out[rows]`` of a full (N, 3) array.
+        """
+        flat = np.ascontiguousarray(vertices, dtype=self._corners.dtype).reshape(-1)
+        if flat.size != 3 * self.n_vertices:
+            raise ValueError(f"expected ({self.n_vertices}, 3) vertices, got {np.shape(vertices)}")
+        np.take(flat, self._gather, out=self._corners)
+        a, b = self._edges
+        np.subtract(self._corners[1], self._corners[0], out=a)
+        np.subtract(self._corners[2], self._corners[0], out=b)
+        self._cross_product(a, b)
+        sums, m = self._sums, self.incidence
+        sums[:] = 0
+        for k in range(3):
+            _sparsetools.csr_matvec(m.shape[0], m.shape[1], m.indptr, m.indices, m.data, self._cross[k], sums[k])
+        np.sqrt(np.einsum("ij,ij->j", sums, sums), out=self._length)
+        np.maximum(self._length, 1e-30, out=self._length)
+        sums /= self._length
         if out is None:
-            return normals / length
-        np.divide(normals, length, out=out)
+            return sums.T.copy()
+        if scatter:
+            out[self.rows] = sums.T
+        else:
+            out[...] = sums.T
         return out
 
-
-def _cross(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:
-    """Row-wise cross product into ``out`` (np.cross allocates and takes no ``out``)."""
-    out[:, 0] = a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]
-    out[:, 1] = a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]
-    out[:, 2] = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    def _cross_product(self, a: np.ndarray, b: np.ndarray) -> None:
+        c, t = self._cross, self._scratch
+        for i, j, k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
+            np.multiply(a[j], b[k], out=c[i])
+            np.multiply(a[k], b[j], out=t)
+            c[i] -= t

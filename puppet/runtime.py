@@ -14,8 +14,8 @@ Per frame (``deform``):
 5. Rigid regions (eyeballs, lower teeth, tongue) take their part's motion; then the whole head
    turns about 7.1, fading to nothing across the neck band so the bust base stays put.
 
-Normals are recomputed only around vertices that can move other than with the head; the rest
-keep their rest normals (turned with the head).
+Normals are recomputed only where the skin bends (DFFD regions, the neck band); rigid and still
+parts turn their rest normals with their part and the head.
 """
 
 from __future__ import annotations
@@ -168,22 +168,17 @@ class Runtime:
         self._tmp = np.empty_like(self.rest)
 
     def _init_normals(self) -> None:
+        """Normals are recomputed where the skin bends (DFFD regions and the neck band, with one
+        ring of neighbours); rigid and still parts turn their rest normals instead."""
         tri = np.asarray(self.face.triangles, dtype=np.int64)
-        moving = np.zeros(len(self.rest), dtype=bool)
-        moving[np.diff(self.B.indptr) > 0] = True
+        bends = np.zeros(len(self.rest), dtype=bool)
         for region in self._regions:
-            moving[region.vertices] = True
-        for verts in self._rigid_vertices.values():
-            moving[verts] = True
-        touched = np.zeros(len(self.rest), dtype=bool)
-        touched[tri[moving[tri].any(axis=1)].ravel()] = True
-        sub_tri = tri[touched[tri].any(axis=1)]
-        self._normal_vertices = np.unique(sub_tri)
-        local = np.searchsorted(self._normal_vertices, sub_tri)
-        self._affected = np.flatnonzero(touched)
-        self._affected_local = np.searchsorted(self._normal_vertices, self._affected)
-        self._sub_normals = VertexNormals(local, len(self._normal_vertices))
-        self._sub_positions = np.empty((len(self._normal_vertices), 3), dtype=self.dtype)
+            bends[region.vertices] = True
+        bends |= (self._neck_weight > 0) & (self._neck_weight < 1)
+        ring = np.zeros_like(bends)
+        ring[tri[bends[tri].any(axis=1)].ravel()] = True
+        self._bending = np.flatnonzero(ring | bends)
+        self._bend_normals = VertexNormals(tri, len(self.rest), self._bending, dtype=self.dtype)
         self.rest_normals = VertexNormals(tri, len(self.rest))(self.face.vertices).astype(self.dtype)
 
     # -- per frame ------------------------------------------------------------------------
@@ -217,20 +212,24 @@ class Runtime:
                             normals_out: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Positions and unit vertex normals for one frame."""
         vertices = self.deform(displacements, rigid, out=out)
-        return vertices, self.normals(vertices, (rigid or {}).get("head"), out=normals_out)
+        return vertices, self.normals(vertices, rigid, out=normals_out)
 
-    def normals(self, vertices: np.ndarray, head: np.ndarray | None = None,
+    def normals(self, vertices: np.ndarray, rigid: Mapping[str, np.ndarray] | None = None,
                 *, out: np.ndarray | None = None) -> np.ndarray:
-        """Unit normals of deformed vertices; only the region that can deform is recomputed."""
+        """Unit normals of vertices deformed with these rigid motions (as given to ``deform``)."""
+        rigid = rigid or {}
         if out is None:
             out = np.empty_like(self.rest)
+        head = rigid.get("head")
+        turn = np.eye(3) if head is None else head[:, :3]
         if head is None:
             np.copyto(out, self.rest_normals)
         else:
-            np.matmul(self.rest_normals, head[:, :3].T.astype(self.dtype), out=out)
-        np.take(vertices, self._normal_vertices, axis=0, out=self._sub_positions)
-        local = self._sub_normals(self._sub_positions)
-        out[self._affected] = local[self._affected_local]
+            np.matmul(self.rest_normals, turn.T.astype(self.dtype), out=out)
+        for part, verts in self._rigid_vertices.items():
+            if part in rigid:
+                out[verts] = self.rest_normals[verts] @ (turn @ rigid[part][:, :3]).T.astype(self.dtype)
+        self._bend_normals(vertices, out, scatter=True)
         return out
 
     def _effective(self, d: np.ndarray, rigid: Mapping[str, np.ndarray]) -> np.ndarray:
