@@ -17,7 +17,8 @@ Regions (Zhang & Chen's functional regions), decided per skin vertex, first rule
 * ``cheek_l`` / ``cheek_r``: the rest of the front, split at the mid-line; it reaches down over the
   jaw line to the neck so that the jaw drags it smoothly.
 * Parts: eyeballs rigid about their centres, lower teeth and tongue rigid with the jaw, upper
-  teeth still.
+  teeth still. The four lids are rigid parts too, but of control points only: their margin points
+  turn about the eyeball centre and the lid skin follows by DFFD (the paper's hybrid eyelids).
 
 Control points per region: the feature points the FAPs move (active, direct: on their vertex),
 extra lid-margin points (the hybrid eyelids turn them about the eyeball centre), lip lines (the
@@ -47,6 +48,7 @@ from scipy.sparse.csgraph import connected_components
 from .rig import ControlPoint, LipLine, Region, Rig, RigidPart, RigError
 
 INDIRECT_WEIGHT = 0.5
+CORNER_JAW_SHARE = 0.5  # how far the lip corners go with the jaw
 BORDER_SPACING = 0.12  # border point spacing, as a fraction of the eye separation
 DRIVERS = {"cheek_l": ("upper_mouth", "lower_mouth"), "cheek_r": ("upper_mouth", "lower_mouth"),
            "nose": ("upper_mouth",)}
@@ -246,6 +248,16 @@ class _Builder:
             else:
                 self._add(name, f"{name}_edge_{vertex}", "fixed", vertex=int(vertex))
 
+    def _midline_anchors(self, region: str) -> None:
+        """Fixed anchors down the mid-line, so one side's motion does not leak to the other."""
+        verts = np.flatnonzero(self.region_of == region)
+        width = np.ptp(self.v[verts, 0])
+        middle = verts[np.abs(self.v[verts, 0]) < 1e-3 * width]
+        positions = {p.name: p.position for p in self.points}
+        taken = [positions[n] for n in self.members.get(region, [])]
+        for vertex in _spread_out(self.v, middle, taken, self._scale(BORDER_SPACING)):
+            self._add(region, f"{region}_midline_{vertex}", "fixed", vertex=vertex)
+
     def _deep_anchors(self, region: str, prefix: str, depth: float, attach: str | None = None) -> None:
         """Indirect anchors under the region's skin (its centre pushed back along -z); fixed, or
         carried by a rigid part (then they are active points the part moves)."""
@@ -258,27 +270,28 @@ class _Builder:
 
     def _forehead(self) -> None:
         for f in FOREHEAD_ACTIVE:
-            self._fdp("forehead", f, "active", group=_lid_group(f))
+            lid = _lid_group(f)
+            self._fdp("forehead", f, "active", group=lid, attach=lid)
         for f in FOREHEAD_FIXED:
             self._fdp("forehead", f, "fixed")
         self._lid_margins()
+        self._midline_anchors("forehead")
         self._deep_anchors("forehead", "forehead_deep_", self._scale(0.25))
 
     def _lid_margins(self) -> None:
-        """Two more points on each lid margin, between the lid centre and the eye corners."""
-        for side, loop_name, centre_up, centre_down, corners in (
-            ("l", "left_lid_opening", "3.1", "3.3", ("3.7", "3.11")),
-            ("r", "right_lid_opening", "3.2", "3.4", ("3.12", "3.8")),
-        ):
-            loop = np.asarray(self.face.contours[loop_name])
-            for centre, lid in ((centre_up, "upper"), (centre_down, "lower")):
-                c = self.fp[centre]
-                for corner in corners:
-                    target = (c + self.fp[corner]) / 2
-                    target[1] = c[1] + 0.6 * (self.fp[corner][1] - c[1])
-                    vertex = int(loop[np.argmin(np.linalg.norm(self.v[loop] - target, axis=1))])
-                    self._add("forehead", f"{lid}_lid_{side}_{corner}", "active", vertex=vertex,
-                              group=f"{lid}_lid_{side}")
+        """Every vertex of each lid margin (the lid-opening loop between the eye corners) rides on
+        its lid, so a closing lid keeps a smooth edge."""
+        for side, loop_name, corners in (("l", "left_lid_opening", ("3.7", "3.11")),
+                                         ("r", "right_lid_opening", ("3.12", "3.8"))):
+            loop = list(np.asarray(self.face.contours[loop_name]))
+            a, b = (loop.index(self.fv[c]) for c in corners)
+            for lid, centre in (("upper", self.fv["3.1" if side == "l" else "3.2"]),
+                                ("lower", self.fv["3.3" if side == "l" else "3.4"])):
+                path = _loop_path_via(loop, a, b, centre)
+                for vertex in path[1:-1]:
+                    if vertex != centre:
+                        self._add("forehead", f"{lid}_lid_{side}_{vertex}", "active", vertex=int(vertex),
+                                  group=f"{lid}_lid_{side}", attach=f"{lid}_lid_{side}")
 
     def _nose(self) -> None:
         for f in NOSE_ACTIVE:
@@ -291,7 +304,7 @@ class _Builder:
         for f in UPPER_ACTIVE:
             self._fdp("upper_mouth", f, "active")
         for f in CORNERS:
-            self._fdp("upper_mouth", f, "active")
+            self._fdp("upper_mouth", f, "active", attach="jaw", attach_weight=CORNER_JAW_SHARE)
             self._fdp("lower_mouth", f, "active")
         for f in LOWER_JAW:
             self._fdp("lower_mouth", f, "active", attach="jaw")
@@ -332,6 +345,20 @@ class _Builder:
         """A length as a fraction of the eye separation (the face's own scale)."""
         return f * abs(self.fp["3.5"][0] - self.fp["3.6"][0])
 
+    def _jaw_hinge(self) -> np.ndarray:
+        """Where the jaw turns when the mouth opens: on the mid-plane, at the lips' height, as far
+        back as the jaw angles (2.13/2.14).
+
+        The mandible opens by turning while its condyles glide forward; the centre of that combined
+        motion lies near the middle of the ramus, about level with the bite, not at the condyle.
+        Turning about it takes the chin mostly down and a little back, as a jaw does; a hinge up at
+        the condyle (MakeHuman's joint-mouth marker, the face's ``pivots["jaw"]``) swings the chin
+        back as much as down.
+        """
+        lip_y = (self.fp["2.2"][1] + self.fp["2.3"][1]) / 2
+        back = (self.fp["2.13"][2] + self.fp["2.14"][2]) / 2
+        return np.array([0.0, lip_y, back])
+
     def _rigid_parts(self) -> dict[str, RigidPart]:
         pivots = self.face.pivots
         skin = self.v[self.face.parts["skin"]]
@@ -340,15 +367,24 @@ class _Builder:
         neck = (float(neck_lo), float(self.fp["2.1"][1]))
         return {
             "head": RigidPart("head", self.fp["7.1"], neck=neck),
-            "jaw": RigidPart("jaw", np.asarray(pivots["jaw"], float),
-                             axis=np.asarray(pivots.get("jaw_axis", (1.0, 0.0, 0.0)), float)),
+            "jaw": RigidPart("jaw", self._jaw_hinge(), axis=np.asarray(pivots.get("jaw_axis", (1.0, 0.0, 0.0)), float)),
             "eye_l": RigidPart("eye_l", np.asarray(pivots["eye_l"], float)),
             "eye_r": RigidPart("eye_r", np.asarray(pivots["eye_r"], float)),
+            **{f"{lid}_lid_{side}": RigidPart(f"{lid}_lid_{side}", np.asarray(pivots[f"eye_{side}"], float),
+                                               axis=np.array([1.0, 0.0, 0.0]))
+               for lid in ("upper", "lower") for side in ("l", "r")},
         }
 
 
 def _lid_group(fdp: str) -> str | None:
     return {"3.1": "upper_lid_l", "3.2": "upper_lid_r", "3.3": "lower_lid_l", "3.4": "lower_lid_r"}.get(fdp)
+
+
+def _loop_path_via(loop: list[int], i: int, j: int, via: int) -> list[int]:
+    """The vertices from loop[i] to loop[j] along the closed loop, the way that passes ``via``."""
+    n = len(loop)
+    forward = [loop[(i + k) % n] for k in range((j - i) % n + 1)]
+    return forward if via in forward else [loop[(i - k) % n] for k in range((i - j) % n + 1)]
 
 
 def _loop_path(loop: list[int], i: int, j: int) -> list[int]:

@@ -3,9 +3,11 @@
 Per frame (``deform``):
 
 1. The caller gives displacements of the rig's active control points (``control_points``, in
-   order) and rigid motions (3x4 ``[R | t]``) for ``jaw``, ``eye_l``, ``eye_r`` and ``head``.
+   order) and rigid motions (3x4 ``[R | t]``) of the rig's rigid parts: ``jaw``, ``eye_l``,
+   ``eye_r``, ``head`` and the lids ``upper_lid_l`` ... ``lower_lid_r``.
 2. Points attached to a rigid part ride on it: the lower lip and chin points move with the jaw
-   (their own displacement applied first, in the jaw's frame), which is how the jaw opens the mouth.
+   (their own displacement applied first, in the jaw's frame), which is how the jaw opens the
+   mouth; the lid margin points turn about the eyeball centre (hybrid eyelids).
 3. Fixed, interpolated (lip line) and passive points follow by one small dense product.
 4. Every DFFD region moves its vertices by its weighted Sibson coefficients. In the precomputed
    mode all of this is folded into one sparse matrix B (vertices x active points), so the skin
@@ -33,7 +35,6 @@ from .normals import VertexNormals
 from .rig import Rig, rig_to_dict
 
 MODES = ("precomputed", "realtime")
-RIGID_MOTIONS = ("jaw", "eye_l", "eye_r", "head")
 
 
 class Runtime:
@@ -70,6 +71,7 @@ class Runtime:
                            dtype=np.int64)
             for part in rig.rigid_parts
         }
+        self._attach_weight = np.array([[rig.point(n).attach_weight] for n in self.control_points])
 
     def _init_regions(self, cache: bool) -> None:
         rig = self.rig
@@ -187,10 +189,10 @@ class Runtime:
                *, out: np.ndarray | None = None) -> np.ndarray:
         """Vertex positions (N, 3) for active control point displacements (K, 3) and rigid motions."""
         rigid = rigid or {}
-        unknown = set(rigid) - set(RIGID_MOTIONS)
+        unknown = set(rigid) - set(self.rig.rigid_parts)
         if unknown:
-            raise ValueError(f"unknown rigid motions {sorted(unknown)}; expected {RIGID_MOTIONS}")
-        d = self._effective(np.asarray(displacements, dtype=float), rigid)
+            raise ValueError(f"unknown rigid motions {sorted(unknown)}; this rig has {sorted(self.rig.rigid_parts)}")
+        d = self._effective(np.array(displacements, dtype=float), rigid)
         if out is None:
             out = np.empty_like(self.rest)
         if self.mode == "precomputed":
@@ -238,7 +240,9 @@ class Runtime:
         for part, idx in self._attached.items():
             if part in rigid and part != "head" and len(idx):
                 p0 = self._p0[self._active[idx]]
-                d[idx] = (p0 + d[idx]) @ rigid[part][:, :3].T + rigid[part][:, 3] - p0
+                carried = (p0 + d[idx]) @ rigid[part][:, :3].T + rigid[part][:, 3] - p0
+                w = self._attach_weight[idx]
+                d[idx] = w * carried + (1 - w) * d[idx]
         return d
 
     def _turn_head(self, motion: np.ndarray, out: np.ndarray) -> None:

@@ -173,3 +173,19 @@ def test_the_shipped_rig_is_what_autorig_builds_today(face):
     built = build_rig(face)
     built.face_hash = face.content_hash
     assert shipped == json.loads(json.dumps(rig_to_dict(built))), "run tools/build_default_rig.py"
+
+
+def test_hybrid_eyelid_turns_its_margin_about_the_eyeball_and_the_lid_follows(runtime, face):
+    eye = runtime.rig.rigid_parts["upper_lid_l"]
+    close = rigid.about(eye.pivot, rigid.rotation(eye.axis, np.radians(25)))
+    out = runtime.deform(np.zeros((len(runtime.control_points), 3)), {"upper_lid_l": close})
+    lid = face.feature_vertices["3.1"]
+    centre = face.pivots["eye_l"]
+    assert out[lid, 1] < face.vertices[lid, 1] - 0.03
+    assert np.linalg.norm(out[lid] - centre) == pytest.approx(np.linalg.norm(face.vertices[lid] - centre))
+    moved = np.linalg.norm(out - face.vertices, axis=1) > 1e-9
+    assert moved.sum() > 20
+    assert not moved[_region(runtime, "eyeball_l")].any()
+    motion = np.linalg.norm(out - face.vertices, axis=1)
+    right = face.vertices[:, 0] < 0
+    assert motion[right].max() < 0.02 * motion.max(), "closing the left lid moved the right side"
