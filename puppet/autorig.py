@@ -259,14 +259,14 @@ class _Builder:
             self._add(region, f"{region}_midline_{vertex}", "fixed", vertex=vertex)
 
     def _deep_anchors(self, region: str, prefix: str, depth: float, attach: str | None = None) -> None:
-        """Indirect anchors under the region's skin (its centre pushed back along -z); fixed, or
-        carried by a rigid part (then they are active points the part moves)."""
+        """Indirect fixed anchors under the region's skin (its centre pushed back along -z),
+        carried by a rigid part if one is named."""
         verts = np.flatnonzero(self.region_of == region)
         p = self.v[verts]
         lo, hi = p.min(axis=0), p.max(axis=0)
         for i, fx in enumerate((0.25, 0.75)):
             xyz = np.array([lo[0] + fx * (hi[0] - lo[0]), (lo[1] + hi[1]) / 2, lo[2] - depth])
-            self._add(region, f"{prefix}{i}", "active" if attach else "fixed", position=xyz, attach=attach)
+            self._add(region, f"{prefix}{i}", "fixed", position=xyz, attach=attach)
 
     def _forehead(self) -> None:
         for f in FOREHEAD_ACTIVE:
@@ -290,7 +290,7 @@ class _Builder:
                 path = _loop_path_via(loop, a, b, centre)
                 for vertex in path[1:-1]:
                     if vertex != centre:
-                        self._add("forehead", f"{lid}_lid_{side}_{vertex}", "active", vertex=int(vertex),
+                        self._add("forehead", f"{lid}_lid_{side}_{vertex}", "fixed", vertex=int(vertex),
                                   group=f"{lid}_lid_{side}", attach=f"{lid}_lid_{side}")
 
     def _nose(self) -> None:

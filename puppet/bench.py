@@ -5,8 +5,9 @@ For each mesh (the default face; it subdivided to about 4x and 16x the vertices;
 
 * ``sibson_s``: computing every region's Sibson coordinates from scratch (no cache);
 * ``load_s``: building the runtime from the on-disk coefficient cache;
-* ``deform_ms`` and ``deform_normals_ms``: one frame of random control point displacements with
-  a jaw rotation, positions only and positions + normals;
+* ``deform_ms`` and ``deform_normals_ms``: one frame of a smooth take (``performance``: every
+  control point oscillating, the jaw opening and closing), positions only and positions + normals;
+* ``realtime_ms``: the same frames (positions) in real-time mode, rebases included;
 * ``dense_ms``: the same mesh and control points as dense blendshapes, one (V x 3) delta per
   control point (V x 3 x K, float32), one frame = rest + deltas @ weights; ``ratio`` is
   dense_ms / deform_ms.
@@ -17,12 +18,13 @@ Timings are single-threaded (BLAS limited to one thread before numpy loads) so t
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import statistics
 import tempfile
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
@@ -47,21 +49,34 @@ def median_time(fn: Callable[[], object], repeat: int) -> float:
     return statistics.median(times)
 
 
-def bench_face(face: Face, frames: int, rig=None) -> dict:
-    """All measurements for one face (see module docstring)."""
+@contextlib.contextmanager
+def _private_cache() -> Iterator[None]:
+    """A fresh, empty coefficient cache for the duration (the user's cache is left alone)."""
+    saved = os.environ.get("FACEPUPPET_CACHE")
     with tempfile.TemporaryDirectory() as cache:
         os.environ["FACEPUPPET_CACHE"] = cache
+        try:
+            yield
+        finally:
+            if saved is None:
+                del os.environ["FACEPUPPET_CACHE"]
+            else:
+                os.environ["FACEPUPPET_CACHE"] = saved
+
+
+def bench_face(face: Face, frames: int, rig=None) -> dict:
+    """All measurements for one face (see module docstring)."""
+    with _private_cache():
         sibson_s = median_time(lambda: Runtime(face, rig, cache=False), 1)
         Runtime(face, rig)
         load_s = median_time(lambda: Runtime(face, rig), 3)
         runtime = Runtime(face, rig)
+        realtime = Runtime(face, rig, mode="realtime")
     k = len(runtime.control_points)
     rng = np.random.default_rng(7)
-    scale = 0.01 * float(np.ptp(face.vertices[:, 1]))
-    displacements = rng.normal(scale=scale, size=(frames, k, 3))
+    displacements, angles = performance(rng, frames, k, 0.03 * float(np.ptp(face.vertices[:, 1])))
     jaw = runtime.rig.rigid_parts["jaw"]
-    motions = [{"jaw": rigid.about(jaw.pivot, rigid.rotation(jaw.axis, a))}
-               for a in np.radians(rng.uniform(0, 15, frames))]
+    motions = [{"jaw": rigid.about(jaw.pivot, rigid.rotation(jaw.axis, a))} for a in angles]
     out = np.empty_like(runtime.rest)
     normals = np.empty_like(runtime.rest)
     frame = iter(range(10**9))
@@ -81,6 +96,10 @@ def bench_face(face: Face, frames: int, rig=None) -> dict:
         i = next(frame) % frames
         np.add(dense[1], (dense[0] @ weights[i]).reshape(-1, 3), out=dense[2])
 
+    def deform_realtime() -> None:
+        i = next(frame) % frames
+        realtime.deform(displacements[i], motions[i], out=out)
+
     deform_ms = 1e3 * median_time(deform, frames)
     dense_ms = 1e3 * median_time(blend, frames)
     return {
@@ -92,9 +111,22 @@ def bench_face(face: Face, frames: int, rig=None) -> dict:
         "load_s": load_s,
         "deform_ms": deform_ms,
         "deform_normals_ms": 1e3 * median_time(deform_normals, frames),
+        "realtime_ms": 1e3 * median_time(deform_realtime, frames),
         "dense_ms": dense_ms,
         "ratio": dense_ms / deform_ms,
     }
+
+
+def performance(rng: np.random.Generator, frames: int, k: int, amplitude: float) -> tuple[np.ndarray, np.ndarray]:
+    """A smooth take at 60 frames/s: every control point on its own slow oscillation (0.2-2 Hz)
+    of up to ``amplitude``, and the jaw opening and closing up to 15 degrees."""
+    t = np.arange(frames) / 60.0
+    freq = rng.uniform(0.2, 2.0, size=(k, 3))
+    phase = rng.uniform(0, 2 * np.pi, size=(k, 3))
+    size = rng.uniform(0, amplitude, size=(k, 3))
+    displacements = size * np.sin(2 * np.pi * freq * t[:, None, None] + phase)
+    angles = np.radians(7.5) * (1 - np.cos(2 * np.pi * 0.7 * t))
+    return displacements, angles
 
 
 def _dense_baseline(runtime: Runtime) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -124,10 +156,12 @@ def run_bench(frames: int = 300, as_json: bool = False, ict: bool = True) -> int
         print(json.dumps(rows, indent=1))
         return 0
     header = ("face", "vertices", "control_points", "sibson_s", "load_s", "deform_ms",
-              "deform_normals_ms", "dense_ms", "ratio")
-    print("  ".join(f"{h:>17}" for h in header))
+              "deform_normals_ms", "realtime_ms", "dense_ms", "ratio")
+    widths = [max(len(h), 12) for h in header]
+    print("  ".join(f"{h:>{w}}" for h, w in zip(header, widths)))
     for row in rows:
-        print("  ".join(f"{row[h]:>17.4g}" if isinstance(row[h], float) else f"{row[h]!s:>17}" for h in header))
+        print("  ".join(f"{row[h]:>{w}.4g}" if isinstance(row[h], float) else f"{row[h]!s:>{w}}"
+                        for h, w in zip(header, widths)))
     return 0
 
 

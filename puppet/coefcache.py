@@ -2,8 +2,10 @@
 
 Sibson coordinates depend only on the rest mesh and the rig, so they are computed once and kept
 in ``$FACEPUPPET_CACHE`` (default ``~/.cache/facepuppet``) under a key hashed from the mesh, the
-rig and the format version: a changed face or rig can never load stale coefficients. A corrupt or
-unreadable cache file is ignored and recomputed, never an error.
+rig, the format version and the source of the modules that compute them: a changed face, rig or
+algorithm can never load stale coefficients. A corrupt or
+unreadable cache file is ignored and recomputed, and an unwritable cache folder only warns:
+neither is ever an error.
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ import hashlib
 import json
 import os
 import tempfile
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -27,9 +30,12 @@ def cache_dir() -> Path:
 
 
 def cache_key(mesh_hash: str, rig_dict: dict) -> str:
-    """A stable key for one mesh + rig + cache format."""
+    """A stable key for one mesh + rig + cache format + the code that computes coefficients."""
     text = json.dumps({"mesh": mesh_hash, "rig": rig_dict, "format": CACHE_FORMAT}, sort_keys=True)
-    return hashlib.sha256(text.encode()).hexdigest()[:32]
+    digest = hashlib.sha256(text.encode())
+    for module in ("sibson.py", "dffd.py"):
+        digest.update(Path(__file__).with_name(module).read_bytes())
+    return digest.hexdigest()[:32]
 
 
 def load(key: str) -> dict[str, tuple[np.ndarray, sp.csr_matrix]] | None:
@@ -67,5 +73,6 @@ def store(key: str, regions: dict[str, tuple[np.ndarray, sp.csr_matrix]]) -> Non
         with tempfile.NamedTemporaryFile(dir=folder, suffix=".tmp", delete=False) as tmp:
             np.savez(tmp, **arrays)
         os.replace(tmp.name, folder / f"{key}.npz")
-    except OSError:
-        return
+    except OSError as exc:
+        warnings.warn(f"coefficient cache not written to {folder} ({exc}); the rig will be recomputed next time",
+                      stacklevel=2)

@@ -1,10 +1,11 @@
 """How the displacements of a rig's driven points spread to every control point.
 
-The runtime is given displacements of the *active* control points only. Fixed points stay put;
+The runtime is given displacements of its *input* points: the active control points, then the
+fixed points a rigid part carries (``Rig.input_points``). Other fixed points stay put;
 points interpolated along a lip line follow the line's key points by Catmull-Rom interpolation
 (a cubic Bezier through the keys, parametrised by the keys' rest positions); passive points
 follow the DFFD of their driver region. All three are linear in the active displacements, so
-they fold into one small dense matrix ``M`` (all points x active points): D_all = M @ D_active.
+they fold into one small dense matrix ``M`` (all points x inputs): D_all = M @ D_inputs.
 """
 
 from __future__ import annotations
@@ -50,13 +51,13 @@ def _closest_segment(keys: np.ndarray, point: np.ndarray) -> tuple[int, float]:
 
 
 def spread_matrix(rig: Rig, passive_rows: dict[str, dict[str, float]]) -> np.ndarray:
-    """M (all points x active points) with D_all = M @ D_active.
+    """M (all points x inputs) with D_all = M @ D_inputs.
 
     ``passive_rows`` gives, for each passive point, its DFFD coefficients over the control points
     of its driver region. Dependencies are resolved in order; a cycle is a rig error.
     """
     index = rig.point_index()
-    active = {name: i for i, name in enumerate(rig.active_points)}
+    active = {name: i for i, name in enumerate(rig.input_points)}
     depends = _dependencies(rig, passive_rows)
     rows: dict[str, np.ndarray] = {}
     pending = [p.name for p in rig.control_points]
@@ -82,7 +83,7 @@ def _dependencies(rig: Rig, passive_rows: dict[str, dict[str, float]]) -> dict[s
 
 def _row(role: str, name: str, active: dict[str, int], depends: dict, rows: dict) -> np.ndarray:
     row = np.zeros(len(active))
-    if role == "active":
+    if name in active:
         row[active[name]] = 1.0
     elif role in ("passive", "interpolated"):
         for source, weight in depends[name].items():

@@ -37,10 +37,14 @@ class DffdError(ValueError):
 
 
 def box_corners(points: np.ndarray, scale: float) -> np.ndarray:
-    """The 8 corners of the points' bounding box, each half-extent scaled by ``scale``."""
+    """The 8 corners of the points' bounding box, each half-extent scaled by ``scale``.
+
+    A thin axis is first widened to half the longest one, so that skin moving off a flat region's
+    surface still has room inside the box.
+    """
     lo, hi = points.min(axis=0), points.max(axis=0)
     centre = (lo + hi) / 2
-    half = np.maximum((hi - lo) / 2, 1e-3 * max(float((hi - lo).max()), 1e-12)) * scale
+    half = np.maximum((hi - lo) / 2, 0.5 * max(float((hi - lo).max()) / 2, 1e-12)) * scale
     signs = np.array([[i >> 2 & 1, i >> 1 & 1, i & 1] for i in range(8)]) * 2 - 1
     return centre + signs * half
 
@@ -65,6 +69,7 @@ class RegionDeformer:
     def __init__(self, name: str, queries: np.ndarray, sites: np.ndarray, weights: np.ndarray,
                  box_scale: float = 1.5) -> None:
         self.name = name
+        self.box_scale = box_scale
         self.weights = np.asarray(weights, dtype=float)
         self.box = box_corners(np.vstack([queries, sites]), box_scale)
         self.queries = np.array(queries, dtype=float)
@@ -74,10 +79,11 @@ class RegionDeformer:
 
     @classmethod
     def from_matrices(cls, name: str, queries: np.ndarray, sites: np.ndarray, weights: np.ndarray,
-                      box: np.ndarray, sibson: sp.csr_matrix) -> RegionDeformer:
+                      box: np.ndarray, sibson: sp.csr_matrix, box_scale: float = 1.5) -> RegionDeformer:
         """Rebuild a deformer from cached matrices without recomputing Sibson coordinates."""
         self = cls.__new__(cls)
         self.name, self.weights, self.box = name, np.asarray(weights, float), np.asarray(box, float)
+        self.box_scale = box_scale
         self.queries, self.sites = np.array(queries, float), np.array(sites, float)
         self.sibson = sp.csr_matrix(sibson)
         self.coefficients = weighted_coefficients(self.sibson, self.weights, name)
@@ -87,13 +93,13 @@ class RegionDeformer:
         """Recompute the coefficients for new query and site positions; return the rows redone."""
         queries = np.asarray(queries, dtype=float)
         sites = np.asarray(sites, dtype=float)
+        if not self._room_for(np.vstack([queries, sites])):
+            return self._rebuild(queries, sites)
         moved_sites = np.flatnonzero(np.any(sites != self.sites, axis=1))
         rows = np.any(queries != self.queries, axis=1)
         if len(moved_sites):
             rows |= np.asarray((self.sibson[:, moved_sites] != 0).sum(axis=1)).ravel() > 0
-            all_sites = np.vstack([sites, self.box])
-            for k in moved_sites:
-                rows |= natural_neighbour_mask(queries, all_sites, int(k))
+            rows |= natural_neighbour_mask(queries, np.vstack([sites, self.box]), moved_sites)
         redo = np.flatnonzero(rows)
         if len(redo):
             fresh = self._sibson(queries[redo], sites)
@@ -101,6 +107,20 @@ class RegionDeformer:
             self.coefficients = weighted_coefficients(self.sibson, self.weights, self.name)
         self.queries, self.sites = queries.copy(), sites.copy()
         return redo
+
+    def _room_for(self, points: np.ndarray) -> bool:
+        """Whether the points stay well inside the box (a quarter of its margin to spare)."""
+        lo, hi = self.box.min(axis=0), self.box.max(axis=0)
+        slack = (hi - lo) * (1 - 1 / self.box_scale) / 8
+        return bool(np.all(points > lo + slack) and np.all(points < hi - slack))
+
+    def _rebuild(self, queries: np.ndarray, sites: np.ndarray) -> np.ndarray:
+        """The skin has moved toward the box's walls: a new box around it, every row redone."""
+        self.box = box_corners(np.vstack([queries, sites]), self.box_scale)
+        self.queries, self.sites = queries.copy(), sites.copy()
+        self.sibson = self._sibson(self.queries, self.sites)
+        self.coefficients = weighted_coefficients(self.sibson, self.weights, self.name)
+        return np.arange(len(queries))
 
     def _sibson(self, queries: np.ndarray, sites: np.ndarray) -> sp.csr_matrix:
         try:

@@ -65,13 +65,13 @@ class Runtime:
         self._p0 = np.array([p.position for p in rig.control_points], dtype=float)
         index = rig.point_index()
         self.control_points: list[str] = rig.active_points
-        self._active = np.array([index[n] for n in self.control_points], dtype=np.int64)
+        inputs = rig.input_points
+        self._inputs = np.array([index[n] for n in inputs], dtype=np.int64)
         self._attached = {
-            part: np.array([i for i, n in enumerate(self.control_points) if rig.point(n).attach == part],
-                           dtype=np.int64)
+            part: np.array([i for i, n in enumerate(inputs) if rig.point(n).attach == part], dtype=np.int64)
             for part in rig.rigid_parts
         }
-        self._attach_weight = np.array([[rig.point(n).attach_weight] for n in self.control_points])
+        self._attach_weight = np.array([[rig.point(n).attach_weight] for n in inputs])
 
     def _init_regions(self, cache: bool) -> None:
         rig = self.rig
@@ -105,7 +105,7 @@ class Runtime:
             if cached is not None and region.name in cached:
                 box, sibson = cached[region.name]
                 deformers[region.name] = RegionDeformer.from_matrices(
-                    region.name, queries, self._p0[cps], weights, box, sibson)
+                    region.name, queries, self._p0[cps], weights, box, sibson, self.rig.box_scale)
             else:
                 deformers[region.name] = RegionDeformer(
                     region.name, queries, self._p0[cps], weights, self.rig.box_scale)
@@ -150,7 +150,7 @@ class Runtime:
             place = sp.csr_matrix((np.ones(len(region.vertices)), (region.vertices, np.arange(len(region.vertices)))),
                                   shape=(n, len(region.vertices)))
             blocks.append(place @ folded)
-        B = sum(blocks[1:], blocks[0]) if blocks else sp.csr_matrix((n, len(self.control_points)))
+        B = sum(blocks[1:], blocks[0]) if blocks else sp.csr_matrix((n, len(self._inputs)))
         B = sp.csr_matrix(B, dtype=self.dtype)
         B.sort_indices()
         self.B = B
@@ -192,7 +192,7 @@ class Runtime:
         unknown = set(rigid) - set(self.rig.rigid_parts)
         if unknown:
             raise ValueError(f"unknown rigid motions {sorted(unknown)}; this rig has {sorted(self.rig.rigid_parts)}")
-        d = self._effective(np.array(displacements, dtype=float), rigid)
+        d = self._effective(np.asarray(displacements, dtype=float), rigid)
         if out is None:
             out = np.empty_like(self.rest)
         if self.mode == "precomputed":
@@ -235,11 +235,13 @@ class Runtime:
         return out
 
     def _effective(self, d: np.ndarray, rigid: Mapping[str, np.ndarray]) -> np.ndarray:
-        if d.shape != (len(self.control_points), 3):
-            raise ValueError(f"displacements must be ({len(self.control_points)}, 3), got {d.shape}")
+        k = len(self.control_points)
+        if d.shape != (k, 3):
+            raise ValueError(f"displacements must be ({k}, 3), got {d.shape}")
+        d = np.vstack([d, np.zeros((len(self._inputs) - k, 3))])
         for part, idx in self._attached.items():
             if part in rigid and part != "head" and len(idx):
-                p0 = self._p0[self._active[idx]]
+                p0 = self._p0[self._inputs[idx]]
                 carried = (p0 + d[idx]) @ rigid[part][:, :3].T + rigid[part][:, 3] - p0
                 w = self._attach_weight[idx]
                 d[idx] = w * carried + (1 - w) * d[idx]
@@ -256,7 +258,7 @@ class Runtime:
     def _deform_realtime(self, d: np.ndarray, out: np.ndarray) -> None:
         """Each region from its reference state; rebase regions whose points drifted past T."""
         points = self._p0.copy()
-        points[self._active] += d
+        points[self._inputs] += d
         points[self._interp] = self._p0[self._interp] + self._spread[self._interp] @ d
         np.copyto(out, self.rest)
         for region in self._order:

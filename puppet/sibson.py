@@ -123,8 +123,9 @@ def sibson_coordinates(queries: np.ndarray, sites: np.ndarray) -> sp.csr_matrix:
     )
 
 
-def natural_neighbour_mask(queries: np.ndarray, sites: np.ndarray, k: int) -> np.ndarray:
-    """Boolean (M,): which queries have a non-zero Sibson coordinate for site ``k``.
+def natural_neighbour_mask(queries: np.ndarray, sites: np.ndarray, k: int | np.ndarray) -> np.ndarray:
+    """Boolean (M,): which queries have a non-zero Sibson coordinate for site ``k`` (or, given
+    several indices, for any of them).
 
     That is, the query lies strictly inside the circumsphere of a non-flat Delaunay tetrahedron
     incident to site k.  Same test, chunking and snap rule as sibson_coordinates, so the mask
@@ -132,12 +133,13 @@ def natural_neighbour_mask(queries: np.ndarray, sites: np.ndarray, k: int) -> np
     """
     tri = _prepare(sites)
     n = len(tri.points)
-    if not 0 <= int(k) < n:
-        raise SibsonError(f"site index k={k} out of range for {n} sites")
+    ks = np.atleast_1d(np.asarray(k, dtype=np.int64))
+    if ((ks < 0) | (ks >= n)).any():
+        raise SibsonError(f"site index k={ks[(ks < 0) | (ks >= n)][0]} out of range for {n} sites")
     vt, snap = _prepare_queries(queries, tri)
     spheres = _sphere_rows(tri)
-    incident = np.flatnonzero((tri.tets == k).any(axis=1) & ~tri.flat)
-    mask = snap == k
+    incident = np.flatnonzero(np.isin(tri.tets, ks).any(axis=1) & ~tri.flat)
+    mask = np.isin(snap, ks)
     for _, free in _free_chunks(snap):
         mask[free] = _inside_spheres(vt[:, free], spheres)[incident].any(axis=0)
     return mask

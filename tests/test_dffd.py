@@ -86,3 +86,14 @@ def test_catmull_rom_interpolates_its_keys_and_keeps_unity():
     weights = lip_line_weights(keys, np.array([1.5, 0.55, 0.0]))
     assert sum(weights.values()) == pytest.approx(1.0)
     assert max(weights, key=weights.get) in (1, 2)
+
+
+def test_rebase_rebuilds_the_box_when_the_skin_nears_its_walls():
+    deformer, vertices, sites = _deformer()
+    moved = sites + (0.0, 0.0, 1.5)
+    queries = vertices + deformer.coefficients @ (moved - sites)
+    redone = deformer.rebase(queries, moved)
+    assert len(redone) == len(vertices)
+    fresh = sibson_coordinates(queries, np.vstack([moved, deformer.box]))
+    np.testing.assert_allclose(deformer.sibson.toarray(), fresh.toarray(), atol=1e-12)
+    assert deformer.box[:, 2].min() > sites[:, 2].max() - 1.0

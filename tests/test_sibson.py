@@ -359,3 +359,12 @@ def test_mask_rejects_bad_site_index() -> None:
 def test_empty_queries() -> None:
     x = sibson_coordinates(np.zeros((0, 3)), corners(1.0))
     assert x.shape == (0, 8) and x.nnz == 0
+
+
+def test_mask_of_several_sites_is_the_union_of_their_masks():
+    rng = np.random.default_rng(3)
+    sites = np.vstack([rng.uniform(-1, 1, (12, 3)), corners(2.0)])
+    queries = rng.uniform(-0.9, 0.9, (300, 3))
+    union = natural_neighbour_mask(queries, sites, np.array([2, 5, 7]))
+    each = [natural_neighbour_mask(queries, sites, k) for k in (2, 5, 7)]
+    np.testing.assert_array_equal(union, each[0] | each[1] | each[2])
