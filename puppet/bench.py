@@ -90,7 +90,7 @@ def bench_face(face: Face, frames: int, rig=None) -> dict:
         runtime.deform_with_normals(displacements[i], motions[i], out=out, normals_out=normals)
 
     dense = _dense_baseline(runtime)
-    weights = rng.uniform(0, 1, size=(frames, k)).astype(np.float32)
+    weights = rng.uniform(0, 1, size=(frames, runtime.B.shape[1])).astype(np.float32)
 
     def blend() -> None:
         i = next(frame) % frames

@@ -7,14 +7,20 @@ Per frame (``deform``):
    ``eye_r``, ``head`` and the lids ``upper_lid_l`` ... ``lower_lid_r``.
 2. Points attached to a rigid part ride on it: the lower lip and chin points move with the jaw
    (their own displacement applied first, in the jaw's frame), which is how the jaw opens the
-   mouth; the lid margin points turn about the eyeball centre (hybrid eyelids).
+   mouth; the lid margin points turn about the eyeball centre (hybrid eyelids); the lip corners
+   go half way with the jaw.
 3. Fixed, interpolated (lip line) and passive points follow by one small dense product.
 4. Every DFFD region moves its vertices by its weighted Sibson coefficients. In the precomputed
-   mode all of this is folded into one sparse matrix B (vertices x active points), so the skin
+   mode all of this is folded into one sparse matrix B (vertices x inputs: the active points and
+   the fixed points rigid parts carry), so the skin
    costs a single sparse product written into the output; in real-time mode each region applies
    its own coefficients and rebases them when a control point drifts farther than ``threshold``.
 5. Rigid regions (eyeballs, lower teeth, tongue) take their part's motion; then the whole head
    turns about 7.1, fading to nothing across the neck band so the bust base stays put.
+
+The real-time mode is incremental, as the paper's: between rebases each region moves from the
+skin and control points as they were at its last rebase, so the same pose reached by different
+paths can differ slightly. The precomputed mode is exact and path-free, and it is the default.
 
 Normals are recomputed only where the skin bends (DFFD regions, the neck band); rigid and still
 parts turn their rest normals with their part and the head.
@@ -29,6 +35,7 @@ import scipy.sparse as sp
 from scipy.sparse import _sparsetools
 
 from . import coefcache
+from .autorig import rig_for_face
 from .controls import spread_matrix
 from .dffd import RegionDeformer
 from .normals import VertexNormals
@@ -45,7 +52,7 @@ class Runtime:
         if mode not in MODES:
             raise ValueError(f"mode {mode!r}: expected one of {MODES}")
         self.face = face
-        self.rig = rig if rig is not None else _rig_for(face)
+        self.rig = rig if rig is not None else rig_for_face(face)
         self.rig.validate()
         if self.rig.n_vertices != len(face.vertices):
             raise ValueError(f"rig is for {self.rig.n_vertices} vertices, face has {len(face.vertices)}")
@@ -89,7 +96,6 @@ class Runtime:
         self._interp = np.array([i for i, p in enumerate(rig.control_points) if p.role == "interpolated"],
                                 dtype=np.int64)
         self._fold()
-        self._ref_points = self._p0.copy()
 
     def _queries(self, region) -> np.ndarray:
         return np.vstack([self.face.vertices[region.vertices], self._p0[self._driven[region.name]]])
@@ -278,8 +284,3 @@ def _default_threshold(face) -> float:
     extent = np.ptp(np.asarray(face.vertices), axis=0)
     return 0.02 * float(extent[1])
 
-
-def _rig_for(face) -> Rig:
-    from .autorig import rig_for_face
-
-    return rig_for_face(face)

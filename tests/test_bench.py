@@ -1,0 +1,30 @@
+"""``puppet bench`` measures what it says on a real face (a few frames, as a smoke test)."""
+
+import json
+
+from puppet.bench import bench_face, performance, run_bench
+from puppet.face import load_face
+
+import numpy as np
+
+
+def test_bench_face_reports_every_figure():
+    row = bench_face(load_face(), frames=3)
+    for key in ("sibson_s", "load_s", "deform_ms", "deform_normals_ms", "realtime_ms", "dense_ms", "ratio"):
+        assert row[key] > 0, key
+    assert row["vertices"] == len(load_face().vertices)
+    assert row["deform_normals_ms"] >= row["deform_ms"] * 0.5
+
+
+def test_the_benchmark_take_is_smooth():
+    d, angles = performance(np.random.default_rng(0), 120, 5, 0.1)
+    assert np.abs(d).max() <= 0.1
+    assert np.abs(np.diff(d, axis=0)).max() < 0.1 * 2 * np.pi * 2.0 / 60 + 1e-12
+    assert 0 <= angles.min() and angles.max() <= np.radians(15) + 1e-12
+
+
+def test_run_bench_prints_json(capsys, monkeypatch):
+    monkeypatch.setattr("puppet.bench.bench_faces", lambda ict: [(load_face(), None)])
+    assert run_bench(frames=2, as_json=True, ict=False) == 0
+    rows = json.loads(capsys.readouterr().out)
+    assert rows[0]["face"] == "default"
