@@ -132,10 +132,20 @@ def test_realtime_recompute_equals_a_fresh_precompute(face):
         np.testing.assert_allclose(deformer.sibson.toarray(), fresh.toarray(), atol=1e-12)
 
 
-def test_realtime_matches_precomputed_below_the_threshold(face, runtime):
+def test_realtime_matches_precomputed_below_the_threshold(face):
     rt = Runtime(face, mode="realtime", threshold=1.0, dtype=np.float64)
+    exact = Runtime(face, prune=0, dtype=np.float64)
     d = _displace(rt, {"8.3": (0.02, 0.01, 0), "8.2": (0, -0.02, 0), "4.3": (0, 0.02, 0)})
-    np.testing.assert_allclose(rt.deform(d), runtime.deform(d), atol=1e-12)
+    np.testing.assert_allclose(rt.deform(d), exact.deform(d), atol=1e-12)
+
+
+def test_pruning_moves_no_vertex_by_more_than_a_hair(face, runtime):
+    exact = Runtime(face, prune=0, dtype=np.float64)
+    assert runtime.B.nnz < 0.8 * exact.B.nnz
+    rng = np.random.default_rng(1)
+    d = rng.normal(scale=0.02, size=(len(runtime.control_points), 3))
+    error = np.linalg.norm(runtime.deform(d) - exact.deform(d), axis=1).max()
+    assert error < 0.01 * np.abs(d).max()
 
 
 def test_rig_file_round_trip(runtime, tmp_path):
