@@ -1,7 +1,7 @@
 """``puppet bench``: what the runtime costs, against a dense blendshape baseline, in one run.
 
-For each mesh (the default face; it subdivided to about 4x and 16x the vertices; the ICT face when
-``../shared/assets/ict_facekit`` is there) it measures, as medians:
+For each mesh (the default face; it with its skin subdivided once and twice, about 23k and 75k
+vertices; the ICT face when ``../shared/assets/ict_facekit`` is there) it measures, as medians:
 
 * ``sibson_s``: computing every region's Sibson coordinates from scratch (no cache);
 * ``load_s``: building the runtime from the on-disk coefficient cache;
@@ -12,8 +12,8 @@ For each mesh (the default face; it subdivided to about 4x and 16x the vertices;
   control point (V x 3 x K, float32), one frame = rest + deltas @ weights; ``ratio`` is
   dense_ms / deform_ms.
 
-Timings are single-threaded (BLAS limited to one thread before numpy loads) so they read as
-"one core".
+The DFFD path is single-threaded scipy; the baseline's BLAS may use threads, so for one-core
+figures run it pinned: ``OPENBLAS_NUM_THREADS=1 taskset -c 1 puppet bench``.
 """
 
 from __future__ import annotations
@@ -27,15 +27,12 @@ import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
-for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
+import numpy as np
 
-import numpy as np  # noqa: E402
-
-from . import rigid  # noqa: E402
-from .face import Face, load_face  # noqa: E402
-from .runtime import Runtime  # noqa: E402
-from .subdivide import subdivide  # noqa: E402
+from . import rigid
+from .face import Face, load_face
+from .runtime import Runtime
+from .subdivide import subdivide
 
 
 def median_time(fn: Callable[[], object], repeat: int) -> float:

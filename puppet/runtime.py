@@ -170,6 +170,8 @@ class Runtime:
             if region.kind == "rigid":
                 prev = self._rigid_vertices.get(region.part, np.zeros(0, dtype=np.int64))
                 self._rigid_vertices[region.part] = np.concatenate([prev, region.vertices]).astype(np.int64)
+        self._part_buffers = {part: (np.empty((len(v), 3), self.dtype), np.empty((len(v), 3), self.dtype))
+                              for part, v in self._rigid_vertices.items()}
         head = self.rig.rigid_parts.get("head")
         self._neck_weight = np.ones(len(self.rest), dtype=self.dtype)
         if head is not None and head.neck is not None:
@@ -213,7 +215,7 @@ class Runtime:
             self._deform_realtime(d, out)
         for part, verts in self._rigid_vertices.items():
             if part in rigid:
-                out[verts] = self.rest[verts] @ rigid[part][:, :3].T.astype(self.dtype) + rigid[part][:, 3]
+                out[verts] = self._moved(part, self.rest, rigid[part][:, :3], rigid[part][:, 3])
         if "head" in rigid:
             self._turn_head(rigid["head"], out)
         return out
@@ -239,9 +241,18 @@ class Runtime:
             np.matmul(self.rest_normals, turn.T.astype(self.dtype), out=out)
         for part, verts in self._rigid_vertices.items():
             if part in rigid:
-                out[verts] = self.rest_normals[verts] @ (turn @ rigid[part][:, :3]).T.astype(self.dtype)
+                out[verts] = self._moved(part, self.rest_normals, turn @ rigid[part][:, :3])
         self._bend_normals(vertices, out, scatter=True)
         return out
+
+    def _moved(self, part: str, source: np.ndarray, R: np.ndarray, t: np.ndarray | None = None) -> np.ndarray:
+        """``source`` rows of a rigid part turned by R (and moved by t), in the part's buffers."""
+        rows, moved = self._part_buffers[part]
+        np.take(source, self._rigid_vertices[part], axis=0, out=rows)
+        np.matmul(rows, R.T.astype(self.dtype), out=moved)
+        if t is not None:
+            moved += t.astype(self.dtype)
+        return moved
 
     def _effective(self, d: np.ndarray, rigid: Mapping[str, np.ndarray]) -> np.ndarray:
         k = len(self.control_points)

@@ -1342,6 +1342,17 @@ All other feature points are the candidates' vertices carried to their new indic
 11.5 stay coordinates; 11.5, the top of the hair, is only 0.005 dm above 11.4 since the mesh
 has no hair). Contours (mouth opening, vermilion border, lid openings, outer eyelids,
 face oval) are carried the same way; `neck_cut` is added.
+
+## The rig
+
+`default_rig.json` is the default face's rig, generated from its feature points by
+`puppet.autorig` (the same code rigs any face with feature points). Rebuild it after the face:
+
+```sh
+python tools/build_default_rig.py
+```
+
+A test fails when the shipped rig differs from what `puppet.autorig` builds today.
 """
 
 
