@@ -72,15 +72,17 @@ UPPER_ACTIVE = ["8.1", "8.5", "8.6", "8.9", "8.10", "2.2", "2.6", "2.7"]
 CORNERS = ["8.3", "8.4", "2.4", "2.5"]
 REQUIRED = sorted(set(FOREHEAD_ACTIVE + FOREHEAD_FIXED + NOSE_ACTIVE + NOSE_FIXED
                       + LOWER_JAW + UPPER_ACTIVE + CORNERS
-                      + ["2.13", "2.14", "5.1", "5.2", "5.3", "5.4", "3.5", "3.6", "7.1"]))
+                      + ["2.13", "2.14", "5.1", "5.2", "5.3", "5.4", "3.5", "3.6", "7.1", "9.15"]))
 
 
 def rig_for_face(face) -> Rig:
-    """The packaged rig for the default face, else a rig generated from the face's feature points."""
-    if getattr(face, "name", None) == "default":
-        from .face import load_default_rig
+    """The shipped rig when ``face`` is the default face (same mesh hash), else a rig generated
+    from the face's feature points."""
+    from .face import load_default_rig
 
-        return load_default_rig()
+    shipped = load_default_rig()
+    if shipped.face_hash == face.content_hash:
+        return shipped
     return build_rig(face)
 
 

@@ -199,3 +199,26 @@ def test_hybrid_eyelid_turns_its_margin_about_the_eyeball_and_the_lid_follows(ru
     motion = np.linalg.norm(out - face.vertices, axis=1)
     right = face.vertices[:, 0] < 0
     assert motion[right].max() < 0.02 * motion.max(), "closing the left lid moved the right side"
+
+
+def test_a_face_without_feature_points_cannot_be_rigged_and_says_which(tmp_path):
+    from puppet.rig import RigError
+
+    path = tmp_path / "tet.obj"
+    path.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 2 4\nf 1 3 4\nf 2 3 4\n")
+    with pytest.raises(RigError, match=r"face 'tet': cannot rig without feature points \[.*'2\.1'"):
+        Runtime(load_face(path))
+
+
+def test_a_bad_rig_file_names_the_file_and_the_problem(tmp_path, runtime):
+    from puppet.rig import RigError, rig_to_dict
+
+    data = rig_to_dict(runtime.rig)
+    data["control_points"][0]["role"] = "dancing"
+    path = tmp_path / "bad.rig.json"
+    path.write_text(json.dumps(data))
+    with pytest.raises(RigError, match=r"bad\.rig\.json: control point .*role 'dancing'"):
+        load_rig(path)
+    path.write_text("{ not json")
+    with pytest.raises(RigError, match=r"bad\.rig\.json:1: not valid JSON"):
+        load_rig(path)
