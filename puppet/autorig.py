@@ -98,8 +98,8 @@ def build_rig(face) -> Rig:
 class _Builder:
     def __init__(self, face) -> None:
         self.face = face
-        self.v = np.asarray(face.vertices, dtype=float)
-        self.fp = {k: np.asarray(p, dtype=float) for k, p in face.feature_points.items()}
+        self.v = np.array(face.vertices, dtype=float)
+        self.fp = {k: np.array(p, dtype=float) for k, p in face.feature_points.items()}
         self.fv = dict(face.feature_vertices)
         self.points: list[ControlPoint] = []
         self.region_of = np.full(len(self.v), "", dtype=object)

@@ -17,7 +17,7 @@ def main(argv: list[str] | None = None) -> int:
 
     bench = commands.add_parser("bench", help="measure Sibson precompute, rig load and per-frame deform")
     bench.add_argument("--json", action="store_true", help="print the results as JSON")
-    bench.add_argument("--frames", type=int, default=300, help="frames per measurement")
+    bench.add_argument("--frames", type=_positive, default=300, help="frames per measurement")
     bench.add_argument("--no-ict", action="store_true", help="skip the ICT face even when present")
 
     args = parser.parse_args(argv)
@@ -32,6 +32,13 @@ def main(argv: list[str] | None = None) -> int:
 
         return run_bench(frames=args.frames, as_json=args.json, ict=not args.no_ict)
     return 2
+
+
+def _positive(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
+    return value
 
 
 if __name__ == "__main__":

@@ -2,8 +2,8 @@
 
 Sibson coordinates depend only on the rest mesh and the rig, so they are computed once and kept
 in ``$FACEPUPPET_CACHE`` (default ``~/.cache/facepuppet``) under a key hashed from the mesh, the
-rig, the format version and the source of the modules that compute them: a changed face, rig or
-algorithm can never load stale coefficients. A corrupt or
+rig, the format version and the source of the modules that define and compute them: a changed
+face, rig or algorithm can never load stale coefficients. A corrupt or
 unreadable cache file is ignored and recomputed, and an unwritable cache folder only warns:
 neither is ever an error.
 """
@@ -33,7 +33,7 @@ def cache_key(mesh_hash: str, rig_dict: dict) -> str:
     """A stable key for one mesh + rig + cache format + the code that computes coefficients."""
     text = json.dumps({"mesh": mesh_hash, "rig": rig_dict, "format": CACHE_FORMAT}, sort_keys=True)
     digest = hashlib.sha256(text.encode())
-    for module in ("sibson.py", "dffd.py"):
+    for module in ("sibson.py", "dffd.py", "runtime.py"):
         digest.update(Path(__file__).with_name(module).read_bytes())
     return digest.hexdigest()[:32]
 
@@ -54,7 +54,7 @@ def load(key: str) -> dict[str, tuple[np.ndarray, sp.csr_matrix]] | None:
                 )
                 for name in names
             }
-    except (OSError, KeyError, ValueError):
+    except Exception:  # a cache is only ever a shortcut: any damage means "compute again"
         return None
 
 
@@ -71,7 +71,11 @@ def store(key: str, regions: dict[str, tuple[np.ndarray, sp.csr_matrix]]) -> Non
     try:
         folder.mkdir(parents=True, exist_ok=True)
         with tempfile.NamedTemporaryFile(dir=folder, suffix=".tmp", delete=False) as tmp:
-            np.savez(tmp, **arrays)
+            try:
+                np.savez(tmp, **arrays)
+            except BaseException:
+                os.unlink(tmp.name)
+                raise
         os.replace(tmp.name, folder / f"{key}.npz")
     except OSError as exc:
         warnings.warn(f"coefficient cache not written to {folder} ({exc}); the rig will be recomputed next time",

@@ -99,7 +99,10 @@ class RegionDeformer:
         rows = np.any(queries != self.queries, axis=1)
         if len(moved_sites):
             rows |= np.asarray((self.sibson[:, moved_sites] != 0).sum(axis=1)).ravel() > 0
-            rows |= natural_neighbour_mask(queries, np.vstack([sites, self.box]), moved_sites)
+            try:
+                rows |= natural_neighbour_mask(queries, np.vstack([sites, self.box]), moved_sites)
+            except SibsonError as exc:
+                raise DffdError(f"region {self.name!r}: {exc}") from None
         redo = np.flatnonzero(rows)
         if len(redo):
             fresh = self._sibson(queries[redo], sites)

@@ -151,6 +151,13 @@ class Rig:
             unknown = [n for n in line.keys + line.points if n not in by_name]
             if unknown:
                 raise RigError(f"lip line {line.name!r}: unknown control points {unknown}")
+        on_lines = {n for line in self.lip_lines for n in line.points}
+        deforming = {r.name for r in self.regions if r.kind == "dffd"}
+        for p in self.control_points:
+            if p.role == "interpolated" and p.name not in on_lines:
+                raise RigError(f"control point {p.name!r}: interpolated, but on no lip line")
+            if p.role == "passive" and p.driver not in deforming:
+                raise RigError(f"control point {p.name!r}: driver {p.driver!r} is not a DFFD region")
 
 
 def _validate_point(p: ControlPoint, regions: set[str], parts: dict, n_vertices: int) -> None:

@@ -20,14 +20,17 @@ Per frame (``deform``):
 
 The real-time mode is incremental, as the paper's: between rebases each region moves from the
 skin and control points as they were at its last rebase, so the same pose reached by different
-paths can differ slightly. The precomputed mode is exact and path-free, and it is the default.
+paths can differ slightly. The precomputed mode is path-free (and exact with ``prune=0``), and it
+is the default.
 
 Normals are recomputed only where the skin bends (DFFD regions, the neck band); rigid and still
-parts turn their rest normals with their part and the head.
+parts turn their rest normals with their part and the head (the bust base below the neck band
+does not turn).
 """
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Mapping
 
 import numpy as np
@@ -37,7 +40,7 @@ from scipy.sparse import _sparsetools
 from . import coefcache
 from .autorig import rig_for_face
 from .controls import spread_matrix
-from .dffd import RegionDeformer
+from .dffd import DffdError, RegionDeformer
 from .normals import VertexNormals
 from .rig import Rig, rig_to_dict
 
@@ -103,21 +106,23 @@ class Runtime:
         return np.vstack([self.face.vertices[region.vertices], self._p0[self._driven[region.name]]])
 
     def _load_or_compute(self, cache: bool) -> dict[str, RegionDeformer]:
+        """Each region's deformer from the coefficient cache, or computed (and then cached)."""
         key = coefcache.cache_key(self.face.content_hash, rig_to_dict(self.rig))
-        cached = coefcache.load(key) if cache else None
-        deformers = {}
+        cached = (coefcache.load(key) if cache else None) or {}
+        deformers, computed = {}, False
         for region in self._regions:
             cps = self._region_cps[region.name]
             weights = [self.rig.control_points[i].weight for i in cps]
             queries = self._queries(region)
-            if cached is not None and region.name in cached:
-                box, sibson = cached[region.name]
+            box, sibson = cached.get(region.name, (None, None))
+            if sibson is not None and sibson.shape == (len(queries), len(cps) + len(box)):
                 deformers[region.name] = RegionDeformer.from_matrices(
                     region.name, queries, self._p0[cps], weights, box, sibson, self.rig.box_scale)
             else:
                 deformers[region.name] = RegionDeformer(
                     region.name, queries, self._p0[cps], weights, self.rig.box_scale)
-        if cache and cached is None:
+                computed = True
+        if cache and computed:
             coefcache.store(key, {n: (d.box, d.sibson) for n, d in deformers.items()})
         return deformers
 
@@ -179,6 +184,7 @@ class Runtime:
             s = np.clip((self.face.vertices[:, 1] - lo) / (hi - lo), 0.0, 1.0)
             self._neck_weight[:] = s * s * (3 - 2 * s)
         self._tmp = np.empty_like(self.rest)
+        self._unturned = np.flatnonzero(self._neck_weight <= 0)
 
     def _init_normals(self) -> None:
         """Normals are recomputed where the skin bends (DFFD regions and the neck band, with one
@@ -199,13 +205,12 @@ class Runtime:
     def deform(self, displacements: np.ndarray, rigid: Mapping[str, np.ndarray] | None = None,
                *, out: np.ndarray | None = None) -> np.ndarray:
         """Vertex positions (N, 3) for active control point displacements (K, 3) and rigid motions."""
-        rigid = rigid or {}
-        unknown = set(rigid) - set(self.rig.rigid_parts)
-        if unknown:
-            raise ValueError(f"unknown rigid motions {sorted(unknown)}; this rig has {sorted(self.rig.rigid_parts)}")
+        rigid = self._checked(rigid)
         d = self._effective(np.asarray(displacements, dtype=float), rigid)
         if out is None:
             out = np.empty_like(self.rest)
+        elif out.shape != self.rest.shape or out.dtype != self.dtype or not out.flags.c_contiguous:
+            raise ValueError(f"out must be a C-contiguous {self.rest.shape} {self.dtype} array")
         if self.mode == "precomputed":
             np.copyto(out, self.rest)
             B = self.B
@@ -230,7 +235,7 @@ class Runtime:
     def normals(self, vertices: np.ndarray, rigid: Mapping[str, np.ndarray] | None = None,
                 *, out: np.ndarray | None = None) -> np.ndarray:
         """Unit normals of vertices deformed with these rigid motions (as given to ``deform``)."""
-        rigid = rigid or {}
+        rigid = self._checked(rigid)
         if out is None:
             out = np.empty_like(self.rest)
         head = rigid.get("head")
@@ -239,11 +244,23 @@ class Runtime:
             np.copyto(out, self.rest_normals)
         else:
             np.matmul(self.rest_normals, turn.T.astype(self.dtype), out=out)
+            out[self._unturned] = self.rest_normals[self._unturned]
         for part, verts in self._rigid_vertices.items():
             if part in rigid:
                 out[verts] = self._moved(part, self.rest_normals, turn @ rigid[part][:, :3])
         self._bend_normals(vertices, out, scatter=True)
         return out
+
+    def _checked(self, rigid: Mapping[str, np.ndarray] | None) -> dict[str, np.ndarray]:
+        """The rigid motions as float arrays, each a 3x4 [R | t] for a part this rig has."""
+        rigid = {k: np.asarray(m, dtype=float) for k, m in (rigid or {}).items()}
+        unknown = set(rigid) - set(self.rig.rigid_parts)
+        if unknown:
+            raise ValueError(f"unknown rigid motions {sorted(unknown)}; this rig has {sorted(self.rig.rigid_parts)}")
+        for name, motion in rigid.items():
+            if motion.shape != (3, 4):
+                raise ValueError(f"rigid motion {name!r} must be a 3x4 [R | t] matrix, got shape {motion.shape}")
+        return rigid
 
     def _moved(self, part: str, source: np.ndarray, R: np.ndarray, t: np.ndarray | None = None) -> np.ndarray:
         """``source`` rows of a rigid part turned by R (and moved by t), in the part's buffers."""
@@ -290,7 +307,16 @@ class Runtime:
             points[self._driven[region.name]] = q[nv:]
             drift = np.linalg.norm(points[cps] - deformer.sites, axis=1)
             if drift.max(initial=0.0) > self.threshold:
-                deformer.rebase(q, points[cps])
+                self._rebase(deformer, q, points[cps])
+
+    @staticmethod
+    def _rebase(deformer: RegionDeformer, queries: np.ndarray, sites: np.ndarray) -> None:
+        """Rebase one region; if the pose cannot be rebased (two control points dragged onto each
+        other), keep the old coefficients: the face goes on moving, only less exactly."""
+        try:
+            deformer.rebase(queries, sites)
+        except DffdError as exc:
+            warnings.warn(f"real-time rebase skipped: {exc}", stacklevel=3)
 
 
 def _pruned(B: sp.csr_matrix, prune: float) -> sp.csr_matrix:
@@ -298,7 +324,7 @@ def _pruned(B: sp.csr_matrix, prune: float) -> sp.csr_matrix:
     that largest entry.
 
     Far-away inputs reach a vertex through tiny coefficients: dropping those under 1e-3 of the
-    row's largest removes about 40% of B's entries (and of the per-frame work) while moving no
+    row's largest removes about 30% of B's entries (and of the per-frame work) while moving no
     vertex by more than a few thousandths of one input's displacement. Keeping each row's sum keeps
     what matters exactly: a region translates with its points, a direct point moves its vertex by
     exactly its displacement, no displacement gives the rest mesh.

@@ -3,7 +3,8 @@
 Each triangle of the chosen parts (by default the skin, the surface that deforms) becomes four;
 the old vertices keep their indices and each split edge's midpoint is appended, so feature points, pivots and part membership carry over. A midpoint belongs to a part
 when both ends do, and contours gain the midpoints of their own edges so they stay closed edge
-loops. Used to measure how the runtime scales with the vertex count.
+loops. Texture coordinates and source indices are not carried (the result is for measuring how
+the runtime scales with the vertex count, not for rendering with a texture).
 """
 
 from __future__ import annotations

@@ -157,18 +157,59 @@ def test_rig_file_round_trip(runtime, tmp_path):
         assert a.name == b.name and np.array_equal(a.vertices, b.vertices)
 
 
-def test_cached_coefficients_load_the_same_rig(face, tmp_path, monkeypatch):
+def test_cached_coefficients_load_the_same_rig_without_computing(face, tmp_path, monkeypatch):
     monkeypatch.setenv("FACEPUPPET_CACHE", str(tmp_path))
     first = Runtime(face, dtype=np.float64)
     assert list(tmp_path.glob("*.npz"))
+
+    def no_sibson(*args, **kwargs):
+        raise AssertionError("Sibson coordinates were computed although they are cached")
+
+    monkeypatch.setattr("puppet.dffd.sibson_coordinates", no_sibson)
     second = Runtime(face, dtype=np.float64)
     assert (first.B != second.B).nnz == 0
 
 
-def test_normals_follow_the_deformation(runtime, face):
-    jaw = runtime.rig.rigid_parts["jaw"]
+def test_a_damaged_cache_file_is_recomputed(face, tmp_path, monkeypatch):
+    monkeypatch.setenv("FACEPUPPET_CACHE", str(tmp_path))
+    Runtime(face)
+    (cached,) = tmp_path.glob("*.npz")
+    for damage in (b"", cached.read_bytes()[:500]):
+        cached.write_bytes(damage)
+        rt = Runtime(face, dtype=np.float64)
+        assert np.array_equal(rt.deform(np.zeros((len(rt.control_points), 3))), face.vertices)
+        assert cached.stat().st_size > 1000, "the damaged file was not rewritten"
+
+
+def test_a_non_contiguous_output_buffer_is_refused(runtime):
     d = np.zeros((len(runtime.control_points), 3))
-    v, n = runtime.deform_with_normals(d, {"jaw": rigid.about(jaw.pivot, rigid.rotation(jaw.axis, np.radians(15)))})
+    with pytest.raises(ValueError, match="C-contiguous"):
+        runtime.deform(d, out=np.empty((len(runtime.rest), 4))[:, :3])
+
+
+def test_a_malformed_rigid_motion_is_named(runtime):
+    d = np.zeros((len(runtime.control_points), 3))
+    with pytest.raises(ValueError, match="'jaw' must be a 3x4"):
+        runtime.deform(d, {"jaw": np.eye(4)})
+    with pytest.raises(ValueError, match="unknown rigid motions \\['neck'\\]"):
+        runtime.deform(d, {"neck": np.eye(3, 4)})
+
+
+def test_realtime_mode_survives_points_dragged_onto_each_other(face):
+    rt = Runtime(face, mode="realtime", threshold=0.01, dtype=np.float64, cache=False)
+    onto = face.feature_points["8.1"] - face.feature_points["8.3"]
+    with pytest.warns(UserWarning, match="rebase skipped"):
+        out = rt.deform(_displace(rt, {"8.3": onto}))
+    assert np.isfinite(out).all()
+
+
+def test_normals_follow_the_deformation(runtime, face):
+    parts = runtime.rig.rigid_parts
+    motions = {name: rigid.about(parts[name].pivot, rigid.rotation(axis, np.radians(angle)))
+               for name, axis, angle in (("jaw", parts["jaw"].axis, 15), ("eye_l", (0, 1, 0), 20),
+                                         ("upper_lid_r", (1, 0, 0), 20), ("head", (0.3, 1, 0.1), 25))}
+    d = _displace(runtime, {"8.3": (0.02, 0.02, 0), "4.4": (0, 0.03, 0)})
+    v, n = runtime.deform_with_normals(d, motions)
     from puppet.normals import VertexNormals
 
     np.testing.assert_allclose(n, VertexNormals(face.triangles, len(face.vertices))(v), atol=1e-9)
