@@ -79,11 +79,12 @@ class Runtime:
         self.control_points: list[str] = rig.active_points
         inputs = rig.input_points
         self._inputs = np.array([index[n] for n in inputs], dtype=np.int64)
+        points = [rig.control_points[index[n]] for n in inputs]
         self._attached = {
-            part: np.array([i for i, n in enumerate(inputs) if rig.point(n).attach == part], dtype=np.int64)
+            part: np.array([i for i, p in enumerate(points) if p.attach == part], dtype=np.int64)
             for part in rig.rigid_parts
         }
-        self._attach_weight = np.array([[rig.point(n).attach_weight] for n in inputs])
+        self._attach_weight = np.array([[p.attach_weight] for p in points])
 
     def _init_regions(self, cache: bool) -> None:
         rig = self.rig
