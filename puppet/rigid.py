@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 
-IDENTITY = np.hstack([np.eye(3), np.zeros((3, 1))])
 
 
 def rotation(axis: np.ndarray, angle: float) -> np.ndarray:
