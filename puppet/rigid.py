@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 
 
-
 def rotation(axis: np.ndarray, angle: float) -> np.ndarray:
     """3x3 rotation by ``angle`` radians about the unit vector ``axis`` (right-hand rule)."""
     x, y, z = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
