@@ -16,8 +16,8 @@ Regions (Zhang & Chen's functional regions), decided per skin vertex, first rule
 * ``forehead``: above the lower eyelids: brows, lids, glabella, forehead.
 * ``cheek_l`` / ``cheek_r``: the rest of the front, split at the mid-line; it reaches down over the
   jaw line to the neck so that the jaw drags it smoothly.
-* Parts: eyeballs rigid about their centres, lower teeth and tongue rigid with the jaw, upper
-  teeth still. The four lids are rigid parts too, but of control points only: their margin points
+* Parts: eyeballs rigid about their centres, lower teeth rigid with the jaw, the tongue rigid
+  on the jaw (its own motion in the jaw's frame), upper teeth still. The four lids are rigid parts too, but of control points only: their margin points
   turn about the eyeball centre and the lid skin follows by DFFD (the paper's hybrid eyelids).
 
 Control points per region: the feature points the FAPs move (active, direct: on their vertex),
@@ -191,7 +191,7 @@ class _Builder:
             verts = np.flatnonzero(self.region_of == name).astype(np.int32)
             regions.append(Region(name, "dffd", verts, self.members[name]))
         for name, part in (("eyeball_l", "eye_l"), ("eyeball_r", "eye_r"),
-                           ("lower_teeth", "jaw"), ("tongue", "jaw")):
+                           ("lower_teeth", "jaw"), ("tongue", "tongue")):
             verts = np.flatnonzero(self.region_of == name).astype(np.int32)
             if len(verts):
                 regions.append(Region(name, "rigid", verts, part=part))
@@ -372,6 +372,7 @@ class _Builder:
             "jaw": RigidPart("jaw", self._jaw_hinge(), axis=np.asarray(pivots.get("jaw_axis", (1.0, 0.0, 0.0)), float)),
             "eye_l": RigidPart("eye_l", np.asarray(pivots["eye_l"], float)),
             "eye_r": RigidPart("eye_r", np.asarray(pivots["eye_r"], float)),
+            "tongue": RigidPart("tongue", self.fp.get("6.2", self._jaw_hinge()).copy(), parent="jaw"),
             **{f"{lid}_lid_{side}": RigidPart(f"{lid}_lid_{side}", np.asarray(pivots[f"eye_{side}"], float),
                                                axis=np.array([1.0, 0.0, 0.0]))
                for lid in ("upper", "lower") for side in ("l", "r")},

@@ -76,12 +76,16 @@ class Region:
 
 @dataclass
 class RigidPart:
-    """A rigid part's pivot (and hinge axis for the jaw); the head also has its neck band."""
+    """A rigid part's pivot (and hinge axis for the jaw); the head also has its neck band.
+
+    A part with a ``parent`` rides on it: the tongue's own motion is applied in the jaw's frame.
+    """
 
     name: str
     pivot: np.ndarray
     axis: np.ndarray | None = None
     neck: tuple[float, float] | None = None
+    parent: str | None = None
 
 
 @dataclass
@@ -147,6 +151,11 @@ class Rig:
         if (owner < 0).any():
             missing = np.flatnonzero(owner < 0)
             raise RigError(f"regions: {len(missing)} vertices in no region, first {missing[:5].tolist()}")
+        for part in self.rigid_parts.values():
+            if part.parent is not None and part.parent not in self.rigid_parts:
+                raise RigError(f"rigid part {part.name!r}: unknown parent {part.parent!r}")
+            if part.parent is not None and self.rigid_parts[part.parent].parent is not None:
+                raise RigError(f"rigid part {part.name!r}: its parent {part.parent!r} has a parent itself")
         for line in self.lip_lines:
             unknown = [n for n in line.keys + line.points if n not in by_name]
             if unknown:
@@ -233,7 +242,8 @@ def rig_to_dict(rig: Rig) -> dict:
         "rigid_parts": {
             name: {"pivot": _floats(p.pivot),
                    "axis": None if p.axis is None else _floats(p.axis),
-                   "neck": None if p.neck is None else list(p.neck)}
+                   "neck": None if p.neck is None else list(p.neck),
+                   "parent": p.parent}
             for name, p in rig.rigid_parts.items()
         },
         "lip_lines": [{"name": l.name, "keys": l.keys, "points": l.points} for l in rig.lip_lines],
@@ -259,7 +269,8 @@ def rig_from_dict(data: dict, source: str = "<rig>") -> Rig:
             rigid_parts={
                 name: RigidPart(name, np.asarray(p["pivot"], float),
                                 None if p.get("axis") is None else np.asarray(p["axis"], float),
-                                None if p.get("neck") is None else tuple(p["neck"]))
+                                None if p.get("neck") is None else tuple(p["neck"]),
+                                p.get("parent"))
                 for name, p in data["rigid_parts"].items()
             },
             lip_lines=[LipLine(l["name"], list(l["keys"]), list(l["points"])) for l in data.get("lip_lines", [])],

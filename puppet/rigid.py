@@ -29,3 +29,18 @@ def about(pivot: np.ndarray, R: np.ndarray, translation: np.ndarray | None = Non
 def apply(motion: np.ndarray, points: np.ndarray) -> np.ndarray:
     """The points moved by a 3x4 motion."""
     return points @ motion[:, :3].T + motion[:, 3]
+
+
+def compose(outer: np.ndarray, inner: np.ndarray) -> np.ndarray:
+    """The motion doing ``inner`` first, then ``outer``."""
+    R = outer[:, :3] @ inner[:, :3]
+    return np.hstack([R, (outer[:, :3] @ inner[:, 3] + outer[:, 3])[:, None]])
+
+
+def kabsch(rest: np.ndarray, moved: np.ndarray) -> np.ndarray:
+    """The rigid motion that best maps ``rest`` points onto ``moved`` ones (least squares)."""
+    a, b = rest.mean(axis=0), moved.mean(axis=0)
+    u, _, vt = np.linalg.svd((rest - a).T @ (moved - b))
+    flip = np.sign(np.linalg.det(vt.T @ u.T))
+    R = vt.T @ np.diag([1.0, 1.0, flip]) @ u.T
+    return np.hstack([R, (b - R @ a)[:, None]])

@@ -43,8 +43,10 @@ from .controls import spread_matrix
 from .dffd import DffdError, RegionDeformer
 from .normals import VertexNormals
 from .rig import Rig, rig_to_dict
+from .rigid import compose
 
 MODES = ("precomputed", "realtime")
+_IDENTITY = np.hstack([np.eye(3), np.zeros((3, 1))])
 
 
 class Runtime:
@@ -261,6 +263,9 @@ class Runtime:
         for name, motion in rigid.items():
             if motion.shape != (3, 4):
                 raise ValueError(f"rigid motion {name!r} must be a 3x4 [R | t] matrix, got shape {motion.shape}")
+        for name, part in self.rig.rigid_parts.items():
+            if part.parent in rigid:
+                rigid[name] = compose(rigid[part.parent], rigid.get(name, _IDENTITY))
         return rigid
 
     def _moved(self, part: str, source: np.ndarray, R: np.ndarray, t: np.ndarray | None = None) -> np.ndarray:
