@@ -30,6 +30,7 @@ does not turn).
 
 from __future__ import annotations
 
+import functools
 import warnings
 from collections.abc import Mapping
 
@@ -253,6 +254,36 @@ class Runtime:
                 out[verts] = self._moved(part, self.rest_normals, turn @ rigid[part][:, :3])
         self._bend_normals(vertices, out, scatter=True)
         return out
+
+    @functools.cached_property
+    def faps(self):
+        """This face's FAP engine (``puppet.fap.FapEngine``), made on first use."""
+        from .fap import FapEngine
+
+        return FapEngine(self)
+
+    def pose(self, fap: Mapping[int | str, float] | np.ndarray | None = None, *,
+             viseme: tuple | None = None, expression: tuple | None = None,
+             out: np.ndarray | None = None) -> np.ndarray:
+        """Vertices for MPEG-4 FAPs: {number or name: value} (or 68 values, index 0 = FAP 1), in
+        FAPU units as in a .fap file, plus FAP 1 (select1, select2, blend) and FAP 2 (select1,
+        intensity1, select2, intensity2) blends. Unknown names name the closest FAP."""
+        d, motions = self.fap_controls(fap, viseme=viseme, expression=expression)
+        return self.deform(d, motions, out=out)
+
+    def fap_controls(self, fap: Mapping[int | str, float] | np.ndarray | None = None, *,
+                     viseme: tuple | None = None,
+                     expression: tuple | None = None) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """The displacements and rigid motions ``pose`` deforms with."""
+        from .fap import fap_values
+
+        if fap is None:
+            values = np.zeros(68)
+        elif isinstance(fap, Mapping):
+            values = fap_values(fap)
+        else:
+            values = np.asarray(fap, dtype=float)
+        return self.faps.controls(self.faps.low_level(values, viseme, expression))
 
     def _checked(self, rigid: Mapping[str, np.ndarray] | None) -> dict[str, np.ndarray]:
         """The rigid motions as float arrays, each a 3x4 [R | t] for a part this rig has."""

@@ -1,0 +1,287 @@
+"""MPEG-4 FAPs drive the rig, and a deformed mesh is measured back into FAPs.
+
+``FapEngine.controls(values)`` turns one frame of the 68 FAP values (FAPU units, as in a .fap
+file; index 0 = FAP 1) into the runtime's inputs: control point displacements and rigid motions.
+
+* Translations (every FAP whose unit is a distance and whose feature point is an active control
+  point of the rig): the point moves by value x FAPU along the FAP's positive direction. They are
+  one small dense product.
+* open_jaw (3) turns the jaw about its hinge so that 2.1 drops by exactly value x MNS;
+  thrust_jaw (14) and shift_jaw (15) translate it.
+* Eyelids (19-22) turn the lid margins about the eyeball centre so that 3.1 / 3.2 drop (3.3 /
+  3.4 rise) by exactly value x IRISD: the paper's hybrid eyelids.
+* Eyeballs: yaw (23, 24) about +y, pitch (25, 26) about +x, in that order; thrust (27, 28)
+  translates.
+* Head: pitch (48), yaw (49), roll (50) about 7.1, as yaw * pitch * roll.
+* Tongue (43-46): the default face's tongue is rigid on the jaw, so tip and body FAPs translate
+  it whole (44 and 46 both raise it).
+* High-level FAPs 1 and 2 expand into low-level FAPs from ``data/high_level_faps.yaml`` (blends as
+  the standard says) and add to the frame's low-level values.
+
+``effects()`` says for every FAP what it does on this face, or why it does nothing (pupil dilation
+is painted on the eyeball; the default face's ears are in its still region; tongue roll needs a
+deformable tongue).
+
+``FapEngine.encode(vertices)`` is the inverse: it measures the head, jaw, eyes, lids and tongue
+rigidly (Kabsch fits on their vertices) and each translational FAP's feature point displacement in
+the jaw's (or lid's) frame, so a take driven by other means can be written as standard FAPs.
+"""
+
+from __future__ import annotations
+
+import functools
+import importlib.resources
+from collections.abc import Mapping
+
+import numpy as np
+import yaml
+
+from . import rigid
+from .faptable import N_FAPS, fap, faps
+
+JAW_FAPS = (3, 14, 15)
+LID_FAPS = {19: ("upper_lid_l", "3.1", 1), 20: ("upper_lid_r", "3.2", 1),  # +: the point drops
+            21: ("lower_lid_l", "3.3", -1), 22: ("lower_lid_r", "3.4", -1)}  # +: the point rises
+EYE_FAPS = {"eye_l": (23, 25, 27), "eye_r": (24, 26, 28)}
+HEAD_FAPS = (48, 49, 50)
+TONGUE_FAPS = (43, 44, 45, 46)
+NOT_ON_ANY_FACE = {29: "the pupil is painted on the eyeball", 30: "the pupil is painted on the eyeball",
+                   47: "the tongue is rigid: it cannot roll"}
+X, Y, Z = np.eye(3)
+
+
+class FapEngine:
+    """FAP frames to runtime inputs (and back) for one face and rig."""
+
+    def __init__(self, runtime) -> None:
+        self.runtime = runtime
+        self.face, self.rig = runtime.face, runtime.rig
+        self.fapu = self.face.fapu
+        self.rest = np.asarray(self.face.vertices, dtype=float)
+        self._index = {name: i for i, name in enumerate(runtime.control_points)}
+        self._translations = self._translation_matrix()
+        self._high = high_level_faps()
+
+    # -- decoding ------------------------------------------------------------------------
+
+    def _translation_matrix(self) -> np.ndarray:
+        """(K * 3, 68): displacement of every active point per unit of each translational FAP."""
+        T = np.zeros((len(self._index), 3, N_FAPS))
+        for f in faps():
+            if f.unit in (None, "AU") or f.axis is None or f.number in JAW_FAPS + TONGUE_FAPS:
+                continue
+            if f.number in LID_FAPS or f.number in (27, 28):
+                continue
+            for point in f.feature_points:
+                if point in self._index:
+                    T[self._index[point], :, f.number - 1] += f.axis * self.fapu[f.unit]
+        return T.reshape(-1, N_FAPS)
+
+    def effects(self) -> dict[int, str]:
+        """What each FAP does on this face (or why it does nothing), by FAP number."""
+        moved = np.abs(self._translations).sum(axis=0) > 0
+        parts = self.rig.rigid_parts
+        out = {}
+        for f in faps():
+            n = f.number
+            if n in (1, 2):
+                out[n] = "expands into low-level FAPs (data/high_level_faps.yaml)"
+            elif n in NOT_ON_ANY_FACE:
+                out[n] = f"nothing: {NOT_ON_ANY_FACE[n]}"
+            elif n in JAW_FAPS:
+                out[n] = "moves the jaw (rigid), the lower lip and chin follow"
+            elif n in LID_FAPS:
+                out[n] = f"turns the {LID_FAPS[n][0].replace('_', ' ')} margin about the eyeball"
+            elif n in (23, 24, 25, 26, 27, 28):
+                out[n] = "moves the eyeball (rigid)"
+            elif n in HEAD_FAPS:
+                out[n] = "turns the head about 7.1"
+            elif n in TONGUE_FAPS:
+                out[n] = "translates the tongue (rigid on the jaw)" if "tongue" in parts else "nothing: no tongue"
+            elif moved[n - 1]:
+                out[n] = f"moves control point {'/'.join(f.feature_points)}"
+            else:
+                out[n] = f"nothing: feature point {'/'.join(f.feature_points)} is not a control point of this rig"
+        return out
+
+    def low_level(self, values: np.ndarray, viseme: tuple | None = None,
+                  expression: tuple | None = None) -> np.ndarray:
+        """The 68 values with FAP 1 / FAP 2 expanded into low-level FAPs and added.
+
+        ``viseme`` is (select1, select2, blend); ``expression`` is (select1, intensity1,
+        select2, intensity2); both as in a .fap file.
+        """
+        out = np.array(values, dtype=float)
+        if viseme is not None:
+            s1, s2, blend = viseme[:3]
+            out += self._high["visemes"][int(s1)] * (blend / 63) + self._high["visemes"][int(s2)] * (1 - blend / 63)
+        if expression is not None:
+            s1, i1, s2, i2 = expression[:4]
+            out += self._high["expressions"][int(s1)] * (i1 / 63) + self._high["expressions"][int(s2)] * (i2 / 63)
+        return out
+
+    def controls(self, values: np.ndarray) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """Control point displacements (K, 3) and rigid motions for 68 low-level FAP values."""
+        v = np.asarray(values, dtype=float)
+        d = (self._translations @ v).reshape(-1, 3)
+        motions = {"jaw": self._jaw(v), "head": self._head(v)}
+        for part, (yaw, pitch, thrust) in EYE_FAPS.items():
+            motions[part] = self._eye(part, v[yaw - 1], v[pitch - 1], v[thrust - 1])
+        for number, (part, point, sign) in LID_FAPS.items():
+            if part in self.rig.rigid_parts:
+                motions[part] = self._lid(part, point, sign * v[number - 1] * self.fapu["IRISD0"])
+        if "tongue" in self.rig.rigid_parts:
+            motions["tongue"] = self._tongue(v)
+        return d, {k: m for k, m in motions.items() if k in self.rig.rigid_parts}
+
+    def _jaw(self, v: np.ndarray) -> np.ndarray:
+        jaw = self.rig.rigid_parts["jaw"]
+        drop = v[2] * self.fapu["MNS0"]
+        angle = _angle_for_drop(self.face.feature_points["2.1"] - jaw.pivot, jaw.axis, drop)
+        shift = v[13] * self.fapu["MNS0"] * Z - v[14] * self.fapu["MW0"] * X
+        return rigid.about(jaw.pivot, rigid.rotation(jaw.axis, angle), shift)
+
+    def _lid(self, part: str, point: str, drop: float) -> np.ndarray:
+        lid = self.rig.rigid_parts[part]
+        angle = _angle_for_drop(self.face.feature_points[point] - lid.pivot, lid.axis, drop)
+        return rigid.about(lid.pivot, rigid.rotation(lid.axis, angle))
+
+    def _eye(self, part: str, yaw: float, pitch: float, thrust: float) -> np.ndarray:
+        au = self.fapu["AU"]
+        R = rigid.rotation(Y, yaw * au) @ rigid.rotation(X, pitch * au)
+        return rigid.about(self.rig.rigid_parts[part].pivot, R, thrust * self.fapu["ES0"] * Z)
+
+    def _head(self, v: np.ndarray) -> np.ndarray:
+        au = self.fapu["AU"]
+        pitch, yaw, roll = (v[n - 1] * au for n in HEAD_FAPS)
+        R = rigid.rotation(Y, yaw) @ rigid.rotation(X, pitch) @ rigid.rotation(Z, roll)
+        return rigid.about(self.rig.rigid_parts["head"].pivot, R)
+
+    def _tongue(self, v: np.ndarray) -> np.ndarray:
+        mw, mns = self.fapu["MW0"], self.fapu["MNS0"]
+        move = -v[42] * mw * X + (v[43] + v[45]) * mns * Y + v[44] * mw * Z
+        return rigid.about(self.rig.rigid_parts["tongue"].pivot, np.eye(3), move)
+
+    # -- encoding ------------------------------------------------------------------------
+
+    def encode(self, vertices: np.ndarray) -> np.ndarray:
+        """The 68 FAP values (FAP 1 and 2 left 0) that describe a deformed mesh of this face."""
+        moved = np.asarray(vertices, dtype=float)
+        out = np.zeros(N_FAPS)
+        head = rigid.kabsch(self.rest[self._head_rows], moved[self._head_rows])
+        out[[n - 1 for n in HEAD_FAPS]] = _yaw_pitch_roll(head[:, :3])[[1, 0, 2]] / self.fapu["AU"]
+        local = rigid.apply(_inverse(head), moved)
+        jaw = self._measure("jaw", local, "lower_teeth")
+        self._encode_jaw(jaw, out)
+        for part, (yaw, pitch, thrust) in EYE_FAPS.items():
+            self._encode_eye(part, local, out, yaw, pitch, thrust)
+        for number, (_, point, sign) in LID_FAPS.items():
+            p = self.face.feature_vertices[point]
+            out[number - 1] = sign * (self.rest[p, 1] - local[p, 1]) / self.fapu["IRISD0"]
+        if "tongue" in self.rig.rigid_parts:
+            self._encode_tongue(jaw, local, out)
+        self._encode_translations(local, {"jaw": jaw}, out)
+        return out
+
+    @functools.cached_property
+    def _head_rows(self) -> np.ndarray:
+        """Vertices that only ever move with the head: the upper teeth."""
+        return self.rig.region("upper_teeth").vertices
+
+    def _measure(self, part: str, local: np.ndarray, region: str) -> np.ndarray:
+        rows = self.rig.region(region).vertices
+        return rigid.kabsch(self.rest[rows], local[rows])
+
+    def _encode_jaw(self, jaw: np.ndarray, out: np.ndarray) -> None:
+        part = self.rig.rigid_parts["jaw"]
+        turn = rigid.about(part.pivot, jaw[:, :3])
+        chin = self.face.feature_points["2.1"]
+        out[2] = (chin[1] - rigid.apply(turn, chin[None])[0, 1]) / self.fapu["MNS0"]
+        shift = jaw[:, 3] - turn[:, 3]
+        out[13] = shift[2] / self.fapu["MNS0"]
+        out[14] = -shift[0] / self.fapu["MW0"]
+
+    def _encode_eye(self, part: str, local: np.ndarray, out: np.ndarray, yaw: int, pitch: int, thrust: int) -> None:
+        eye = self._measure(part, local, "eyeball_l" if part == "eye_l" else "eyeball_r")
+        angles = _yaw_pitch_roll(eye[:, :3])
+        out[yaw - 1], out[pitch - 1] = angles[0] / self.fapu["AU"], angles[1] / self.fapu["AU"]
+        centre = self.rig.rigid_parts[part].pivot
+        out[thrust - 1] = (rigid.apply(eye, centre[None])[0, 2] - centre[2]) / self.fapu["ES0"]
+
+    def _encode_tongue(self, jaw: np.ndarray, local: np.ndarray, out: np.ndarray) -> None:
+        rows = self.rig.region("tongue").vertices
+        own = rigid.kabsch(self.rest[rows], rigid.apply(_inverse(jaw), local[rows]))
+        move = own[:, 3] - (self.rig.rigid_parts["tongue"].pivot - own[:, :3] @ self.rig.rigid_parts["tongue"].pivot)
+        out[42] = -move[0] / self.fapu["MW0"]
+        out[43] = move[1] / self.fapu["MNS0"]
+        out[44] = move[2] / self.fapu["MW0"]
+
+    def _encode_translations(self, local: np.ndarray, motions: dict[str, np.ndarray], out: np.ndarray) -> None:
+        """Each translational FAP from its point's own displacement (the part's motion undone)."""
+        T = self._translations.reshape(len(self._index), 3, N_FAPS)
+        for name, k in self._index.items():
+            columns = np.flatnonzero(np.abs(T[k]).sum(axis=0))
+            if not len(columns):
+                continue
+            point = self.rig.point(name)
+            delta = local[point.vertex] - self.rest[point.vertex]
+            d = _own_displacement(point, delta, motions.get(point.attach))
+            for c in columns:
+                axis = T[k, :, c]
+                out[c] = d @ axis / (axis @ axis)
+
+
+def _own_displacement(point, delta: np.ndarray, motion: np.ndarray | None) -> np.ndarray:
+    """Invert the runtime's carrying of an attached point: delta = w (M(p0 + d) - p0) + (1 - w) d."""
+    if motion is None:
+        return delta
+    w, R, t, p0 = point.attach_weight, motion[:, :3], motion[:, 3], point.position
+    A = w * R + (1 - w) * np.eye(3)
+    return np.linalg.solve(A, delta - w * (R @ p0 + t - p0))
+
+
+def _angle_for_drop(offset: np.ndarray, axis: np.ndarray, drop: float) -> float:
+    """The turn about ``axis`` that lowers a point at ``offset`` from the pivot by ``drop`` in y."""
+    a = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
+    r_perp = offset - (offset @ a) * a
+    A, C = r_perp[1], np.cross(a, r_perp)[1]
+    radius = np.hypot(A, C)
+    if radius < 1e-12 or drop == 0:
+        return 0.0
+    psi = np.arctan2(C, A)
+    target = np.clip((A - drop) / radius, -1.0, 1.0)
+    return float(psi - np.sign(psi) * np.arccos(target)) if psi else float(np.arccos(target))
+
+
+def _yaw_pitch_roll(R: np.ndarray) -> np.ndarray:
+    """Angles (about y, x, z) of R = Ry(yaw) Rx(pitch) Rz(roll)."""
+    pitch = np.arcsin(np.clip(-R[1, 2], -1.0, 1.0))
+    return np.array([np.arctan2(R[0, 2], R[2, 2]), pitch, np.arctan2(R[1, 0], R[1, 1])])
+
+
+def _inverse(motion: np.ndarray) -> np.ndarray:
+    R = motion[:, :3].T
+    return np.hstack([R, (-R @ motion[:, 3])[:, None]])
+
+
+@functools.lru_cache(maxsize=1)
+def high_level_faps() -> dict[str, dict[int, np.ndarray]]:
+    """Visemes 0-14 and expressions 0-6 (0 = none) as 68-value arrays, from the data file."""
+    text = importlib.resources.files("puppet").joinpath("data", "high_level_faps.yaml").read_text("utf-8")
+    data = yaml.safe_load(text)
+    out: dict[str, dict[int, np.ndarray]] = {"visemes": {}, "expressions": {0: np.zeros(N_FAPS)}}
+    for kind in ("visemes", "expressions"):
+        for number, shape in data[kind].items():
+            values = np.zeros(N_FAPS)
+            for name, value in (shape or {}).items():
+                values[fap(name).number - 1] += float(value)
+            out[kind][int(number)] = values
+    return out
+
+
+def fap_values(faps_by_key: Mapping[int | str, float]) -> np.ndarray:
+    """A 68-value array from {number or name: value}; unknown keys name the closest FAP."""
+    values = np.zeros(N_FAPS)
+    for key, value in faps_by_key.items():
+        values[fap(key).number - 1] = float(value)
+    return values
