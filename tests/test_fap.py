@@ -1,0 +1,138 @@
+"""MPEG-4 FAPs move the default face as the standard means them, and are measured back exactly."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from puppet.face import load_face
+from puppet.faptable import UnknownFapError, faps
+from puppet.runtime import Runtime
+
+
+@pytest.fixture(scope="module")
+def face():
+    return load_face()
+
+
+@pytest.fixture(scope="module")
+def runtime(face):
+    return Runtime(face, dtype=np.float64)
+
+
+def _translational(runtime) -> list:
+    effects = runtime.faps.effects()
+    return [f for f in faps() if effects[f.number].startswith("moves control point")]
+
+
+def _allowed_regions(rig, point: str) -> set[str]:
+    """Regions that list the point, and every region their passive points carry motion into."""
+    allowed = {r.name for r in rig.regions if point in r.control_points}
+    grew = True
+    while grew:
+        driven = {r.name for r in rig.regions
+                  if any(rig.point(c).role == "passive" and rig.point(c).driver in allowed for c in r.control_points)}
+        grew = not driven <= allowed
+        allowed |= driven
+    return allowed
+
+
+def test_every_translational_fap_moves_its_point_by_value_times_fapu_along_its_direction(runtime, face):
+    fapu = face.fapu
+    checked = 0
+    for f in _translational(runtime):
+        value = 150.0
+        moved = runtime.pose({f.number: value})
+        for point in f.feature_points:
+            vertex = face.feature_vertices[point]
+            np.testing.assert_allclose(moved[vertex] - face.vertices[vertex], value * fapu[f.unit] * f.axis,
+                                       atol=1e-9, err_msg=f"FAP {f.number} {f.name}")
+        checked += 1
+    assert checked == 39  # 4-13, 16-18, 31-42, 51-64
+
+
+def test_every_translational_fap_moves_no_vertex_outside_its_regions(runtime, face):
+    owner = np.empty(len(face.vertices), dtype=object)
+    for region in runtime.rig.regions:
+        owner[region.vertices] = region.name
+    for f in _translational(runtime):
+        moved = np.linalg.norm(runtime.pose({f.name: 200}) - face.vertices, axis=1) > 1e-12
+        allowed = set().union(*(_allowed_regions(runtime.rig, p) for p in f.feature_points))
+        outside = set(owner[moved]) - allowed
+        assert not outside, f"FAP {f.number} {f.name} moved {outside}"
+
+
+def test_open_jaw_drops_the_chin_by_value_times_mns_and_opens_the_mouth(runtime, face):
+    moved = runtime.pose({"open_jaw": 400})
+    chin, lip_top, lip_bottom = (face.feature_vertices[p] for p in ("2.1", "2.2", "2.3"))
+    assert face.vertices[chin, 1] - moved[chin, 1] == pytest.approx(400 * face.fapu["MNS0"], rel=1e-9)
+    assert moved[lip_top, 1] - moved[lip_bottom, 1] > 300 * face.fapu["MNS0"]
+    thrust = runtime.pose({"thrust_jaw": 100, "shift_jaw": 50})
+    np.testing.assert_allclose(thrust[chin] - face.vertices[chin],
+                               [-50 * face.fapu["MW0"], 0, 100 * face.fapu["MNS0"]], atol=1e-12)
+
+
+@pytest.mark.parametrize("number, point, sign", [(19, "3.1", -1), (20, "3.2", -1), (21, "3.3", 1), (22, "3.4", 1)])
+def test_eyelids_move_their_centre_point_by_value_times_irisd_on_the_eyeball(runtime, face, number, point, sign):
+    moved = runtime.pose({number: 300})
+    vertex = face.feature_vertices[point]
+    assert moved[vertex, 1] - face.vertices[vertex, 1] == pytest.approx(sign * 300 * face.fapu["IRISD0"], rel=1e-9)
+    centre = face.pivots["eye_l" if point in ("3.1", "3.3") else "eye_r"]
+    assert np.linalg.norm(moved[vertex] - centre) == pytest.approx(np.linalg.norm(face.vertices[vertex] - centre))
+
+
+def test_eyeballs_turn_left_and_down_for_positive_values(runtime, face):
+    au = face.fapu["AU"]
+    for name, pupil, eye in (("l", "3.5", "eye_l"), ("r", "3.6", "eye_r")):
+        p = face.feature_vertices[pupil]
+        centre = face.pivots[eye]
+        left = runtime.pose({f"yaw_{name}_eyeball": 20000})[p] - centre
+        down = runtime.pose({f"pitch_{name}_eyeball": 20000})[p] - centre
+        assert np.arctan2(left[0], left[2]) == pytest.approx(20000 * au, rel=1e-9)
+        assert np.arctan2(-down[1], down[2]) == pytest.approx(20000 * au, rel=1e-9)
+
+
+def test_head_pitch_yaw_roll_turn_about_7_1(runtime, face):
+    nose = face.feature_vertices["9.3"]
+    top = face.feature_vertices["11.4"]
+    assert runtime.pose({"head_pitch": 20000})[nose, 1] < face.vertices[nose, 1]
+    assert runtime.pose({"head_yaw": 20000})[nose, 0] > face.vertices[nose, 0]
+    assert runtime.pose({"head_roll": 20000})[top, 0] < face.vertices[top, 0]
+
+
+def test_faps_that_do_nothing_on_the_default_face_say_why(runtime):
+    effects = runtime.faps.effects()
+    nothing = {n for n, what in effects.items() if what.startswith("nothing")}
+    assert nothing == {29, 30, 47, 65, 66, 67, 68}
+    for n in nothing:
+        assert np.array_equal(runtime.pose({n: 300}), runtime.pose({}))
+
+
+def test_unknown_fap_names_suggest_the_closest(runtime):
+    with pytest.raises(UnknownFapError, match="did you mean 'open_jaw'"):
+        runtime.pose({"opn_jaw": 100})
+    with pytest.raises(UnknownFapError, match="numbered 1 to 68"):
+        runtime.pose({69: 1})
+
+
+def test_visemes_and_expressions_blend_and_add_to_low_level_faps(runtime):
+    engine = runtime.faps
+    a = engine.low_level(np.zeros(68), viseme=(10, 0, 63))
+    half = engine.low_level(np.zeros(68), viseme=(10, 14, 32))
+    u = engine.low_level(np.zeros(68), viseme=(14, 0, 63))
+    np.testing.assert_allclose(half, a * 32 / 63 + u * 31 / 63)
+    joy = engine.low_level(np.zeros(68), expression=(1, 63, 0, 0))
+    both = engine.low_level(np.full(68, 5.0), viseme=(10, 0, 63), expression=(1, 63, 0, 0))
+    np.testing.assert_allclose(both, 5.0 + a + joy)
+
+
+def test_encoding_a_decoded_frame_gives_the_frame_back(runtime, face):
+    rng = np.random.default_rng(5)
+    effects = runtime.faps.effects()
+    x = np.zeros(68)
+    for f in faps():
+        if f.number > 2 and not effects[f.number].startswith("nothing") and f.number != 46:
+            x[f.number - 1] = rng.uniform(-200, 200) if f.bidirectional else rng.uniform(0, 300)
+    x[[47, 48, 49]] = rng.uniform(-15000, 15000, 3)
+    encoded = runtime.faps.encode(runtime.pose(x))
+    np.testing.assert_allclose(encoded, x, atol=1e-6)
