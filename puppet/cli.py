@@ -11,9 +11,9 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="puppet", description="facepuppet: live facial puppeteering")
     commands = parser.add_subparsers(dest="command", required=True)
 
-    demo = commands.add_parser("demo", help="render the default face, neutral and deformed, to PNG")
+    demo = commands.add_parser("demo", help="replay the shipped demo take on the default face to a video")
     demo.add_argument("--out", default="out", help="output folder (default: out)")
-    demo.add_argument("--size", type=int, default=720, help="image size in pixels")
+    demo.add_argument("--size", type=_size, default=(640, 480), help="video size WxH (default 640x480)")
 
     bench = commands.add_parser("bench", help="measure Sibson precompute, rig load and per-frame deform")
     bench.add_argument("--json", action="store_true", help="print the results as JSON")
@@ -32,6 +32,16 @@ def main(argv: list[str] | None = None) -> int:
 
         return run_bench(frames=args.frames, as_json=args.json, ict=not args.no_ict)
     return 2
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        width, height = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT such as 640x480, got {text!r}") from None
+    if width < 16 or height < 16:
+        raise argparse.ArgumentTypeError(f"too small: {text}")
+    return width, height
 
 
 def _positive(text: str) -> int:

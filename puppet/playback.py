@@ -1,0 +1,112 @@
+"""Playing a FAP take on a face: frames to poses, offscreen to video, or in a window.
+
+A .fap frame transmits only its masked FAPs; the others keep the value they last had (the
+decoder's rule in MPEG-4 players), starting from neutral. ``FapPlayback`` applies that rule while
+streaming, so a take of any length plays in constant memory, and hands each frame's vertices
+and normals to whatever draws them.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .face import Face, load_face
+from .fapfile import FapFrame, iter_fap
+from .render import Renderer, write_video
+from .runtime import Runtime
+
+VIEWS = ("front", "three_quarter", "profile")
+
+
+@dataclass
+class HeldFaps:
+    """The FAP state a player holds: values of FAPs 3..68 and the FAP 1/2 fields, masked-in."""
+
+    values: np.ndarray
+    viseme: np.ndarray | None = None
+    expression: np.ndarray | None = None
+
+    @classmethod
+    def neutral(cls) -> HeldFaps:
+        return cls(np.zeros(68))
+
+    def update(self, frame: FapFrame) -> HeldFaps:
+        """Take this frame's masked values; keep the rest."""
+        self.values[frame.mask] = frame.values[frame.mask]
+        if frame.mask[0]:
+            self.viseme = frame.viseme.copy()
+        if frame.mask[1]:
+            self.expression = frame.expression.copy()
+        return self
+
+    def low_level(self, runtime: Runtime) -> np.ndarray:
+        """The held state as 68 low-level FAPs (visemes and expressions expanded)."""
+        values = self.values.copy()
+        values[:2] = 0
+        return runtime.faps.low_level(values, self.viseme, self.expression)
+
+
+class FapPlayback:
+    """Streams a .fap take as (vertices, normals) per frame on a face."""
+
+    def __init__(self, path: str | os.PathLike, face: Face | None = None,
+                 runtime: Runtime | None = None) -> None:
+        self.path = Path(path)
+        self.face = face if face is not None else load_face()
+        self.runtime = runtime if runtime is not None else Runtime(self.face)
+        with iter_fap(self.path) as reader:
+            self.header = reader.header
+
+    @property
+    def fps(self) -> float:
+        return self.header.fps
+
+    def __iter__(self) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+        held = HeldFaps.neutral()
+        with iter_fap(self.path) as reader:
+            for frame in reader:
+                d, motions = self.runtime.faps.controls(held.update(frame).low_level(self.runtime))
+                yield self.runtime.deform_with_normals(d, motions)
+
+
+def render_take(path: str | os.PathLike, out: str | os.PathLike, *, face: Face | None = None,
+                size: tuple[int, int] = (640, 480), view: str = "front", fps: float | None = None,
+                progress: bool = True) -> int:
+    """Render a .fap take to an MP4 at the take's fps (or ``fps``); return the frame count."""
+    playback = FapPlayback(path, face)
+    with Renderer(playback.face.triangles, len(playback.face.vertices), playback.face.colors,
+                  width=size[0], height=size[1]) as renderer:
+        frame_head(renderer, playback.face, view)
+        total = playback.header.declared_frames
+        frames = _progress((renderer.render(v, n) for v, n in playback), total, progress)
+        return write_video(frames, out, fps or playback.fps)
+
+
+def frame_head(renderer: Renderer, face: Face, view: str) -> None:
+    """Aim the camera at the head (above the neck), from a named view."""
+    if view not in VIEWS:
+        raise ValueError(f"view {view!r}: expected one of {VIEWS}")
+    skin = face.vertices[face.parts["skin"]]
+    chin = face.feature_points.get("2.1")
+    keep = skin[:, 1] > chin[1] - 0.25 * np.ptp(skin[:, 1]) if chin is not None else slice(None)
+    renderer.frame(skin[keep], view=view)
+
+
+def _progress(frames: Iterator[np.ndarray], total: int | None, show: bool) -> Iterator[np.ndarray]:
+    """Pass frames through, drawing a progress line on stderr (when it is a terminal or asked)."""
+    start = time.perf_counter()
+    for i, frame in enumerate(frames, 1):
+        if show:
+            rate = i / max(time.perf_counter() - start, 1e-9)
+            of = f"/{total}" if total else ""
+            print(f"\rrendering frame {i}{of} ({rate:.1f} frames/s)", end="", file=sys.stderr, flush=True)
+        yield frame
+    if show:
+        print(file=sys.stderr)
