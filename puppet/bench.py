@@ -15,6 +15,11 @@ vertices; the ICT face when ``../shared/assets/ict_facekit`` is there) it measur
   dense_ms / deform_ms. This is the baseline as specified, and it flatters the dense side: a
   DFFD input moves in 3D, so a blendshape rig doing the same needs 3K shapes (3x the work).
 
+A second table splits whole frames (``bench_frame_split``): FAP frame (the demo take, where the
+face has feature points; the smooth take's displacements otherwise) -> control points -> DFFD ->
+normals -> draw -> read-back of a 640x480 offscreen image, with the frames per second and the
+share of the frame spent deforming (controls + DFFD + normals).
+
 The DFFD path is single-threaded scipy; the baseline's BLAS may use threads, so for one-core
 figures run it pinned: ``OPENBLAS_NUM_THREADS=1 taskset -c 1 puppet bench``.
 """
@@ -132,6 +137,57 @@ def performance(rng: np.random.Generator, frames: int, k: int, amplitude: float)
     return displacements, angles
 
 
+def bench_frame_split(face: Face, frames: int, rig=None, size: tuple[int, int] = (640, 480)) -> dict:
+    """Median ms per step of a whole offscreen frame, and frames per second (module docstring)."""
+    from .render import Renderer
+
+    runtime = Runtime(face, rig)
+    inputs, kind = _frame_inputs(runtime, frames)
+    steps = {"controls": [], "dffd": [], "normals": [], "draw": [], "read": []}
+    out, normals = np.empty_like(runtime.rest), np.empty_like(runtime.rest)
+    with Renderer(face.triangles, len(face.vertices), face.colors, width=size[0], height=size[1]) as renderer:
+        renderer.frame(face.vertices)
+        for i in range(frames + 1):
+            t = [time.perf_counter()]
+            d, motions = inputs(i)
+            t.append(time.perf_counter())
+            runtime.deform(d, motions, out=out)
+            t.append(time.perf_counter())
+            runtime.normals(out, motions, out=normals)
+            t.append(time.perf_counter())
+            renderer.draw(out, normals)
+            renderer.finish()
+            t.append(time.perf_counter())
+            renderer.read()
+            t.append(time.perf_counter())
+            if i:  # the first frame warms up
+                for step, a, b in zip(steps, t, t[1:]):
+                    steps[step].append(b - a)
+    ms = {f"{step}_ms": 1e3 * statistics.median(v) for step, v in steps.items()}
+    frame = sum(ms.values())
+    return {"face": face.name, "vertices": len(face.vertices), "input": kind, "size": f"{size[0]}x{size[1]}",
+            **ms, "fps": 1e3 / frame,
+            "deform_share": (ms["controls_ms"] + ms["dffd_ms"] + ms["normals_ms"]) / frame}
+
+
+def _frame_inputs(runtime: Runtime, frames: int):
+    """Per frame index, the runtime's inputs: from the demo take's FAPs, or the smooth take."""
+    if "2.1" in runtime.face.feature_points:
+        from .demo import demo_take
+        from .fapfile import iter_fap
+        from .playback import HeldFaps
+
+        held, take = HeldFaps.neutral(), []
+        with iter_fap(demo_take()) as reader:
+            for frame in reader:
+                take.append(held.update(frame).low_level(runtime))
+        return (lambda i: runtime.faps.controls(take[i % len(take)])), "FAP"
+    rng = np.random.default_rng(7)
+    d, angles = performance(rng, frames + 1, len(runtime.control_points), 0.03 * float(np.ptp(runtime.rest[:, 1])))
+    jaw = runtime.rig.rigid_parts["jaw"]
+    return (lambda i: (d[i], {"jaw": rigid.about(jaw.pivot, rigid.rotation(jaw.axis, angles[i]))})), "displacements"
+
+
 def _dense_baseline(runtime: Runtime) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(deltas (3V x K) float32, rest (V, 3), output buffer): one dense delta per control point."""
     deltas = np.ascontiguousarray(np.repeat(runtime.B.toarray(), 3, axis=0), dtype=np.float32)
@@ -153,19 +209,28 @@ def bench_faces(ict: bool) -> list[tuple[Face, object]]:
 
 
 def run_bench(frames: int = 300, as_json: bool = False, ict: bool = True) -> int:
-    """Measure every mesh and print a table (or JSON); return the process exit code."""
-    rows = [bench_face(face, frames, rig) for face, rig in bench_faces(ict)]
+    """Measure every mesh and print two tables (or JSON); return the process exit code."""
+    faces = bench_faces(ict)
+    rows = [bench_face(face, frames, rig) for face, rig in faces]
+    split = [bench_frame_split(face, min(frames, 120), rig) for face, rig in faces
+             if face.name in ("default", "ict")]
     if as_json:
-        print(json.dumps(rows, indent=1))
+        print(json.dumps({"deform": rows, "frames": split}, indent=1))
         return 0
-    header = ("face", "vertices", "control_points", "precompute_s", "load_s", "deform_ms",
-              "deform_normals_ms", "realtime_ms", "dense_ms", "ratio")
+    _table(rows, ("face", "vertices", "control_points", "precompute_s", "load_s", "deform_ms",
+                  "deform_normals_ms", "realtime_ms", "dense_ms", "ratio"))
+    print()
+    _table(split, ("face", "input", "size", "controls_ms", "dffd_ms", "normals_ms", "draw_ms", "read_ms",
+                   "fps", "deform_share"))
+    return 0
+
+
+def _table(rows: list[dict], header: tuple[str, ...]) -> None:
     widths = [max(len(h), 12) for h in header]
     print("  ".join(f"{h:>{w}}" for h, w in zip(header, widths)))
     for row in rows:
         print("  ".join(f"{row[h]:>{w}.4g}" if isinstance(row[h], float) else f"{row[h]!s:>{w}}"
                         for h, w in zip(header, widths)))
-    return 0
 
 
 def shared_assets() -> Path:

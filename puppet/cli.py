@@ -6,6 +6,10 @@ import argparse
 import sys
 from pathlib import Path
 
+from .render import VIEW_DIRECTIONS
+
+VIEWS = tuple(VIEW_DIRECTIONS)
+
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="puppet", description="facepuppet: live facial puppeteering")
@@ -14,6 +18,19 @@ def main(argv: list[str] | None = None) -> int:
     demo = commands.add_parser("demo", help="replay the shipped demo take on the default face to a video")
     demo.add_argument("--out", default="out", help="output folder (default: out)")
     demo.add_argument("--size", type=_size, default=(640, 480), help="video size WxH (default 640x480)")
+
+    render = commands.add_parser("render", help="render a .fap take to an MP4 video")
+    render.add_argument("take", help="the .fap file")
+    render.add_argument("-o", "--output", required=True, help="the video to write (.mp4)")
+    render.add_argument("--size", type=_size, default=(640, 480), help="video size WxH (default 640x480)")
+    render.add_argument("--view", choices=VIEWS, default="front", help="camera (default front)")
+    render.add_argument("--fps", type=float, default=None, help="video fps (default: the take's)")
+    render.add_argument("--face", default=None, help="a face mesh with feature points (default: the embedded face)")
+
+    play = commands.add_parser("play", help="play a .fap take in a window, in real time")
+    play.add_argument("take", help="the .fap file")
+    play.add_argument("--size", type=_size, default=(960, 720), help="window size WxH (default 960x720)")
+    play.add_argument("--view", choices=VIEWS, default="front", help="camera (default front)")
 
     bench = commands.add_parser("bench", help="measure Sibson precompute, rig load and per-frame deform")
     bench.add_argument("--json", action="store_true", help="print the results as JSON")
@@ -26,6 +43,20 @@ def main(argv: list[str] | None = None) -> int:
 
         for path in run_demo(Path(args.out), size=args.size):
             print(path)
+        return 0
+    if args.command == "render":
+        from .face import load_face
+        from .playback import render_take
+
+        face = load_face(args.face) if args.face else None
+        count = render_take(args.take, args.output, face=face, size=args.size, view=args.view, fps=args.fps,
+                            progress=sys.stderr.isatty())
+        print(f"{args.output}: {count} frames")
+        return 0
+    if args.command == "play":
+        from .window import play_take
+
+        play_take(args.take, size=args.size, view=args.view)
         return 0
     if args.command == "bench":
         from .bench import run_bench

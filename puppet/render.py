@@ -386,14 +386,22 @@ class Renderer:
 
         ``normals`` None computes unit vertex normals from ``vertices``.
         """
-        self._prepare(vertices)
+        self.draw(vertices, normals)
+        return self.read()
+
+    def read(self) -> np.ndarray:
+        """The last frame drawn offscreen, as (height, width, 3) uint8 sRGB, top row first."""
         with self._current():
-            self._draw(vertices, normals, self._draw_target)
             if self._read_target is not self._draw_target:
                 self.ctx.copy_framebuffer(self._read_target, self._draw_target)
             data = self._read_target.read(components=3, alignment=1)
         width, height = self.size
         return np.frombuffer(data, dtype=np.uint8).reshape(height, width, 3)[::-1].copy()
+
+    def finish(self) -> None:
+        """Wait until the GL has executed everything issued so far (for timing)."""
+        with self._current():
+            self.ctx.finish()
 
     def release(self) -> None:
         """Free every GL object this renderer made, and its context if it created it."""

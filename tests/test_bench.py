@@ -26,5 +26,8 @@ def test_the_benchmark_take_is_smooth():
 def test_run_bench_prints_json(capsys, monkeypatch):
     monkeypatch.setattr("puppet.bench.bench_faces", lambda ict: [(load_face(), None)])
     assert run_bench(frames=2, as_json=True, ict=False) == 0
-    rows = json.loads(capsys.readouterr().out)
-    assert rows[0]["face"] == "default"
+    report = json.loads(capsys.readouterr().out)
+    assert report["deform"][0]["face"] == "default"
+    frame = report["frames"][0]
+    assert frame["input"] == "FAP" and frame["fps"] > 0
+    assert 0 < frame["deform_share"] < 1
