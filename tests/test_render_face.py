@@ -68,3 +68,28 @@ def test_opening_the_jaw_shows_the_mouth_interior_not_the_background(scene):
     inside = image[row - 2:row + 3, col - 2:col + 3].astype(int)
     assert np.abs(inside - background).max() > 30, "the open mouth shows the background"
     assert np.abs(inside.mean(axis=(0, 1)) - closed[row, col]).max() > 20, "the mouth did not open"
+
+
+def _mouth_crop(renderer, face, image: np.ndarray) -> np.ndarray:
+    corners = np.array([face.feature_points[p] for p in ("8.3", "8.4", "8.1", "2.1")])
+    px = renderer.project(corners)
+    lo = np.floor(px.min(axis=0)).astype(int) - 6
+    hi = np.ceil(px.max(axis=0)).astype(int) + 6
+    return image[lo[1]:hi[1], lo[0]:hi[0]].astype(int)
+
+
+def test_visemes_and_expressions_render_visibly_different_mouths(scene):
+    face, runtime, renderer = scene
+    shapes = {
+        "A": {"viseme": (10, 0, 63)}, "U": {"viseme": (14, 0, 63)}, "p/b/m": {"viseme": (1, 0, 63)},
+        "joy": {"expression": (1, 63, 0, 0)}, "sadness": {"expression": (2, 63, 0, 0)},
+    }
+    crops = {}
+    for name, high_level in shapes.items():
+        d, motions = runtime.fap_controls(None, **high_level)
+        crops[name] = _mouth_crop(renderer, face, renderer.render(*runtime.deform_with_normals(d, motions)))
+    names = list(crops)
+    for i, a in enumerate(names):
+        for b in names[i + 1:]:
+            changed = (np.abs(crops[a] - crops[b]).max(axis=2) > 12).mean()
+            assert changed > 0.03, f"{a} and {b} look the same around the mouth ({changed:.1%} of pixels differ)"
