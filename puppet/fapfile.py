@@ -37,6 +37,9 @@ Decisions
   ranges: selects 0-14 / 0-6, blend and intensities 0-63, flags 0-1) are clamped, with one
   ``FapWarning`` per file naming the file, the FAPs and the count. Streaming readers emit the
   warnings that summarise a file when they reach its end.
+* **API**: ``read_fap`` (whole file, ``FapStream``) is built on ``iter_fap`` (a ``FapReader``:
+  ``.header`` as soon as it is opened, then ``FapFrame``s one line pair at a time);
+  ``write_fap`` (a whole take) is built on ``FapWriter`` (frame by frame, live).
 * **Errors**: every problem is a ``FapError`` ``"{file}:{line}: expected ..., found ..."``.
 * **Writing** (``write_fap``, ``FapWriter``): ``2.1 <name, whitespace -> _> <integer fps> <n>``,
   68 flags, frames numbered from 0, values rounded to integers, LF. FAP 1/2 are masked only in
@@ -57,7 +60,6 @@ import math
 import os
 import warnings
 from dataclasses import dataclass
-from pathlib import Path
 from typing import IO, Iterator, Sequence
 
 import numpy as np
@@ -108,10 +110,10 @@ class FapStream:
     """A whole FAP stream; see the module docstring for the meaning of each array."""
 
     fps: float
-    values: np.ndarray          # (frames, 68) float, FAPU units; columns 0/1 = select1 of FAP 1/2
+    values: np.ndarray          # (frames, 68) float, FAPU; columns 0/1: select1 of FAP 1/2
     mask: np.ndarray            # (frames, 68) bool
-    viseme: np.ndarray          # (frames, 4) int: select1, select2, blend, def
-    expression: np.ndarray      # (frames, 6) int: select1, intensity1, select2, intensity2, init, def
+    viseme: np.ndarray          # (frames, 4) int: VISEME_FIELDS
+    expression: np.ndarray      # (frames, 6) int: EXPRESSION_FIELDS
     frame_numbers: np.ndarray   # (frames,) int, as written in the file
     name: str = ""
     version: str = VERSION
@@ -224,7 +226,7 @@ class FapReader:
     def _parse_mask(self, number: int, tokens: list[str]) -> _Mask:
         if not _is_mask(tokens):
             bad = next((t for t in tokens if t not in _FLAGS), None)
-            found = f"{len(tokens)} flags" if bad is None else f"{len(tokens)} tokens, {bad!r} among them"
+            found = f"{len(tokens)} flags" if bad is None else f"{bad!r} among {len(tokens)} tokens"
             raise _fail(self.label, number, "expected a mask line of 68 flags (0 or 1)", found)
         if len(tokens) > N_FAPS:
             tokens = self._drop_extra_slot(number, tokens)
@@ -245,7 +247,7 @@ class FapReader:
         if not len(numbers) and mask.count:
             tally.note_empty(number)
             mask = _EMPTY_MASK
-        full = len(numbers) - mask.n_low > mask.n_high
+        full = len(numbers) - mask.n_low > mask.n_single
         values = np.zeros(N_FAPS)
         values[mask.low] = numbers[len(numbers) - mask.n_low:]
         viseme, expression, rest = np.zeros(4, int), np.zeros(6, int), numbers
@@ -259,8 +261,7 @@ class FapReader:
 
     def _numbers(self, number: int, tokens: list[str], mask: _Mask) -> np.ndarray:
         if tokens and len(tokens) - mask.n_low not in mask.extras:
-            raise _fail(self.label, number, f"expected {mask.describe()} after the frame number",
-                        f"{len(tokens)} values")
+            raise _fail(self.label, number, f"expected {mask.describe()}", f"{len(tokens)} values")
         try:
             numbers = np.array(list(map(float, tokens)))
         except ValueError:
@@ -292,13 +293,13 @@ class _Mask:
         ones = {(False, False): 0, (True, False): 1, (False, True): 1, (True, True): 2}
         full = {(False, False): 0, (True, False): 4, (False, True): 6, (True, True): 10}
         key = (bool(mask[0]), bool(mask[1]))
-        self.n_high = ones[key]
+        self.n_single = ones[key]
         self.extras = {ones[key], full[key]}
 
     def describe(self) -> str:
         counts = sorted({self.n_low + e for e in self.extras})
         what = " or ".join(str(c) for c in counts)
-        return f"{what} values for the {self.count} FAPs its mask line sets"
+        return f"{what} values after the frame number (its mask line sets {self.count} FAPs)"
 
 
 _EMPTY_MASK = _Mask(np.zeros(N_FAPS, bool))
@@ -352,7 +353,8 @@ def _chain(first: tuple[int, list[str]],
     yield from rest
 
 
-def _fields(numbers: np.ndarray, full: bool, defaults: tuple[int, ...]) -> tuple[list[int], np.ndarray]:
+def _fields(numbers: np.ndarray, full: bool,
+            defaults: tuple[int, ...]) -> tuple[list[int], np.ndarray]:
     """Take one FAP 1/2 from the front of ``numbers``: all its fields, or a select + defaults."""
     size = len(defaults) + 1
     if full:
