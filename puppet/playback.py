@@ -19,10 +19,10 @@ import numpy as np
 
 from .face import Face, load_face
 from .fapfile import FapFrame, iter_fap
-from .render import Renderer, write_video
+from .render import VIEW_DIRECTIONS, Renderer, write_video
 from .runtime import Runtime
 
-VIEWS = ("front", "three_quarter", "profile")
+VIEWS = tuple(VIEW_DIRECTIONS)
 
 
 @dataclass
