@@ -79,3 +79,15 @@ def test_the_demo_writes_a_video_and_a_still(tmp_path):
         assert sum(1 for _ in reader) == len(read_fap(demo_take()))
     with Image.open(still) as picture:
         assert picture.size == (128, 48)
+
+
+def test_the_shipped_demo_take_is_what_the_tool_makes_today(tmp_path):
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    out = tmp_path / "demo_take.fap"
+    subprocess.run([sys.executable, str(root / "tools" / "make_demo_take.py"), "--out", str(out)],
+                   check=True, capture_output=True, env={"PYTHONPATH": str(root), "PATH": ""})
+    assert out.read_bytes() == demo_take().read_bytes(), "run tools/make_demo_take.py"
