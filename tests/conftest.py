@@ -1,6 +1,11 @@
-"""Every test session gets its own coefficient cache: tests never read or write the user's."""
+"""Shared fixtures. Every test session gets its own coefficient cache: tests never read or write
+the user's."""
 
+import numpy as np
 import pytest
+
+from puppet.face import load_face
+from puppet.runtime import Runtime
 
 
 @pytest.fixture(autouse=True, scope="session")
@@ -9,3 +14,15 @@ def _private_coefficient_cache(tmp_path_factory):
     mp.setenv("FACEPUPPET_CACHE", str(tmp_path_factory.mktemp("coefficients")))
     yield
     mp.undo()
+
+
+@pytest.fixture(scope="session")
+def face():
+    """The default face (tests must not change it)."""
+    return load_face()
+
+
+@pytest.fixture(scope="session")
+def runtime(face, _private_coefficient_cache):
+    """The default face's runtime in float64, so exact properties can be checked exactly."""
+    return Runtime(face, dtype=np.float64)

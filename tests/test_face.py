@@ -33,11 +33,6 @@ MIDLINE = ["2.1", "2.2", "2.3", "2.10", "6.1", "6.2", "7.1", "8.1", "8.2", "9.3"
            "9.10", "9.11", "9.12", "9.15", "11.1", "11.4", "11.5", "11.6"]
 
 
-@pytest.fixture(scope="module")
-def face() -> Face:
-    return load_face()
-
-
 def part_triangles(face: Face, part: str) -> np.ndarray:
     inside = np.zeros(len(face.vertices), dtype=bool)
     inside[face.parts[part]] = True

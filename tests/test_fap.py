@@ -5,19 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from puppet.face import load_face
 from puppet.faptable import UnknownFapError, faps
-from puppet.runtime import Runtime
-
-
-@pytest.fixture(scope="module")
-def face():
-    return load_face()
-
-
-@pytest.fixture(scope="module")
-def runtime(face):
-    return Runtime(face, dtype=np.float64)
 
 
 def _translational(runtime) -> list:

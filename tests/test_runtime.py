@@ -14,16 +14,6 @@ from puppet.runtime import Runtime
 from puppet.sibson import sibson_coordinates
 
 
-@pytest.fixture(scope="module")
-def face():
-    return load_face()
-
-
-@pytest.fixture(scope="module")
-def runtime(face):
-    return Runtime(face, dtype=np.float64)
-
-
 def _displace(rt: Runtime, moves: dict[str, tuple[float, float, float]]) -> np.ndarray:
     d = np.zeros((len(rt.control_points), 3))
     for name, move in moves.items():
