@@ -175,12 +175,10 @@ def _frame_inputs(runtime: Runtime, frames: int):
     if "2.1" in runtime.face.feature_points:
         from .demo import demo_take
         from .fapfile import iter_fap
-        from .playback import HeldFaps
+        from .playback import held_low_level
 
-        held, take = HeldFaps.neutral(), []
         with iter_fap(demo_take()) as reader:
-            for frame in reader:
-                take.append(held.update(frame).low_level(runtime))
+            take = list(held_low_level(reader, runtime))
         return (lambda i: runtime.faps.controls(take[i % len(take)])), "FAP"
     rng = np.random.default_rng(7)
     d, angles = performance(rng, frames + 1, len(runtime.control_points), 0.03 * float(np.ptp(runtime.rest[:, 1])))

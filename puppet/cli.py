@@ -24,7 +24,7 @@ def main(argv: list[str] | None = None) -> int:
     render.add_argument("-o", "--output", required=True, help="the video to write (.mp4)")
     render.add_argument("--size", type=_size, default=(640, 480), help="video size WxH (default 640x480)")
     render.add_argument("--view", choices=VIEWS, default="front", help="camera (default front)")
-    render.add_argument("--fps", type=float, default=None, help="video fps (default: the take's)")
+    render.add_argument("--fps", type=_positive_float, default=None, help="video fps (default: the take's)")
     render.add_argument("--face", default=None, help="a face mesh with feature points (default: the embedded face)")
 
     play = commands.add_parser("play", help="play a .fap take in a window, in real time")
@@ -45,14 +45,7 @@ def main(argv: list[str] | None = None) -> int:
             print(path)
         return 0
     if args.command == "render":
-        from .face import load_face
-        from .playback import render_take
-
-        face = load_face(args.face) if args.face else None
-        count = render_take(args.take, args.output, face=face, size=args.size, view=args.view, fps=args.fps,
-                            progress=sys.stderr.isatty())
-        print(f"{args.output}: {count} frames")
-        return 0
+        return _render(args)
     if args.command == "play":
         from .window import play_take
 
@@ -63,6 +56,34 @@ def main(argv: list[str] | None = None) -> int:
 
         return run_bench(frames=args.frames, as_json=args.json, ict=not args.no_ict)
     return 2
+
+
+def _render(args: argparse.Namespace) -> int:
+    """``puppet render``: a bad take, face or path is one line on stderr and exit code 2."""
+    from .face import FaceFileError, MissingFeaturePointsError, load_face
+    from .fapfile import FapError
+    from .playback import TakeError, render_take
+    from .rig import RigError
+
+    try:
+        face = load_face(args.face) if args.face else None
+        count = render_take(args.take, args.output, face=face, size=args.size, view=args.view, fps=args.fps,
+                            progress=sys.stderr.isatty())
+    except (FapError, TakeError, FaceFileError, MissingFeaturePointsError, RigError) as exc:
+        print(f"puppet render: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        print(f"puppet render: {exc.filename or args.take}: {exc.strerror or exc}", file=sys.stderr)
+        return 2
+    print(f"{args.output}: {count} frames")
+    return 0
+
+
+def _positive_float(text: str) -> float:
+    value = float(text)
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"must be above 0, got {text}")
+    return value
 
 
 def _size(text: str) -> tuple[int, int]:

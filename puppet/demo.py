@@ -41,7 +41,7 @@ def run_demo(out: Path, size: tuple[int, int] = (640, 480), view: str = "three_q
 
 
 class _Still:
-    """Keeps the rendered frame with the widest gap between the inner lips (2.2 and 2.3)."""
+    """Keeps the rendered frame with the widest vertical gap between the inner lips (2.2, 2.3)."""
 
     def __init__(self, upper_lip: int, lower_lip: int) -> None:
         self.lips = (upper_lip, lower_lip)
@@ -49,7 +49,7 @@ class _Still:
         self.image: np.ndarray | None = None
 
     def keep(self, image: np.ndarray, vertices: np.ndarray) -> np.ndarray:
-        gap = float(np.linalg.norm(vertices[self.lips[0]] - vertices[self.lips[1]]))
+        gap = float(vertices[self.lips[0], 1] - vertices[self.lips[1], 1])
         if gap > self.best:
             self.best, self.image = gap, image
         return image

@@ -109,9 +109,15 @@ class FapEngine:
         """The 68 values with FAP 1 / FAP 2 expanded into low-level FAPs and added.
 
         ``viseme`` is (select1, select2, blend); ``expression`` is (select1, intensity1,
-        select2, intensity2); both as in a .fap file.
+        select2, intensity2); both as in a .fap file. The def / init_face flags of a .fap file
+        (new viseme or expression definitions sent in the stream) are not used: the shapes come
+        from the data file.
         """
         out = np.array(values, dtype=float)
+        if out[:2].any():
+            raise ValueError("FAP 1 and 2 are not values: pass them as viseme=(select1, select2, blend) "
+                             "and expression=(select1, intensity1, select2, intensity2)")
+        _check_selects(viseme, expression)
         if viseme is not None:
             s1, s2, blend = viseme[:3]
             out += self._high["visemes"][int(s1)] * (blend / 63) + self._high["visemes"][int(s2)] * (1 - blend / 63)
@@ -171,7 +177,7 @@ class FapEngine:
         head = rigid.kabsch(self.rest[self._head_rows], moved[self._head_rows])
         out[[n - 1 for n in HEAD_FAPS]] = _yaw_pitch_roll(head[:, :3])[[1, 0, 2]] / self.fapu["AU"]
         local = rigid.apply(_inverse(head), moved)
-        jaw = self._measure("jaw", local, "lower_teeth")
+        jaw = self._measure(local, "lower_teeth")
         self._encode_jaw(jaw, out)
         for part, (yaw, pitch, thrust) in EYE_FAPS.items():
             self._encode_eye(part, local, out, yaw, pitch, thrust)
@@ -188,7 +194,7 @@ class FapEngine:
         """Vertices that only ever move with the head: the upper teeth."""
         return self.rig.region("upper_teeth").vertices
 
-    def _measure(self, part: str, local: np.ndarray, region: str) -> np.ndarray:
+    def _measure(self, local: np.ndarray, region: str) -> np.ndarray:
         rows = self.rig.region(region).vertices
         return rigid.kabsch(self.rest[rows], local[rows])
 
@@ -202,7 +208,7 @@ class FapEngine:
         out[14] = -shift[0] / self.fapu["MW0"]
 
     def _encode_eye(self, part: str, local: np.ndarray, out: np.ndarray, yaw: int, pitch: int, thrust: int) -> None:
-        eye = self._measure(part, local, "eyeball_l" if part == "eye_l" else "eyeball_r")
+        eye = self._measure(local, "eyeball_l" if part == "eye_l" else "eyeball_r")
         angles = _yaw_pitch_roll(eye[:, :3])
         out[yaw - 1], out[pitch - 1] = angles[0] / self.fapu["AU"], angles[1] / self.fapu["AU"]
         centre = self.rig.rigid_parts[part].pivot
@@ -276,6 +282,10 @@ def high_level_faps() -> dict[str, dict[int, np.ndarray]]:
             for name, value in (shape or {}).items():
                 values[fap(name).number - 1] += float(value)
             out[kind][int(number)] = values
+    for kind, top in (("visemes", 14), ("expressions", 6)):
+        missing = sorted(set(range(top + 1)) - set(out[kind]))
+        if missing:
+            raise ValueError(f"high_level_faps.yaml: {kind} {missing} are not defined")
     return out
 
 
@@ -283,5 +293,20 @@ def fap_values(faps_by_key: Mapping[int | str, float]) -> np.ndarray:
     """A 68-value array from {number or name: value}; unknown keys name the closest FAP."""
     values = np.zeros(N_FAPS)
     for key, value in faps_by_key.items():
-        values[fap(key).number - 1] = float(value)
+        number = fap(key).number
+        if number in (1, 2):
+            raise ValueError(f"FAP {number} ({fap(number).name}) is not a value: pass it as "
+                             f"{'viseme=(select1, select2, blend)' if number == 1 else 'expression=(select1, intensity1, select2, intensity2)'}")
+        values[number - 1] = float(value)
     return values
+
+
+def _check_selects(viseme: tuple | None, expression: tuple | None) -> None:
+    """Viseme selects 0-14 and expression selects 0-6, as FAP 1 / FAP 2 define them."""
+    for name, fields, top in (("viseme", viseme, 14), ("expression", expression, 6)):
+        if fields is None:
+            continue
+        selects = [fields[0], fields[2]] if name == "expression" else list(fields[:2])
+        bad = [s for s in selects if not (0 <= int(s) <= top)]
+        if bad:
+            raise ValueError(f"{name} {bad[0]} does not exist: {name}s are numbered 0 to {top}")

@@ -11,7 +11,7 @@ from __future__ import annotations
 import os
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -53,40 +53,70 @@ class HeldFaps:
         return runtime.faps.low_level(values, self.viseme, self.expression)
 
 
+def held_low_level(frames: Iterable[FapFrame], runtime: Runtime) -> Iterator[np.ndarray]:
+    """Per frame, the FAP state a player holds, as 68 low-level values (FAP 1 / 2 expanded)."""
+    held = HeldFaps.neutral()
+    for frame in frames:
+        yield held.update(frame).low_level(runtime)
+
+
 class FapPlayback:
     """Streams a .fap take as (vertices, normals) per frame on a face."""
 
     def __init__(self, path: str | os.PathLike, face: Face | None = None,
                  runtime: Runtime | None = None) -> None:
         self.path = Path(path)
-        self.face = face if face is not None else load_face()
-        self.runtime = runtime if runtime is not None else Runtime(self.face)
         with iter_fap(self.path) as reader:
             self.header = reader.header
+        self.face = face if face is not None else load_face()
+        self.runtime = runtime if runtime is not None else Runtime(self.face)
 
     @property
     def fps(self) -> float:
         return self.header.fps
 
     def __iter__(self) -> Iterator[tuple[np.ndarray, np.ndarray]]:
-        held = HeldFaps.neutral()
         with iter_fap(self.path) as reader:
-            for frame in reader:
-                d, motions = self.runtime.faps.controls(held.update(frame).low_level(self.runtime))
+            for values in held_low_level(reader, self.runtime):
+                d, motions = self.runtime.faps.controls(values)
                 yield self.runtime.deform_with_normals(d, motions)
 
 
 def render_take(path: str | os.PathLike, out: str | os.PathLike, *, face: Face | None = None,
                 size: tuple[int, int] = (640, 480), view: str = "front", fps: float | None = None,
                 progress: bool = True) -> int:
-    """Render a .fap take to an MP4 at the take's fps (or ``fps``); return the frame count."""
+    """Render a .fap take to an MP4 at the take's fps (or ``fps``); return the frame count.
+
+    The video is written beside ``out`` and renamed into place only when every frame has been
+    rendered, so a bad take never leaves a broken video behind.
+    """
     playback = FapPlayback(path, face)
-    with Renderer(playback.face.triangles, len(playback.face.vertices), playback.face.colors,
-                  width=size[0], height=size[1]) as renderer:
-        frame_head(renderer, playback.face, view)
-        total = playback.header.declared_frames
-        frames = _progress((renderer.render(v, n) for v, n in playback), total, progress)
-        return write_video(frames, out, fps or playback.fps)
+    out = Path(out)
+    partial = out.with_name(f".{out.stem}.partial{out.suffix}")
+    try:
+        with Renderer(playback.face.triangles, len(playback.face.vertices), playback.face.colors,
+                      width=size[0], height=size[1]) as renderer:
+            frame_head(renderer, playback.face, view)
+            total = playback.header.declared_frames
+            frames = _progress((renderer.render(v, n) for v, n in playback), total, progress)
+            count = write_video(_not_empty(frames, path), partial, playback.fps if fps is None else fps)
+        partial.replace(out)
+        return count
+    finally:
+        partial.unlink(missing_ok=True)
+
+
+def _not_empty(frames: Iterator[np.ndarray], path: str | os.PathLike) -> Iterator[np.ndarray]:
+    """The frames; a TakeError if there are none."""
+    first = next(frames, None)
+    if first is None:
+        raise TakeError(f"{path}: the take holds no frames")
+    yield first
+    yield from frames
+
+
+class TakeError(ValueError):
+    """A take that cannot be played (no frames)."""
 
 
 def frame_head(renderer: Renderer, face: Face, view: str) -> None:

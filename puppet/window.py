@@ -51,7 +51,7 @@ import numpy as np
 from .face import Face
 from .fapfile import FapError, FapReader, FapWarning, iter_fap
 from .faptable import N_FAPS
-from .playback import VIEWS, FapPlayback, HeldFaps, frame_head
+from .playback import VIEWS, FapPlayback, frame_head, held_low_level
 from .render import Renderer
 from .runtime import Runtime
 
@@ -227,8 +227,8 @@ class HeldTable:
         self.declared_frames = declared_frames
         self._chunks: list[np.ndarray] = []
         self._count = 0
-        self._held = HeldFaps.neutral()
         self._reader: FapReader | None = iter_fap(self.path)
+        self._held = held_low_level(self._reader, runtime)
 
     @property
     def count(self) -> int:
@@ -284,18 +284,18 @@ class HeldTable:
         if self._reader is None:
             return False
         try:
-            frame = next(self._reader, None)
+            values = next(self._held, None)
         except FapError as error:
             warnings.warn(f"{error}; playing the {self._count} frames before it", FapWarning,
                           stacklevel=2)
-            frame = None
-        if frame is None:
+            values = None
+        if values is None:
             self.close()
             return False
         row, column = divmod(self._count, self.CHUNK)
         if row == len(self._chunks):
             self._chunks.append(np.empty((self.CHUNK, N_FAPS), dtype=np.float32))
-        self._chunks[row][column] = self._held.update(frame).low_level(self.runtime)
+        self._chunks[row][column] = values
         self._count += 1
         return True
 

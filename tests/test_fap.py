@@ -86,6 +86,33 @@ def test_head_pitch_yaw_roll_turn_about_7_1(runtime, face):
     assert runtime.pose({"head_pitch": 20000})[nose, 1] < face.vertices[nose, 1]
     assert runtime.pose({"head_yaw": 20000})[nose, 0] > face.vertices[nose, 0]
     assert runtime.pose({"head_roll": 20000})[top, 0] < face.vertices[top, 0]
+    skull = runtime.rig.region("upper_teeth").vertices
+    turned = runtime.pose({"head_pitch": 15000, "head_yaw": -10000, "head_roll": 8000})
+    centre = face.feature_points["7.1"]
+    np.testing.assert_allclose(np.linalg.norm(turned[skull] - centre, axis=1),
+                               np.linalg.norm(face.vertices[skull] - centre, axis=1), atol=1e-9)
+    assert np.abs(turned[skull] - face.vertices[skull]).max() > 0.05
+
+
+def test_high_level_faps_are_not_values_and_selects_must_exist(runtime):
+    with pytest.raises(ValueError, match="pass it as viseme="):
+        runtime.pose({"viseme": 10})
+    with pytest.raises(ValueError, match="visemes are numbered 0 to 14"):
+        runtime.pose(viseme=(15, 0, 63))
+    with pytest.raises(ValueError, match="expressions are numbered 0 to 6"):
+        runtime.pose(expression=(7, 63, 0, 0))
+    values = np.zeros(68)
+    values[0] = 10
+    with pytest.raises(ValueError, match="FAP 1 and 2 are not values"):
+        runtime.pose(values)
+
+
+def test_p_b_m_closes_the_lips_even_while_smiling(runtime, face):
+    top, bottom = face.feature_vertices["2.2"], face.feature_vertices["2.3"]
+    for expression in (None, (1, 63, 0, 0)):
+        lips = runtime.pose(viseme=(1, 0, 63), expression=expression)
+        gap = (lips[top, 1] - lips[bottom, 1]) / face.fapu["MNS0"]
+        assert -8 < gap < 8, f"p/b/m with {expression}: lips {gap:.0f} MNS apart"
 
 
 def test_faps_that_do_nothing_on_the_default_face_say_why(runtime):
@@ -110,8 +137,10 @@ def test_visemes_and_expressions_blend_and_add_to_low_level_faps(runtime):
     u = engine.low_level(np.zeros(68), viseme=(14, 0, 63))
     np.testing.assert_allclose(half, a * 32 / 63 + u * 31 / 63)
     joy = engine.low_level(np.zeros(68), expression=(1, 63, 0, 0))
-    both = engine.low_level(np.full(68, 5.0), viseme=(10, 0, 63), expression=(1, 63, 0, 0))
-    np.testing.assert_allclose(both, 5.0 + a + joy)
+    low = np.full(68, 5.0)
+    low[:2] = 0
+    both = engine.low_level(low, viseme=(10, 0, 63), expression=(1, 63, 0, 0))
+    np.testing.assert_allclose(both, low + a + joy)
 
 
 def test_encoding_a_decoded_frame_gives_the_frame_back(runtime, face):

@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 import imageio.v2 as imageio
+import moderngl
 import numpy as np
 import pytest
 from PIL import Image
 
 from puppet.demo import demo_take, run_demo
 from puppet.fapfile import FapFrame, read_fap, write_fap
-from puppet.playback import FapPlayback, HeldFaps, render_take
+from puppet import cli
+from puppet.playback import FapPlayback, HeldFaps, TakeError, render_take
 
 
 def _frame(values: dict[int, float], viseme=None) -> FapFrame:
@@ -46,15 +48,21 @@ def test_a_take_plays_frame_by_frame_and_opens_the_mouth_where_it_says(tmp_path)
     assert frames[4][chin, 1] < playback.face.vertices[chin, 1] - 0.05
 
 
-def test_render_take_writes_a_video_at_the_takes_fps(tmp_path):
+@pytest.fixture(scope="module")
+def egl():
+    """Skip (with the reason) where no headless OpenGL context can be made."""
+    try:
+        moderngl.create_context(standalone=True, backend="egl").release()
+    except Exception as exc:
+        pytest.skip(f"headless EGL OpenGL context unavailable: {exc}")
+
+
+def test_render_take_writes_a_video_at_the_takes_fps(tmp_path, egl):
     values = np.zeros((5, 68))
     values[:, 2] = np.linspace(0, 500, 5)
     take = tmp_path / "take.fap"
     write_fap(take, values, fps=20)
-    try:
-        count = render_take(take, tmp_path / "take.mp4", size=(96, 72), progress=False)
-    except Exception as exc:  # no EGL: the reason is the skip message
-        pytest.skip(f"headless rendering unavailable: {exc}")
+    count = render_take(take, tmp_path / "take.mp4", size=(96, 72), progress=False)
     with imageio.get_reader(tmp_path / "take.mp4") as reader:
         frames = [frame for frame in reader]  # list() would ask len(): inf for ffmpeg
         assert reader.get_meta_data()["fps"] == pytest.approx(20)
@@ -70,11 +78,25 @@ def test_the_shipped_demo_take_is_a_standard_fap_file():
     assert len(set(take.viseme[:, 0])) >= 8
 
 
-def test_the_demo_writes_a_video_and_a_still(tmp_path):
-    try:
-        video, still = run_demo(tmp_path, size=(64, 48))
-    except Exception as exc:
-        pytest.skip(f"headless rendering unavailable: {exc}")
+def test_render_take_refuses_an_empty_take_and_leaves_no_video(tmp_path, egl):
+    take = tmp_path / "empty.fap"
+    take.write_text("2.1 empty 25 0\n")
+    with pytest.raises(TakeError, match="holds no frames"):
+        render_take(take, tmp_path / "empty.mp4", size=(32, 32), progress=False)
+    assert not list(tmp_path.glob("*.mp4"))
+
+
+def test_puppet_render_reports_a_bad_take_in_one_line(tmp_path, capsys):
+    take = tmp_path / "bad.fap"
+    take.write_text("2.1 bad 25 1\n0 0 1\n")
+    assert cli.main(["render", str(take), "-o", str(tmp_path / "bad.mp4")]) == 2
+    assert capsys.readouterr().err.strip() == f"puppet render: {take}:2: expected a mask line of 68 flags (0 or 1), found 3 flags"
+    assert cli.main(["render", str(tmp_path / "missing.fap"), "-o", str(tmp_path / "x.mp4")]) == 2
+    assert "missing.fap: No such file or directory" in capsys.readouterr().err
+
+
+def test_the_demo_writes_a_video_and_a_still(tmp_path, egl):
+    video, still = run_demo(tmp_path, size=(64, 48))
     with imageio.get_reader(video) as reader:
         assert sum(1 for _ in reader) == len(read_fap(demo_take()))
     with Image.open(still) as picture:

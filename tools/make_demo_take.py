@@ -26,10 +26,11 @@ SENTENCE = [
     (8, 3), (10, 4), (12, 2), (7, 3),                      # nice
     (4, 2), (14, 4),                                       # to
     (1, 3), (12, 4), (4, 3),                               # meet
-    (14, 2), (14, 5),                                      # you
+    (14, 7),                                               # you
     (0, 30),
 ]
-BLINKS = (18, 62, 95)
+BLINKS = (18, 62, 84)
+LID_GAP = 1024  # upper to lower lid on the neutral face, in IRISD (the lids touch the iris)
 OUT = Path(__file__).resolve().parents[1] / "puppet" / "data" / "demo_take.fap"
 
 
@@ -44,17 +45,18 @@ def visemes() -> list[tuple[int, int, int]]:
     return frames
 
 
-def low_level(frame: int, n: int) -> np.ndarray:
+def low_level(frame: int, joy: float) -> np.ndarray:
     """Blinks, glances and head motion for one frame (68 values, index 0 = FAP 1); the head stays
     inside the FAP ranges of fap_coding_params.csv (about 1 degree)."""
     v = np.zeros(68)
     t = frame / FPS
+    lower_from_joy = 250 * joy  # joy's close_b_*_eyelid (high_level_faps.yaml)
     for start in BLINKS:
         k = frame - start
         if 0 <= k < 5:
             close = np.sin(np.pi * (k + 0.5) / 5)
-            v[[18, 19]] = 950 * close
-            v[[20, 21]] = 120 * close
+            v[[20, 21]] = 60 * close
+            v[[18, 19]] = (LID_GAP - 40 - lower_from_joy - 60) * close
     glance = 12000 * np.tanh(3 * np.sin(2 * np.pi * t / 3.2))
     v[[22, 23]] = glance
     v[[24, 25]] = -3000 * np.sin(2 * np.pi * t / 2.1)
@@ -71,6 +73,11 @@ def expression(frame: int, n: int) -> tuple[int, int, int, int, int, int]:
     return (1, joy, 6, surprise, 0, 0)
 
 
+def blink_gap_ok(values: np.ndarray, joy: float) -> bool:
+    """The lids never pass each other: upper + lower closing stays under the neutral gap."""
+    return values[18] + values[20] + 250 * joy < LID_GAP
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=OUT)
@@ -81,7 +88,10 @@ def main(argv: list[str] | None = None) -> int:
     mask[[0, 1, 18, 19, 20, 21, 22, 23, 24, 25, 47, 48, 49]] = True
     with FapWriter(args.out, FPS, "demo_hello") as writer:
         for i, viseme in enumerate(frames):
-            writer.write_frame(low_level(i, n), mask, viseme=(*viseme, 0), expression=expression(i, n))
+            feeling = expression(i, n)
+            values = low_level(i, feeling[1] / 63)
+            assert blink_gap_ok(values, feeling[1] / 63), f"frame {i}: the lids would cross"
+            writer.write_frame(values, mask, viseme=(*viseme, 0), expression=feeling)
     print(f"{args.out}: {n} frames at {FPS} frames/s")
     return 0
 
