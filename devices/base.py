@@ -1,0 +1,199 @@
+"""What every input device has in common: Samples, a reader thread, reconnection, a URL.
+
+A device adapter (serial, HID, CAN, MIDI, OSC, simulated) implements three small methods --
+``_open``, ``_read`` and ``_close`` -- in the spirit of python-can's ``BusABC``; this base class
+runs them in a thread of their own, stamps every reading with ``time.monotonic_ns()`` as soon as
+it returns, and keeps the Samples in a bounded queue that never grows (the oldest are dropped and
+counted). When the hardware disappears (``_open`` or ``_read`` raise ``OSError`` or
+``DeviceLost``) the device closes, reports ``LOST`` and reopens with exponential backoff, while
+whatever consumes its Samples simply sees none: the face holds its pose.
+"""
+
+from __future__ import annotations
+
+import collections
+import enum
+import threading
+import time
+from abc import ABC, abstractmethod
+from collections.abc import Iterable, Iterator, Mapping
+from dataclasses import dataclass, field
+from urllib.parse import parse_qsl, urlsplit
+
+
+@dataclass(frozen=True)
+class Sample:
+    """Raw channel values read from one device at one moment (``time.monotonic_ns()``)."""
+
+    t_ns: int
+    device: str
+    values: Mapping[str, float]
+
+
+class DeviceError(RuntimeError):
+    """A device that cannot be opened as asked (bad URL, unknown backend, missing library)."""
+
+
+class DeviceLost(OSError):
+    """The hardware went away while open (unplugged, port closed); the device will reopen."""
+
+
+class State(enum.Enum):
+    CLOSED = "closed"
+    OPENING = "opening"
+    OPEN = "open"
+    LOST = "lost"
+
+
+@dataclass
+class Counters:
+    """What a device has seen: samples, dropped samples, bad frames, reconnections."""
+
+    samples: int = 0
+    dropped: int = 0
+    bad_frames: int = 0
+    reconnects: int = 0
+    last_error: str = ""
+
+
+@dataclass(frozen=True)
+class Url:
+    """A device URL split into its parts: ``scheme://target?key=value&...``."""
+
+    scheme: str
+    target: str
+    options: dict[str, str] = field(default_factory=dict)
+
+    @classmethod
+    def parse(cls, url: str) -> Url:
+        parts = urlsplit(url)
+        if not parts.scheme:
+            raise DeviceError(f"device URL {url!r}: expected scheme://target, e.g. serial:///dev/ttyACM0")
+        target = (parts.netloc + parts.path) if parts.netloc else parts.path
+        return cls(parts.scheme, target, dict(parse_qsl(parts.query)))
+
+
+class Device(ABC):
+    """An input device read in its own thread; iterate ``samples()`` or poll ``drain()``."""
+
+    QUEUE = 4096
+    BACKOFF = (0.05, 2.0)  # first and longest wait between reopen attempts, in seconds
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+        self.state = State.CLOSED
+        self.counters = Counters()
+        self._queue: collections.deque[Sample] = collections.deque(maxlen=self.QUEUE)
+        self._ready = threading.Condition()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    # -- what an adapter implements ------------------------------------------------------
+
+    @abstractmethod
+    def _open(self) -> None:
+        """Open the hardware; raise OSError (or DeviceLost) if it is not there."""
+
+    @abstractmethod
+    def _read(self) -> Iterable[Mapping[str, float]]:
+        """Wait briefly (well under a second) for input; return the channel readings that came."""
+
+    @abstractmethod
+    def _close(self) -> None:
+        """Release the hardware; must not raise."""
+
+    # -- what callers use --------------------------------------------------------------------
+
+    def start(self) -> Device:
+        """Start the reader thread (it opens the device, and reopens it when it is lost)."""
+        if self._thread is None:
+            self._stop.clear()
+            self._thread = threading.Thread(target=self._run, name=f"device {self.name}", daemon=True)
+            self._thread.start()
+        return self
+
+    def close(self, timeout: float = 2.0) -> None:
+        """Stop the thread promptly and release the hardware."""
+        self._stop.set()
+        with self._ready:
+            self._ready.notify_all()
+        if self._thread is not None:
+            self._thread.join(timeout)
+            self._thread = None
+        self.state = State.CLOSED
+
+    def __enter__(self) -> Device:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def drain(self) -> list[Sample]:
+        """Every Sample read since the last call, oldest first (never blocks)."""
+        with self._ready:
+            out = list(self._queue)
+            self._queue.clear()
+        return out
+
+    def samples(self, timeout: float | None = None) -> Iterator[Sample]:
+        """Samples as they arrive; ends after ``timeout`` seconds without one, or on close."""
+        while not self._stop.is_set():
+            with self._ready:
+                if not self._queue and not self._ready.wait_for(
+                        lambda: self._queue or self._stop.is_set(), timeout):
+                    return
+                batch = list(self._queue)
+                self._queue.clear()
+            yield from batch
+
+    def wait_state(self, state: State, timeout: float = 5.0) -> bool:
+        """Wait until the device reaches ``state``; False on timeout."""
+        deadline = time.monotonic() + timeout
+        while self.state != state:
+            if time.monotonic() > deadline:
+                return False
+            time.sleep(0.005)
+        return True
+
+    # -- the reader thread -----------------------------------------------------------------
+
+    def _run(self) -> None:
+        wait = self.BACKOFF[0]
+        while not self._stop.is_set():
+            self.state = State.OPENING
+            try:
+                self._open()
+            except OSError as exc:
+                self._lost(exc)
+                self._stop.wait(wait)
+                wait = min(wait * 2, self.BACKOFF[1])
+                continue
+            self.state, wait = State.OPEN, self.BACKOFF[0]
+            try:
+                self._pump()
+            except OSError as exc:
+                self._lost(exc)
+            finally:
+                self._close()
+        self.state = State.CLOSED
+
+    def _pump(self) -> None:
+        while not self._stop.is_set():
+            readings = self._read()
+            t_ns = time.monotonic_ns()
+            for values in readings:
+                self._push(Sample(t_ns, self.name, dict(values)))
+
+    def _push(self, sample: Sample) -> None:
+        with self._ready:
+            if len(self._queue) == self._queue.maxlen:
+                self.counters.dropped += 1
+            self._queue.append(sample)
+            self.counters.samples += 1
+            self._ready.notify_all()
+
+    def _lost(self, exc: BaseException) -> None:
+        if self.state == State.OPEN:
+            self.counters.reconnects += 1
+        self.counters.last_error = str(exc)
+        self.state = State.LOST
