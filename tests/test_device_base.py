@@ -1,0 +1,103 @@
+"""The Device base class: a reader thread, a bounded queue, reconnection with backoff, URLs."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import pytest
+
+from devices import BACKENDS, DeviceError, open_device
+from devices.base import Device, DeviceLost, State, Url
+
+
+class Scripted(Device):
+    """A device whose 'hardware' is a list of readings and a plug the test pulls."""
+
+    BACKOFF = (0.01, 0.05)
+
+    def __init__(self, readings=(), queue=None) -> None:
+        if queue is not None:
+            self.QUEUE = queue
+        super().__init__("scripted")
+        self.readings = list(readings)
+        self.plugged = threading.Event()
+        self.plugged.set()
+        self.opens = 0
+
+    def _open(self) -> None:
+        if not self.plugged.is_set():
+            raise FileNotFoundError("no such device")
+        self.opens += 1
+
+    def _read(self):
+        if not self.plugged.is_set():
+            raise DeviceLost("unplugged")
+        if self.readings:
+            return [self.readings.pop(0)]
+        time.sleep(0.002)
+        return []
+
+    def _close(self) -> None:
+        pass
+
+
+def test_samples_arrive_in_order_with_monotonic_timestamps():
+    with Scripted([{"x": float(i)} for i in range(50)]) as device:
+        got = []
+        for sample in device.samples(timeout=1.0):
+            got.append(sample)
+            if len(got) == 50:
+                break
+    assert [s.values["x"] for s in got] == list(range(50))
+    assert all(a.t_ns <= b.t_ns for a, b in zip(got, got[1:]))
+    assert {s.device for s in got} == {"scripted"}
+
+
+def test_the_queue_never_grows_past_its_bound_and_counts_what_it_drops():
+    device = Scripted([{"x": float(i)} for i in range(100)], queue=10)
+    with device:
+        deadline = time.monotonic() + 2
+        while device.counters.samples < 100 and time.monotonic() < deadline:
+            time.sleep(0.005)
+        kept = device.drain()
+    assert len(kept) == 10
+    assert [s.values["x"] for s in kept] == list(range(90, 100))
+    assert device.counters.dropped == 90
+
+
+def test_an_unplugged_device_is_lost_then_reopened_when_plugged_back():
+    device = Scripted()
+    with device:
+        assert device.wait_state(State.OPEN, 1.0)
+        device.plugged.clear()
+        assert device.wait_state(State.LOST, 1.0)
+        time.sleep(0.1)
+        assert device.state in (State.LOST, State.OPENING), "it must not claim to be open while unplugged"
+        device.plugged.set()
+        assert device.wait_state(State.OPEN, 1.0)
+        device.readings.append({"x": 1.0})
+        assert next(device.samples(timeout=1.0)).values == {"x": 1.0}
+    assert device.counters.reconnects == 1
+    assert device.opens == 2
+    assert device.counters.last_error == "no such device"
+
+
+def test_close_is_prompt_and_final():
+    device = Scripted().start()
+    assert device.wait_state(State.OPEN, 1.0)
+    start = time.monotonic()
+    device.close()
+    assert time.monotonic() - start < 0.5
+    assert device.state == State.CLOSED
+
+
+def test_urls_name_a_backend_and_unknown_ones_say_which_exist():
+    url = Url.parse("serial:///dev/ttyACM0?baudrate=115200&protocol=ascii")
+    assert (url.scheme, url.target, url.options) == ("serial", "/dev/ttyACM0", {"baudrate": "115200", "protocol": "ascii"})
+    assert Url.parse("hid://046d:c21d").target == "046d:c21d"
+    with pytest.raises(DeviceError, match="expected scheme://target"):
+        Url.parse("/dev/ttyACM0")
+    with pytest.raises(DeviceError, match=r"unknown scheme 'foo'; known: \["):
+        open_device("foo://bar")
+    assert all(":" in target for target in BACKENDS.values())
