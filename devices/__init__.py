@@ -12,7 +12,9 @@ import importlib
 
 from .base import Counters, Device, DeviceError, DeviceLost, Sample, State, Url
 
-BACKENDS: dict[str, str] = {}
+BACKENDS: dict[str, str] = {
+    "osc": "devices.osc_device:OscDevice",
+}
 """URL scheme -> "module:Class" of its backend (a new backend adds its line here)."""
 
 
