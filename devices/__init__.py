@@ -13,6 +13,7 @@ import importlib
 from .base import Counters, Device, DeviceError, DeviceLost, Sample, State, Url
 
 BACKENDS: dict[str, str] = {
+    "midi": "devices.midi_device:MidiDevice",
     "osc": "devices.osc_device:OscDevice",
 }
 """URL scheme -> "module:Class" of its backend (a new backend adds its line here)."""

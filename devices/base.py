@@ -4,9 +4,10 @@ A device adapter (serial, HID, CAN, MIDI, OSC, simulated) implements three small
 ``_open``, ``_read`` and ``_close`` -- in the spirit of python-can's ``BusABC``; this base class
 runs them in a thread of their own, stamps every reading with ``time.monotonic_ns()`` as soon as
 it returns, and keeps the Samples in a bounded queue that never grows (the oldest are dropped and
-counted). When the hardware disappears (``_open`` or ``_read`` raise ``OSError`` or
-``DeviceLost``) the device closes, reports ``LOST`` and reopens with exponential backoff, while
-whatever consumes its Samples simply sees none: the face holds its pose.
+counted). When the hardware disappears (``_open`` raises ``OSError`` or ``DeviceLost``; ``_read``
+raises anything at all, since an adapter bug must not end the thread either) the device closes,
+reports ``LOST`` with the error and reopens with exponential backoff, while whatever consumes its
+Samples simply sees none: the face holds its pose.
 """
 
 from __future__ import annotations
@@ -171,7 +172,7 @@ class Device(ABC):
             self.state, wait = State.OPEN, self.BACKOFF[0]
             try:
                 self._pump()
-            except OSError as exc:
+            except Exception as exc:  # noqa: BLE001 -- any adapter failure: close, report, reopen
                 self._lost(exc)
             finally:
                 self._close()

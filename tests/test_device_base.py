@@ -101,3 +101,18 @@ def test_urls_name_a_backend_and_unknown_ones_say_which_exist():
     with pytest.raises(DeviceError, match=r"unknown scheme 'foo'; known: \["):
         open_device("foo://bar")
     assert all(":" in target for target in BACKENDS.values())
+
+
+def test_an_adapter_bug_in_read_does_not_end_the_thread():
+    class Flaky(Scripted):
+        fail = True
+
+        def _read(self):
+            if self.fail:
+                self.fail = False
+                raise ValueError("adapter bug")
+            return super()._read()
+
+    with Flaky([{"x": 1.0}]) as device:
+        assert next(device.samples(timeout=1.0)).values == {"x": 1.0}
+    assert device.counters.reconnects == 1 and device.counters.last_error == "adapter bug"
