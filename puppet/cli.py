@@ -32,6 +32,8 @@ def main(argv: list[str] | None = None) -> int:
     play.add_argument("--size", type=_size, default=(960, 720), help="window size WxH (default 960x720)")
     play.add_argument("--view", choices=VIEWS, default="front", help="camera (default front)")
 
+    commands.add_parser("devices", help="list the controllers that are connected (serial, HID, MIDI, CAN)")
+
     bench = commands.add_parser("bench", help="measure Sibson precompute, rig load and per-frame deform")
     bench.add_argument("--json", action="store_true", help="print the results as JSON")
     bench.add_argument("--frames", type=_positive, default=300, help="frames per measurement")
@@ -50,6 +52,11 @@ def main(argv: list[str] | None = None) -> int:
         from .window import play_take
 
         play_take(args.take, size=args.size, view=args.view)
+        return 0
+    if args.command == "devices":
+        from devices.discovery import discover, report
+
+        print(report(discover()))
         return 0
     if args.command == "bench":
         from .bench import run_bench
