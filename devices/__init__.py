@@ -15,6 +15,8 @@ from .base import Counters, Device, DeviceError, DeviceLost, Sample, State, Url
 BACKENDS: dict[str, str] = {
     "midi": "devices.midi_device:MidiDevice",
     "osc": "devices.osc_device:OscDevice",
+    "serial": "devices.serial_port:SerialDevice",
+    "sim": "devices.simulated_serial:SimulatedSerialDevice",
 }
 """URL scheme -> "module:Class" of its backend (a new backend adds its line here)."""
 

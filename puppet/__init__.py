@@ -2,6 +2,7 @@
 
 from .face import Face, load_face
 from .fapfile import FapError, FapStream, FapWarning, FapWriter, iter_fap, read_fap, write_fap
+from .mapping import MappingError, load_mapping
 from .rig import Rig, RigError, load_rig, save_rig
 from .runtime import Runtime
 from .sibson import SibsonError, sibson_coordinates
@@ -10,4 +11,5 @@ __all__ = [
     "Face", "load_face", "Rig", "RigError", "load_rig", "save_rig", "Runtime", "SibsonError",
     "sibson_coordinates",
     "FapError", "FapStream", "FapWarning", "FapWriter", "iter_fap", "read_fap", "write_fap",
+    "MappingError", "load_mapping",
 ]

@@ -1,0 +1,508 @@
+"""Serial devices (Arduino slider boxes, USB joysticks on a CDC port) read through pyserial.
+
+URLs
+----
+``serial:///dev/ttyACM0?baudrate=115200&protocol=ascii``
+    a port by path (``serial:/dev/ttyACM0`` and ``serial:COM3`` also work).
+``serial:loop://?protocol=slip``, ``serial:socket://host:7777?protocol=cobs``, ...
+    any pyserial URL handler (``serial_for_url``): write the pyserial URL right after ``serial:``
+    and our options after it. Options this module does not know are handed on to the pyserial URL
+    (``serial:loop://?protocol=cobs&logging=debug`` opens ``loop://?logging=debug``); with a plain
+    path an unknown option is an error. (Our URL parser drops options without a value, so a
+    pyserial option such as rfc2217's ``ign_set_control`` must be written ``ign_set_control=1``
+    -- which rfc2217 accepts.)
+
+Options: ``protocol=ascii|cobs|slip`` (default ascii); ``channels=a,b,c`` names the channels
+(default ``ch0``, ``ch1``, ...); ``format=i16|f32`` (cobs and slip, default i16);
+``timeout=0.03`` seconds a read waits (what bounds ``close()``); and the port settings
+``baudrate`` (115200), ``bytesize``, ``parity``, ``stopbits``, ``xonxoff``, ``rtscts``,
+``dsrdtr``, ``exclusive``.
+
+Protocols
+---------
+``ascii``: what an Arduino sketch ``Serial.println``-s. One reading per line, ended by CR, LF or
+CRLF. Either numbers separated by commas, semicolons, spaces or tabs (``512,300,1023`` -> ``ch0``,
+``ch1``, ``ch2``, or the names given by ``channels=``, in which case the count must match), or
+``name=value`` / ``name:value`` pairs (``slider1=512 slider2=300``, ``a:1,b:2`` as Arduino's
+Serial Plotter prints; with ``channels=`` every name must be one of them). Numbers are decimal
+(``-12``, ``3.5``, ``1e3``); NaN and infinities are refused. A malformed line (text, a non-number,
+a wrong count, mixed forms, a repeated name, a line over 4096 bytes) counts as one bad frame and
+is skipped; blank lines are ignored; a line split across reads is joined.
+
+``cobs`` and ``slip``: binary frames for high rates. Every frame carries one reading::
+
+    payload = N (1 byte, 1..255 channels)
+              N values, little-endian: int16 (format=i16, 2N bytes) or float32 (format=f32, 4N)
+    frame   = payload + CRC-16/CCITT-FALSE of the payload (2 bytes, big-endian)
+
+and is then framed, either by COBS (consistent overhead byte stuffing: the frame holds no 0x00,
+and 0x00 delimits frames) or by SLIP (RFC 1055: 0xC0 END delimits; 0xC0 and 0xDB inside the frame
+are sent as 0xDB 0xDC and 0xDB 0xDD). The encoders here send a delimiter before *and* after each
+frame (``00 <cobs> 00``, ``C0 <slip> C0``); the reader also takes frames with only the trailing
+delimiter (Arduino PacketSerial style). Sending the leading one costs a byte and means that line
+noise between two frames becomes its own short "frame" that fails its check, so the next real
+frame is never lost with it. Empty frames (delimiter pairs) are ignored.
+
+Resynchronisation is free: the reader splits the stream at delimiters, so after garbage it drops
+bytes up to the next delimiter and goes on. A frame that fails -- bad COBS code (a block longer
+than the frame), bad SLIP escape, bad CRC, N = 0, a length that is not 1 + 2N (or 1 + 4N) + 2, a
+non-finite float, a count other than the ``channels=`` names, or more than 2048 bytes without a
+delimiter -- counts as one bad frame in ``counters.bad_frames`` and yields nothing.
+
+Why CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF, not reflected, no final xor; check value 0x29B1
+for ``b"123456789"``): two bytes are cheap at thousands of frames a second; it detects every
+error burst up to 16 bits and has Hamming distance 4 far beyond our longest frame (1023 bytes), so
+line noise that gets past the framing yields a wrong reading with odds of about 1 in 65,536 per
+corrupted frame, rather than the 1 in 256 of an 8-bit sum; microcontrollers have it at hand (AVR
+libc: start at 0xFFFF and feed ``_crc_xmodem_update``; in CRC libraries pick the variant whose
+check value is 0x29B1, not the reflected "KERMIT" one); and Python computes it
+in C with ``binascii.crc_hqx(data, 0xFFFF)``. Because it is not reflected and has no final xor,
+the CRC of payload + CRC (big-endian) is 0, which is how the reader checks a frame in one call.
+
+``encode_cobs_frame``, ``encode_slip_frame`` and ``encode_ascii_line`` produce exactly these wire
+formats, for the simulated devices and the replay tool.
+
+Reading
+-------
+The reader thread asks pyserial for what is waiting, or waits up to ``timeout`` (30 ms) for the
+first byte, so ``close()`` is prompt. Samples from one read share the timestamp the base class
+takes when the read returns. When the port goes away (pyserial raises ``SerialException``, an
+``OSError``: a USB port unplugged, a pseudo-terminal whose master closed -- EIO, or "device reports
+readiness to read but returned no data") the read raises ``DeviceLost`` and the base class
+reopens the port with backoff; partial data of the lost connection is dropped.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import re
+import struct
+from binascii import crc_hqx
+from collections.abc import Mapping, Sequence
+from urllib.parse import urlencode
+
+import serial
+
+from .base import Device, DeviceError, DeviceLost, Url
+
+PROTOCOLS = ("ascii", "cobs", "slip")
+FORMATS = {"i16": ("h", 2), "f32": ("f", 4)}
+TIMEOUT = 0.03          # seconds a read waits for the first byte
+READ_MAX = 16384        # most bytes taken from the port in one read (one timestamp)
+MAX_LINE = 4096         # longest ascii line
+MAX_FRAME = 2048        # longest cobs/slip frame on the wire, delimiters excluded
+CRC_INIT = 0xFFFF
+
+SLIP_END, SLIP_ESC, SLIP_ESC_END, SLIP_ESC_ESC = 0xC0, 0xDB, 0xDC, 0xDD
+_END, _ESC = bytes([SLIP_END]), bytes([SLIP_ESC])
+_ESC_END, _ESC_ESC = bytes([SLIP_ESC, SLIP_ESC_END]), bytes([SLIP_ESC, SLIP_ESC_ESC])
+
+
+def crc16(data: bytes) -> int:
+    """CRC-16/CCITT-FALSE of ``data``."""
+    return crc_hqx(data, CRC_INIT)
+
+
+# -- encoders (the wire formats) ---------------------------------------------------------------
+
+def encode_payload(values: Sequence[float], fmt: str = "i16") -> bytes:
+    """Count byte, values, CRC: one reading before framing. i16 values are rounded to integers."""
+    n = len(values)
+    if not 1 <= n <= 255:
+        raise ValueError(f"a frame carries 1 to 255 channels, not {n}")
+    code, _ = _format(fmt)
+    if code == "h":
+        values = [round(float(v)) for v in values]
+        if not all(-32768 <= v <= 32767 for v in values):
+            raise ValueError(f"int16 frame: values out of range: {values}")
+    body = struct.pack(f"<B{n}{code}", n, *values)
+    return body + crc16(body).to_bytes(2, "big")
+
+
+def cobs_encode(data: bytes) -> bytes:
+    """COBS: ``data`` with every 0x00 removed, each block led by its length + 1 (0xFF: 254, no zero)."""
+    out = bytearray()
+    parts = bytes(data).split(b"\x00")
+    last = len(parts) - 1
+    for i, part in enumerate(parts):
+        full = len(part) // 254
+        for b in range(full):
+            out.append(0xFF)
+            out += part[b * 254:(b + 1) * 254]
+        rest = part[full * 254:]
+        if rest or i < last or not full:  # a final run of whole 0xFF blocks needs no closing code
+            out.append(len(rest) + 1)
+            out += rest
+    return bytes(out)
+
+
+def cobs_decode(data: bytes) -> bytes | None:
+    """The bytes ``cobs_encode`` was given, or None when ``data`` is not valid COBS."""
+    out = bytearray()
+    i, n = 0, len(data)
+    while i < n:
+        code = data[i]
+        if code == 0:
+            return None
+        end = i + code
+        if end > n:
+            return None
+        out += data[i + 1:end]
+        if code != 0xFF and end < n:
+            out.append(0)
+        i = end
+    return bytes(out)
+
+
+def slip_encode(data: bytes) -> bytes:
+    """SLIP escaping (no delimiters): 0xDB -> 0xDB 0xDD, 0xC0 -> 0xDB 0xDC."""
+    return bytes(data).replace(_ESC, _ESC_ESC).replace(_END, _ESC_END)
+
+
+def slip_decode(data: bytes) -> bytes | None:
+    """The bytes ``slip_encode`` was given, or None on a bad escape."""
+    if SLIP_ESC not in data:
+        return bytes(data)
+    parts = bytes(data).split(_ESC)
+    out = bytearray(parts[0])
+    for part in parts[1:]:
+        if not part:
+            return None
+        first = part[0]
+        if first == SLIP_ESC_END:
+            out.append(SLIP_END)
+        elif first == SLIP_ESC_ESC:
+            out.append(SLIP_ESC)
+        else:
+            return None
+        out += part[1:]
+    return bytes(out)
+
+
+def encode_cobs_frame(values: Sequence[float], fmt: str = "i16") -> bytes:
+    """One reading as a COBS frame on the wire: ``00 cobs(payload + crc) 00``."""
+    return b"\x00" + cobs_encode(encode_payload(values, fmt)) + b"\x00"
+
+
+def encode_slip_frame(values: Sequence[float], fmt: str = "i16") -> bytes:
+    """One reading as a SLIP frame on the wire: ``C0 slip(payload + crc) C0``."""
+    return _END + slip_encode(encode_payload(values, fmt)) + _END
+
+
+def encode_ascii_line(values: Sequence[float] | Mapping[str, float], sep: str = ",",
+                      end: str = "\r\n") -> bytes:
+    """One reading as an Arduino-style line: ``512,300`` or, from a dict, ``a=512,b=300``."""
+    if isinstance(values, Mapping):
+        text = sep.join(f"{k}={_number(v)}" for k, v in values.items())
+    else:
+        text = sep.join(_number(v) for v in values)
+    return (text + end).encode("ascii")
+
+
+def _number(v: float) -> str:
+    return str(int(v)) if float(v).is_integer() else repr(float(v))
+
+
+def _format(fmt: str) -> tuple[str, int]:
+    try:
+        return FORMATS[fmt]
+    except KeyError:
+        raise ValueError(f"format {fmt!r}: expected one of {sorted(FORMATS)}") from None
+
+
+# -- parsers (bytes in, readings out) ----------------------------------------------------------
+
+class _Splitter:
+    """Splits a byte stream at a delimiter, joining chunks across reads and bounding their size.
+
+    ``feed`` returns the readings of the complete chunks; a chunk ``_decode`` refuses (None)
+    counts in ``bad``, which the owner reads and resets.
+    """
+
+    DELIMITER = b"\n"
+    LIMIT = MAX_FRAME
+
+    def __init__(self, names: Sequence[str] | None = None) -> None:
+        self.names = tuple(names) if names else None
+        self.bad = 0
+        self._tail = b""
+        self._skipping = False        # inside an overlong chunk, already counted
+        self._default_names: dict[int, tuple[str, ...]] = {}
+
+    def reset(self) -> None:
+        """Forget a partial chunk (a new connection starts clean)."""
+        self._tail, self._skipping = b"", False
+
+    def feed(self, data: bytes) -> list[dict[str, float]]:
+        data = self._normalise(data)
+        delimiter = self.DELIMITER
+        if delimiter not in data:
+            if not self._skipping:
+                self._tail += data
+                if len(self._tail) > self.LIMIT:
+                    self._overflow()
+            return []
+        chunks = data.split(delimiter)
+        if self._skipping:
+            chunks[0], self._skipping = b"", False
+        else:
+            chunks[0] = self._tail + chunks[0]
+        self._tail = chunks.pop()
+        out = []
+        decode = self._decode
+        for chunk in chunks:
+            if chunk:
+                reading = decode(chunk)
+                if reading:
+                    out.append(reading)
+                elif reading is None:
+                    self.bad += 1
+        if len(self._tail) > self.LIMIT:
+            self._overflow()
+        return out
+
+    def _overflow(self) -> None:
+        self.bad += 1
+        self._tail, self._skipping = b"", True
+
+    def _normalise(self, data: bytes) -> bytes:
+        return data
+
+    def _decode(self, chunk: bytes) -> dict[str, float] | None:
+        raise NotImplementedError
+
+    def _names_for(self, n: int) -> tuple[str, ...] | None:
+        if self.names is not None:
+            return self.names if n == len(self.names) else None
+        names = self._default_names.get(n)
+        if names is None:
+            names = self._default_names[n] = tuple(f"ch{i}" for i in range(n))
+        return names
+
+
+_SPACE_AROUND_PAIR = re.compile(r"\s*([=:])\s*")
+_SEPARATORS = re.compile(r"[,;\s]+")
+
+
+class AsciiParser(_Splitter):
+    """Lines of numbers or name=value pairs (see the module docstring)."""
+
+    DELIMITER = b"\n"
+    LIMIT = MAX_LINE
+
+    def _normalise(self, data: bytes) -> bytes:
+        return data.replace(b"\r", b"\n") if b"\r" in data else data
+
+    def _decode(self, chunk: bytes) -> dict[str, float] | None:
+        try:
+            line = chunk.decode("ascii").strip(" \t,;")
+        except UnicodeDecodeError:
+            return None
+        if not line:
+            return {}
+        if "=" in line or ":" in line:
+            return self._pairs(_SEPARATORS.split(_SPACE_AROUND_PAIR.sub(r"\1", line)))
+        values = [_parse_number(token) for token in _SEPARATORS.split(line)]
+        if None in values:
+            return None
+        names = self._names_for(len(values))
+        return dict(zip(names, values)) if names else None
+
+    def _pairs(self, tokens: list[str]) -> dict[str, float] | None:
+        out = {}
+        for token in tokens:
+            name, sep, text = token.partition("=")
+            if not sep:
+                name, sep, text = token.partition(":")
+            value = _parse_number(text) if sep else None
+            if value is None or not name or name in out:
+                return None
+            if self.names is not None and name not in self.names:
+                return None
+            out[name] = value
+        return out
+
+
+def _parse_number(text: str) -> float | None:
+    try:
+        value = float(text)
+    except ValueError:
+        return None
+    if not math.isfinite(value) or "_" in text:
+        return None
+    return value
+
+
+class _FrameParser(_Splitter):
+    """Binary frames: unframe, check CRC and layout, name the values."""
+
+    def __init__(self, names: Sequence[str] | None = None, fmt: str = "i16") -> None:
+        super().__init__(names)
+        self.fmt = fmt
+        self._code, self._size = _format(fmt)
+        self._structs: dict[int, struct.Struct] = {}
+
+    def _unframe(self, chunk: bytes) -> bytes | None:
+        raise NotImplementedError
+
+    def _decode(self, chunk: bytes) -> dict[str, float] | None:
+        frame = self._unframe(chunk)
+        if frame is None or len(frame) < 4 or crc_hqx(frame, CRC_INIT) != 0:
+            return None
+        n = frame[0]
+        if n == 0 or len(frame) != 3 + n * self._size:
+            return None
+        names = self._names_for(n)
+        if names is None:
+            return None
+        unpack = self._structs.get(n)
+        if unpack is None:
+            unpack = self._structs[n] = struct.Struct(f"<{n}{self._code}")
+        values = unpack.unpack_from(frame, 1)
+        if self._code == "f":
+            if not all(map(math.isfinite, values)):
+                return None
+            return dict(zip(names, values))
+        return dict(zip(names, map(float, values)))
+
+
+class CobsParser(_FrameParser):
+    DELIMITER = b"\x00"
+
+    def _unframe(self, chunk: bytes) -> bytes | None:
+        return cobs_decode(chunk)
+
+
+class SlipParser(_FrameParser):
+    DELIMITER = _END
+
+    def _unframe(self, chunk: bytes) -> bytes | None:
+        return slip_decode(chunk)
+
+
+def make_parser(protocol: str = "ascii", names: Sequence[str] | None = None,
+                fmt: str = "i16") -> _Splitter:
+    """A parser for a protocol: ``feed(bytes) -> [readings]``, bad frames counted in ``bad``."""
+    if protocol == "ascii":
+        return AsciiParser(names)
+    if protocol == "cobs":
+        return CobsParser(names, fmt)
+    if protocol == "slip":
+        return SlipParser(names, fmt)
+    raise ValueError(f"protocol {protocol!r}: expected one of {', '.join(PROTOCOLS)}")
+
+
+# -- the device --------------------------------------------------------------------------------
+
+_PORT_OPTIONS = {
+    "baudrate": int, "bytesize": int, "parity": str.upper, "stopbits": float,
+    "xonxoff": "bool", "rtscts": "bool", "dsrdtr": "bool", "exclusive": "bool",
+}
+_TRUE, _FALSE = {"1", "true", "yes", "on"}, {"0", "false", "no", "off"}
+
+
+class SerialDevice(Device):
+    """Readings from a serial port (a path or any pyserial URL) in one of three protocols."""
+
+    def __init__(self, name: str, port: str, *, protocol: str = "ascii",
+                 channels: Sequence[str] | None = None, fmt: str = "i16",
+                 timeout: float = TIMEOUT, baudrate: int = 115200, **port_options: object) -> None:
+        super().__init__(name)
+        if channels is not None:
+            channels = tuple(channels)
+            if not channels or len(set(channels)) != len(channels) or not all(channels):
+                raise DeviceError(f"serial {port!r}: channel names must be distinct and non-empty: {channels}")
+        if protocol == "ascii" and fmt != "i16":
+            raise DeviceError(f"serial {port!r}: format= applies to cobs and slip, not ascii")
+        if not 0 < timeout <= 0.5:
+            raise DeviceError(f"serial {port!r}: timeout must be in (0, 0.5] seconds, not {timeout}")
+        try:
+            self._parser = make_parser(protocol, channels, fmt)
+        except ValueError as exc:
+            raise DeviceError(f"serial {port!r}: {exc}") from None
+        self.port_url = port
+        self.protocol, self.channels, self.fmt = protocol, channels, fmt
+        self._port_kwargs = dict(port_options, baudrate=baudrate, timeout=timeout)
+        try:  # check the URL handler and settings now, so _open only fails when hardware does
+            serial.serial_for_url(port, do_not_open=True, **self._port_kwargs)
+        except (ValueError, TypeError) as exc:
+            raise DeviceError(f"serial {port!r}: {exc}") from None
+        self._port: serial.SerialBase | None = None
+
+    @classmethod
+    def from_url(cls, url: Url, name: str) -> SerialDevice:
+        options = dict(url.options)
+        target = url.target
+        if not target:
+            raise DeviceError("serial URL: expected serial:///dev/PORT or serial:HANDLER://..., "
+                              "e.g. serial:///dev/ttyACM0?protocol=ascii")
+        kwargs: dict[str, object] = {}
+        try:
+            if "protocol" in options:
+                kwargs["protocol"] = options.pop("protocol")
+            if "format" in options:
+                kwargs["fmt"] = options.pop("format")
+            if "channels" in options:
+                kwargs["channels"] = [c.strip() for c in options.pop("channels").split(",")]
+            if "timeout" in options:
+                kwargs["timeout"] = float(options.pop("timeout"))
+            for key, convert in _PORT_OPTIONS.items():
+                if key in options:
+                    kwargs[key] = _bool(options.pop(key)) if convert == "bool" else convert(options.pop(key))
+        except ValueError as exc:
+            raise DeviceError(f"serial URL {target!r}: {exc}") from None
+        if options:
+            if "://" not in target:
+                raise DeviceError(f"serial URL {target!r}: unknown option(s) {sorted(options)}")
+            target += ("&" if "?" in target else "?") + urlencode(options)
+        return cls(name, target, **kwargs)
+
+    @property
+    def port(self) -> serial.SerialBase | None:
+        """The open pyserial port (None while closed): a loop:// port is written through it."""
+        return self._port
+
+    def _open(self) -> None:
+        self._parser.reset()
+        self._port = serial.serial_for_url(self.port_url, **self._port_kwargs)
+
+    def _read(self) -> list[dict[str, float]]:
+        port = self._port
+        try:
+            waiting = port.in_waiting
+            data = port.read(min(waiting, READ_MAX) if waiting else 1)
+            if data and not waiting:
+                waiting = port.in_waiting
+                if waiting:
+                    data += port.read(min(waiting, READ_MAX))
+        except OSError as exc:  # serial.SerialException is an OSError
+            raise DeviceLost(f"{self.port_url}: {exc}") from exc
+        if not data:
+            return []
+        parser = self._parser
+        readings = parser.feed(data)
+        if parser.bad:
+            self.counters.bad_frames += parser.bad
+            parser.bad = 0
+        return readings
+
+    def _close(self) -> None:
+        port, self._port = self._port, None
+        if port is not None:
+            with contextlib.suppress(Exception):  # a vanished port may fail to close: nothing to do
+                port.close()
+
+
+def _bool(text: str) -> bool:
+    low = text.lower()
+    if low in _TRUE:
+        return True
+    if low in _FALSE:
+        return False
+    raise ValueError(f"expected a yes/no value, not {text!r}")
+
+
+__all__ = ["AsciiParser", "CobsParser", "SerialDevice", "SlipParser", "cobs_decode", "cobs_encode",
+           "crc16", "encode_ascii_line", "encode_cobs_frame", "encode_payload", "encode_slip_frame",
+           "make_parser", "slip_decode", "slip_encode"]

@@ -1,0 +1,312 @@
+"""A serial joystick on a pseudo-terminal: real bytes through a real tty, read by ``SerialDevice``.
+
+``PtyJoystick`` opens ``os.openpty()``, sets the slave side raw (no echo, no line editing) and
+writes readings on the master side -- ascii lines, COBS or SLIP frames, made by the encoders of
+``devices.serial_port`` -- from a generated signal (smooth sine sliders by default) or a script, at
+a given rate, in a thread of its own. Whatever opens the slave with pyserial sees an ordinary
+serial port.
+
+Stable path, unplug and replug
+------------------------------
+A new pseudo-terminal gets a new ``/dev/pts/N``, so the joystick publishes a **symlink at a path
+that never changes** (``joystick.path``; a fresh temporary directory's ``joystick`` unless
+``link=`` is given) pointing at the current slave (``joystick.tty``). Point the device at the
+symlink: ``serial://<path>?protocol=...``.
+
+* ``unplug()`` closes both ends of the pty and removes the symlink. A reader blocked on the slave
+  gets EIO (pyserial raises ``SerialException``): ``SerialDevice`` reports ``LOST``; its reopen
+  attempts fail (no such file) and back off -- exactly what a USB port that vanished does.
+* ``replug()`` opens a new pty and points the symlink at it (atomically); the device's next reopen
+  attempt finds it and samples flow again.
+
+The joystick keeps its own descriptor of the slave open, so the tty exists while no reader has it
+open. Writes never block: bytes wait in a small buffer (8 KiB) while the reader is slow, and when it
+is full -- nobody reading, or unplugged -- whole readings are dropped (``dropped``), never half a
+frame. (pyserial flushes what was queued in the tty when it opens a port, like a real port.)
+
+Rates: ``rate`` readings a second, paced by the clock and written in batches when the thread wakes
+late; ``rate=math.inf`` writes as fast as the reader takes (for throughput measurements);
+``rate=None`` starts no thread: the test calls ``send(values)`` and ``write(raw_bytes)``.
+
+``sim://joystick?protocol=ascii&rate=200&channels=6`` (``SimulatedSerialDevice``) is a
+``SerialDevice`` that starts its own ``PtyJoystick`` and reads it: a serial device for demos with
+no hardware. Options: ``protocol``, ``rate`` (0 = as fast as possible), ``channels`` (a count, or
+names), ``format`` (i16/f32 for cobs and slip), ``style`` (csv, space or pairs for ascii).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import select
+import shutil
+import tempfile
+import threading
+import time
+import tty
+from collections.abc import Callable, Iterable, Sequence
+
+from .base import DeviceError, Url
+from .serial_port import (
+    SerialDevice,
+    encode_ascii_line,
+    encode_cobs_frame,
+    encode_slip_frame,
+    make_parser,
+)
+
+PENDING_MAX = 8192      # bytes waiting for the reader before whole readings are dropped
+MAX_BATCH = 0.1         # at most this many seconds of readings are caught up after a stall
+FLOOD_BLOCK = 256       # readings per block written in flood mode
+STYLES = {"csv": ",", "space": " ", "pairs": ","}
+
+Signal = Callable[[float], Sequence[float]]
+
+
+def sine_sliders(channels: int = 6, lo: float = 0.0, hi: float = 1023.0, integer: bool = True) -> Signal:
+    """Smooth sliders: channel i is a sine between lo and hi at (0.25 + 0.15 i) Hz."""
+    mid, amp = (lo + hi) / 2, (hi - lo) / 2
+    freqs = [2 * math.pi * (0.25 + 0.15 * i) for i in range(channels)]
+
+    def signal(t: float) -> list[float]:
+        values = [mid + amp * math.sin(f * t + i) for i, f in enumerate(freqs)]
+        return [float(round(v)) for v in values] if integer else values
+    return signal
+
+
+def encode_reading(values: Sequence[float], protocol: str = "ascii", fmt: str = "i16", style: str = "csv",
+                   names: Sequence[str] | None = None) -> bytes:
+    """One reading on the wire: a COBS or SLIP frame, or an ascii line in a style."""
+    if protocol == "cobs":
+        return encode_cobs_frame(values, fmt)
+    if protocol == "slip":
+        return encode_slip_frame(values, fmt)
+    if style == "pairs":
+        names = names or [f"ch{i}" for i in range(len(values))]
+        return encode_ascii_line(dict(zip(names, values)), STYLES["pairs"])
+    return encode_ascii_line(values, STYLES[style])
+
+
+class PtyJoystick:
+    """A serial joystick on a pseudo-terminal, with a stable path and a plug to pull."""
+
+    def __init__(self, protocol: str = "ascii", rate: float | None = 200.0, channels: int = 6, *,
+                 fmt: str = "i16", style: str = "csv", names: Sequence[str] | None = None,
+                 signal: Signal | Iterable[Sequence[float]] | None = None, link: str | None = None) -> None:
+        make_parser(protocol, fmt=fmt)  # checks protocol and format
+        if style not in STYLES:
+            raise ValueError(f"style {style!r}: expected one of {sorted(STYLES)}")
+        if rate is not None and not rate >= 0:
+            raise ValueError(f"rate must be >= 0, not {rate}")
+        self.protocol, self.fmt, self.style = protocol, fmt, style
+        self.rate = rate or None
+        self.names = tuple(names) if names else tuple(f"ch{i}" for i in range(channels))
+        self.channels = len(self.names)
+        if signal is None:
+            signal = sine_sliders(self.channels, integer=(protocol == "ascii" or fmt == "i16"))
+        self._signal = signal if callable(signal) else None
+        self._script = None if callable(signal) else list(signal)
+        self._own_dir = link is None
+        self.path = link or os.path.join(tempfile.mkdtemp(prefix="pty-joystick-"), "joystick")
+        self.tty: str | None = None
+        self.sent = 0           # readings handed to the tty
+        self.dropped = 0        # readings dropped (unplugged, or nobody reading)
+        self._master: int | None = None
+        self._slave: int | None = None
+        self._pending = bytearray()
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    # -- the plug ---------------------------------------------------------------------------------
+
+    @property
+    def plugged(self) -> bool:
+        return self._master is not None
+
+    def start(self) -> PtyJoystick:
+        """Plug in and start sending (when a rate was given)."""
+        if not self.plugged:
+            self.replug()
+        if self._thread is None and self.rate is not None:
+            self._stop.clear()
+            self._thread = threading.Thread(target=self._run, name="pty joystick", daemon=True)
+            self._thread.start()
+        return self
+
+    def replug(self) -> None:
+        """Open a new pseudo-terminal and point ``path`` at it."""
+        with self._lock:
+            self._unplug_locked()
+            master, slave = os.openpty()
+            tty.setraw(slave)
+            os.set_blocking(master, False)
+            self._master, self._slave, self.tty = master, slave, os.ttyname(slave)
+            os.makedirs(os.path.dirname(os.path.abspath(self.path)), exist_ok=True)
+            if os.path.lexists(self.path) and not os.path.islink(self.path):
+                raise FileExistsError(f"{self.path} exists and is not a symlink: not replacing it")
+            temporary = f"{self.path}.{os.getpid()}.new"
+            if os.path.lexists(temporary):
+                os.unlink(temporary)
+            os.symlink(self.tty, temporary)
+            os.replace(temporary, self.path)
+
+    def unplug(self) -> None:
+        """Close the pseudo-terminal (the reader sees the device lost) and remove ``path``."""
+        with self._lock:
+            self._unplug_locked()
+
+    def _unplug_locked(self) -> None:
+        if self._master is None:
+            return
+        for fd in (self._master, self._slave):
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+        self._master = self._slave = None
+        self._pending.clear()
+        if os.path.islink(self.path) and os.readlink(self.path) == self.tty:
+            os.unlink(self.path)
+
+    def close(self) -> None:
+        """Stop sending, unplug, and remove the temporary directory."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(2.0)
+            self._thread = None
+        self.unplug()
+        if self._own_dir:
+            shutil.rmtree(os.path.dirname(self.path), ignore_errors=True)
+
+    def __enter__(self) -> PtyJoystick:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- sending ----------------------------------------------------------------------------------
+
+    def encode(self, values: Sequence[float]) -> bytes:
+        """One reading in this joystick's wire format."""
+        return encode_reading(values, self.protocol, self.fmt, self.style, self.names)
+
+    def send(self, values: Sequence[float]) -> bool:
+        """Send one reading now; False if it was dropped."""
+        return self._submit(self.encode(values), 1)
+
+    def write(self, data: bytes) -> bool:
+        """Send raw bytes (line noise, a hand-made frame); False if they were dropped."""
+        return self._submit(bytes(data), 0)
+
+    def _submit(self, data: bytes, readings: int) -> bool:
+        with self._lock:
+            if self._master is None or len(self._pending) + len(data) > PENDING_MAX:
+                self.dropped += readings
+                self._flush_locked()
+                return False
+            self._pending += data
+            self.sent += readings
+            self._flush_locked()
+            return True
+
+    def _flush_locked(self) -> None:
+        if self._master is None or not self._pending:
+            return
+        try:
+            written = os.write(self._master, self._pending)
+        except (BlockingIOError, InterruptedError):
+            return
+        except OSError:
+            return
+        del self._pending[:written]
+
+    def _readings(self, start: int, stop: int) -> list[Sequence[float]]:
+        if self._script is not None:
+            return self._script[start:stop]
+        return [self._signal(i / self.rate) for i in range(start, stop)]
+
+    def _run(self) -> None:
+        if math.isinf(self.rate):
+            self._flood()
+            return
+        period, t0, k = 1.0 / self.rate, time.monotonic(), 0
+        limit = max(1, int(self.rate * MAX_BATCH))
+        while not self._stop.is_set():
+            due = int((time.monotonic() - t0) * self.rate) + 1
+            if self._script is not None:
+                due = min(due, len(self._script))
+                if k >= due:
+                    return
+            if due - k > limit:          # woke very late: skip what is too old to matter
+                self.dropped += due - k - limit
+                k = due - limit
+            readings = self._readings(k, due)
+            if readings:
+                self._submit(b"".join(map(self.encode, readings)), len(readings))
+            else:
+                with self._lock:
+                    self._flush_locked()
+            k = due
+            self._stop.wait(max(0.0, t0 + due * period - time.monotonic()))
+
+    def _flood(self) -> None:
+        if self._script is not None:
+            readings = self._script
+        else:
+            readings = [self._signal(i / 1000.0) for i in range(FLOOD_BLOCK)]
+        block = b"".join(map(self.encode, readings))
+        while not self._stop.is_set():
+            with self._lock:
+                master = self._master
+                if master is not None:
+                    select.select([], [master], [], 0.005)
+                    if len(self._pending) < PENDING_MAX:
+                        self._pending += block
+                        self.sent += len(readings)
+                    self._flush_locked()
+            if master is None:
+                self._stop.wait(0.01)
+
+
+class SimulatedSerialDevice(SerialDevice):
+    """``sim://joystick?...``: a SerialDevice reading a PtyJoystick it starts itself."""
+
+    def __init__(self, name: str, joystick: PtyJoystick, **serial_options: object) -> None:
+        super().__init__(name, joystick.path, protocol=joystick.protocol, fmt=joystick.fmt,
+                         channels=joystick.names, **serial_options)
+        self.joystick = joystick
+        self._joystick_started = False
+
+    @classmethod
+    def from_url(cls, url: Url, name: str) -> SimulatedSerialDevice:
+        if url.target.strip("/") != "joystick":
+            raise DeviceError(f"sim URL: expected sim://joystick?protocol=ascii&rate=200, got target {url.target!r}")
+        options = dict(url.options)
+        unknown = set(options) - {"protocol", "rate", "channels", "format", "style"}
+        if unknown:
+            raise DeviceError(f"sim URL: unknown option(s) {sorted(unknown)}")
+        channels = options.get("channels", "6")
+        try:
+            rate = float(options.get("rate", "200"))
+            names = [f"ch{i}" for i in range(int(channels))] if channels.isdigit() else channels.split(",")
+            joystick = PtyJoystick(options.get("protocol", "ascii"), rate if rate > 0 else math.inf,
+                                   fmt=options.get("format", "i16"), style=options.get("style", "csv"),
+                                   names=names)
+        except ValueError as exc:
+            raise DeviceError(f"sim URL: {exc}") from None
+        return cls(name, joystick)
+
+    def _open(self) -> None:
+        if not self._joystick_started:  # once: after that, unplug() and replug() are the test's
+            self.joystick.start()
+            self._joystick_started = True
+        super()._open()
+
+    def close(self, timeout: float = 2.0) -> None:
+        super().close(timeout)
+        self.joystick.close()
+        self._joystick_started = False
+
+
+__all__ = ["PtyJoystick", "SimulatedSerialDevice", "encode_reading", "sine_sliders"]

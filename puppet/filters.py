@@ -1,0 +1,142 @@
+"""Time-driven smoothing for live channels: the One Euro filter, an exponential filter, a rate limit.
+
+Every filter is driven by the samples' own timestamps (``t_ns``, ``time.monotonic_ns()``), never
+by an assumed sampling rate, so irregular and bursty input is filtered as it really arrived.
+
+* ``OneEuro`` -- the 1€ filter of Casiez, Roussel and Vogel ("1€ Filter: A Simple Speed-based
+  Low-pass Filter for Noisy Input in Interactive Systems", CHI 2012), as the paper's pseudocode
+  gives it: a first-order low-pass filter whose cutoff rises with the (low-pass filtered) speed,
+  ``cutoff = min_cutoff + beta * |dx|``, with ``alpha = 1 / (1 + tau / te)``,
+  ``tau = 1 / (2 pi cutoff)`` and ``te`` the time since the previous sample. The speed is taken
+  against the previous *filtered* value (the paper's ``xfilt.hatxprev()``; the authors' later
+  reference code uses the previous raw value instead). The first sample passes through, with
+  speed 0.
+* ``Exponential`` -- ``y += (1 - exp(-te / tau)) * (x - y)``: the exact discretisation of
+  ``tau dy/dt = x - y`` for an input held between samples, so a step reaches ``1 - exp(-t / tau)``
+  at time ``t`` whatever the sample spacing.
+* ``RateLimit`` -- the output moves toward the input by at most ``rate * te``.
+
+Zero elapsed time means zero change: a sample stamped at (or before) the previous one leaves a
+filter as it was (the limit of every formula above as ``te -> 0``; readings of one device read
+are stamped together).
+
+``step(x, t_ns)`` filters one sample and keeps the state. ``peek(x, t_ns)`` says what ``step``
+would return, without changing anything: a face drawn between the samples of an event-driven
+device (MIDI, HID reports on change) still settles while the input is held.
+"""
+
+from __future__ import annotations
+
+import math
+
+TWO_PI = 2.0 * math.pi
+NS = 1e-9
+
+
+class OneEuro:
+    """The 1€ filter; ``min_cutoff`` and ``d_cutoff`` in Hz, ``beta`` in 1 / (units per second)."""
+
+    __slots__ = ("min_cutoff", "beta", "d_cutoff", "_t", "_x", "_dx")
+
+    def __init__(self, min_cutoff: float = 1.0, beta: float = 0.0, d_cutoff: float = 1.0) -> None:
+        if min_cutoff <= 0 or d_cutoff <= 0 or beta < 0:
+            raise ValueError("One Euro filter: min_cutoff and d_cutoff must be > 0 and beta >= 0")
+        self.min_cutoff, self.beta, self.d_cutoff = float(min_cutoff), float(beta), float(d_cutoff)
+        self.reset()
+
+    def reset(self) -> None:
+        self._t: int | None = None
+        self._x = 0.0   # previous output (the paper's hatxprev)
+        self._dx = 0.0  # previous filtered speed
+
+    def _next(self, x: float, t_ns: int) -> tuple[float, float]:
+        """(output, filtered speed) for ``x`` at ``t_ns``, after at least one sample."""
+        te = (t_ns - self._t) * NS
+        if te <= 0.0:
+            return self._x, self._dx
+        r = TWO_PI * self.d_cutoff * te          # alpha = 1 / (1 + tau / te) = r / (1 + r)
+        a = r / (1.0 + r)
+        dx = a * ((x - self._x) / te) + (1.0 - a) * self._dx
+        r = TWO_PI * (self.min_cutoff + self.beta * abs(dx)) * te
+        a = r / (1.0 + r)
+        return a * x + (1.0 - a) * self._x, dx
+
+    def step(self, x: float, t_ns: int) -> float:
+        if self._t is None:
+            self._t, self._x, self._dx = t_ns, x, 0.0
+            return x
+        if t_ns > self._t:
+            self._x, self._dx = self._next(x, t_ns)
+            self._t = t_ns
+        return self._x
+
+    def peek(self, x: float, t_ns: int) -> float:
+        if self._t is None:
+            return x
+        return self._next(x, t_ns)[0]
+
+
+class Exponential:
+    """First-order low-pass filter with time constant ``tau`` seconds."""
+
+    __slots__ = ("tau", "_t", "_y")
+
+    def __init__(self, tau: float) -> None:
+        if tau <= 0:
+            raise ValueError("exponential filter: tau must be > 0 seconds")
+        self.tau = float(tau)
+        self.reset()
+
+    def reset(self) -> None:
+        self._t: int | None = None
+        self._y = 0.0
+
+    def _next(self, x: float, t_ns: int) -> float:
+        te = (t_ns - self._t) * NS
+        if te <= 0.0:
+            return self._y
+        return self._y + (1.0 - math.exp(-te / self.tau)) * (x - self._y)
+
+    def step(self, x: float, t_ns: int) -> float:
+        if self._t is None:
+            self._t, self._y = t_ns, x
+        elif t_ns > self._t:
+            self._y, self._t = self._next(x, t_ns), t_ns
+        return self._y
+
+    def peek(self, x: float, t_ns: int) -> float:
+        return x if self._t is None else self._next(x, t_ns)
+
+
+class RateLimit:
+    """The output follows the input at most ``rate`` units per second."""
+
+    __slots__ = ("rate", "_t", "_y")
+
+    def __init__(self, rate: float) -> None:
+        if rate <= 0:
+            raise ValueError("rate limit must be > 0 units per second")
+        self.rate = float(rate)
+        self.reset()
+
+    def reset(self) -> None:
+        self._t: int | None = None
+        self._y = 0.0
+
+    def _next(self, x: float, t_ns: int) -> float:
+        te = (t_ns - self._t) * NS
+        if te <= 0.0:
+            return self._y
+        step = self.rate * te
+        d = x - self._y
+        return self._y + step if d > step else self._y - step if d < -step else x
+
+    def step(self, x: float, t_ns: int) -> float:
+        if self._t is None:
+            self._t, self._y = t_ns, x
+        elif t_ns > self._t:
+            self._y, self._t = self._next(x, t_ns), t_ns
+        return self._y
+
+    def peek(self, x: float, t_ns: int) -> float:
+        return x if self._t is None else self._next(x, t_ns)

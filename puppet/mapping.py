@@ -1,0 +1,1045 @@
+"""Mappings: what a puppeteer's controls do to the face, written in YAML, checked before anything opens.
+
+A mapping names the devices to open, shapes every raw channel into a clean -1..1 or 0..1 value,
+and sends the shaped values to targets: FAPs (in FAPU units, as in a .fap file), muscles
+(contraction 0..1), visemes and expressions (MPEG-4 FAP 1 and 2), head and eye rotations::
+
+    # yaml-language-server: $schema=schema.json
+    description: two sliders and a stick
+    devices:
+      box: {url: "serial:///dev/ttyACM0", options: {baudrate: 115200}}
+      pad: {url: "hid://046d:c21d"}
+    channels:
+      box.ch0:                       # device.channel
+        min: 0                       # raw values, calibrated to 0..1 (range: unipolar, the default)
+        max: 1023
+        dead_zone: 0.03              # 0 at the zone's edge, rising linearly to 1 at full scale
+        curve: {type: expo, factor: 0.4}
+        smoothing: {type: one_euro, min_cutoff: 1.0, beta: 0.5, d_cutoff: 1.0}
+      pad.X:
+        range: bipolar               # min / centre / max -> -1 / 0 / 1
+        min: -32768
+        centre: 0
+        max: 32767
+        invert: true
+        rate_limit: 4.0              # shaped units per second
+      pad.A:
+        button: {mode: toggle, threshold: 0.5}
+    targets:
+      - {fap: open_jaw, source: box.ch0, range: [0, 600]}
+      - {muscle: zygomatic_major_l, source: box.ch0, gain: 0.5}
+      - {head: yaw, source: pad.X, range: [-30, 30]}          # degrees, written as FAP 49 in AU
+      - {expression: joy, source: [pad.A, box.ch0], combine: max}
+
+A channel is shaped in this order: calibrate (clamped to the range) -> invert -> button (toggle /
+momentary: the channel becomes 0 or 1) or dead zone -> curve -> smoothing -> rate limit.
+Curves act on the magnitude (a bipolar channel keeps its sign): ``linear``; ``expo`` with
+``factor`` k in 0..1, ``(1 - k) x + k x^3``; ``gamma``, ``x ** gamma``; ``points``, a
+piecewise-linear curve through ``[[0, y0], ..., [1, yn]]`` (x strictly rising, y never falling).
+Smoothing is ``{type: one_euro, min_cutoff, beta, d_cutoff}`` or ``{type: exponential, tau}``
+(seconds), both driven by the samples' timestamps (``puppet.filters``).
+
+A target takes one source or a list (``combine: sum`` (default), ``max`` -- the largest
+magnitude, sign kept -- or ``last``, the source fed most recently), multiplies by ``gain``
+(default 1), maps the source domain (0..1 or -1..1; a target's sources must agree) linearly onto
+``range`` and clamps to it (so a bipolar source's centre lands midway: give it a symmetric range,
+``[-200, 200]``, for a face at rest when the control is). ``range`` is required for ``fap``,
+``head``, ``eyes``, ``eye_l`` and ``eye_r``: degrees for the rotations, written as FAPs 48-50 /
+23-26 in AU with each FAP's own positive direction (pitch down, yaw toward the face's left, roll
+toward its right). Muscles default to [0, 1] (any ``[a-z_0-9]+`` name, passed through as a
+contraction), visemes (blend) and expressions (intensity) to [0, 63]. Targets that write the same
+FAP or muscle add up. One source may feed any number of targets.
+
+Per-device ``options`` are folded into the device URL's query, so ``Mapping.devices`` is just
+{name: URL}. Before its first sample a channel reads 0 (the face at rest). ``pose(t_ns)`` carries
+smoothing and rate limits on to ``t_ns`` with each input held, without keeping anything: devices
+that only report changes (MIDI, HID) still settle between their messages.
+
+Visemes and expressions become the Pose's FAP 1 / FAP 2 fields: the strongest viseme is
+``(select, 0, blend)`` (blended against viseme 0, none), the two strongest expressions are
+``(select1, intensity1, select2, intensity2)``; any weaker ones are expanded into low-level FAPs
+and added to ``Pose.fap``, so the face changes continuously when the order of strengths changes.
+
+Loading is ``yaml.safe_load`` (nothing in a mapping is executed as code) and the whole file is
+checked before a device opens; every problem is reported with the file, line, key path
+(``targets[3].fap``), what was expected and, for names, the closest valid one.
+``mappings/schema.json`` says the same for editors (tests keep the two in step); what a schema
+cannot say (min < centre < max, monotonic points, sources naming declared channels) is checked
+here.
+
+``feed(sample)`` shapes the sample's channels at once (plain Python floats, no per-sample dict or
+YAML walking beyond the sample's own values); ``pose()`` combines the targets into a ``Pose``.
+"""
+
+from __future__ import annotations
+
+import bisect
+import difflib
+import math
+import os
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from urllib.parse import parse_qsl, urlencode, urlsplit
+
+import numpy as np
+import yaml
+
+from .face import AU
+from .faptable import N_FAPS, faps
+from .filters import Exponential, OneEuro, RateLimit
+
+# -- the format -------------------------------------------------------------------------------
+
+ROOT_KEYS = ("devices", "channels", "targets", "description")
+DEVICE_KEYS = ("url", "options", "description")
+CHANNEL_KEYS = ("range", "min", "centre", "max", "invert", "dead_zone", "curve", "smoothing",
+                "rate_limit", "button", "description")
+CURVE_KEYS = {"linear": (), "expo": ("factor",), "gamma": ("gamma",), "points": ("points",)}
+SMOOTHING_KEYS = {"one_euro": ("min_cutoff", "beta", "d_cutoff"), "exponential": ("tau",)}
+ONE_EURO_DEFAULTS = {"min_cutoff": 1.0, "beta": 0.0, "d_cutoff": 1.0}
+BUTTON_KEYS = ("mode", "threshold", "release")
+BUTTON_MODES = ("toggle", "momentary")
+RANGES = ("unipolar", "bipolar")
+TARGET_KINDS = ("fap", "muscle", "viseme", "expression", "head", "eyes", "eye_l", "eye_r")
+TARGET_KEYS = TARGET_KINDS + ("source", "combine", "range", "gain", "description")
+COMBINE_MODES = ("sum", "max", "last")
+EXPRESSIONS = {"joy": 1, "sadness": 2, "anger": 3, "fear": 4, "disgust": 5, "surprise": 6}
+VISEMES = range(1, 15)
+HEAD_AXES = {"pitch": (48,), "yaw": (49,), "roll": (50,)}
+EYE_AXES = {"eyes": {"yaw": (23, 24), "pitch": (25, 26)},
+            "eye_l": {"yaw": (23,), "pitch": (25,)},
+            "eye_r": {"yaw": (24,), "pitch": (26,)}}
+DEFAULT_RANGES = {"muscle": (0.0, 1.0), "viseme": (0.0, 63.0), "expression": (0.0, 63.0)}
+NEEDS_RANGE = ("fap", "head", "eyes", "eye_l", "eye_r")
+
+DEVICE_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_-]*\Z")
+SOURCE = re.compile(r"([A-Za-z_][A-Za-z0-9_-]*)\.(\S+)\Z")
+MUSCLE = re.compile(r"[a-z_0-9]+\Z")
+URL = re.compile(r"[A-Za-z][A-Za-z0-9+.-]*://")
+DEG_TO_AU = math.pi / 180.0 / AU
+
+
+def fap_names() -> list[str]:
+    """Names a ``fap:`` target accepts (FAPs 3-68: FAP 1 and 2 are the viseme / expression targets)."""
+    return [f.name for f in faps() if f.number > 2]
+
+
+# -- errors -----------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Problem:
+    """One thing wrong in a mapping: where (key path, line) and what."""
+
+    path: str
+    line: int | None
+    message: str
+
+
+class MappingError(ValueError):
+    """A mapping that cannot be used; ``problems`` lists everything wrong, each on its own line."""
+
+    def __init__(self, file: str, problems: list[Problem]) -> None:
+        self.file, self.problems = file, list(problems)
+        super().__init__(str(self))
+
+    def __str__(self) -> str:
+        lines = []
+        for p in self.problems:
+            where = f"{self.file}:{p.line}" if p.line else self.file
+            lines.append(f"{where}: {p.path}: {p.message}" if p.path else f"{where}: {p.message}")
+        return "\n".join(lines)
+
+
+# -- loading ----------------------------------------------------------------------------------
+
+def load_mapping(path: str | os.PathLike) -> Mapping:
+    """Read, check and compile a mapping file; ``MappingError`` lists every problem."""
+    file = str(path)
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise MappingError(file, [Problem("", None, f"cannot read the mapping: {exc}")]) from None
+    return parse_mapping(text, file)
+
+
+def parse_mapping(text: str, file: str = "<mapping>") -> Mapping:
+    """A mapping from YAML text (``file`` names it in errors)."""
+    try:
+        lines, duplicates = _lines(text)
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None) or getattr(exc, "context_mark", None)
+        what = " ".join(filter(None, (getattr(exc, "context", None), getattr(exc, "problem", None)))) or str(exc)
+        kind = "YAML syntax error"
+        if isinstance(exc, yaml.constructor.ConstructorError):  # a !!python/... tag, say
+            kind, what = "unsupported YAML", f"{what}; expected plain data (mappings, lists, strings, numbers)"
+        at = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
+        raise MappingError(file, [Problem("", mark.line + 1 if mark else None, f"{kind}{at}: {what}")]) from None
+    except RecursionError:
+        raise MappingError(file, [Problem("", None, "the YAML is nested too deeply")]) from None
+    return Mapping.from_data(data, file, lines=lines, duplicates=duplicates)
+
+
+def _lines(text: str) -> tuple[dict[tuple, int], list[Problem]]:
+    """Line of every key path (from the composed YAML nodes) and the keys written twice."""
+    root = yaml.compose(text, Loader=yaml.SafeLoader)
+    lines: dict[tuple, int] = {}
+    duplicates: list[Problem] = []
+    seen: set[int] = set()
+
+    def walk(node, path: tuple, line: int) -> None:
+        lines.setdefault(path, line)
+        if id(node) in seen:  # an alias: walked once (no blow-up on nested aliases)
+            return
+        seen.add(id(node))
+        if isinstance(node, yaml.MappingNode):
+            first: dict[str, int] = {}
+            for key, value in node.value:
+                name = key.value if isinstance(key, yaml.ScalarNode) else None
+                key_line = key.start_mark.line + 1
+                if name is not None and name != "<<" and name in first:
+                    duplicates.append(Problem(_format_path(path + (name,)), key_line,
+                                              f"duplicate key {name!r} (first on line {first[name]}): "
+                                              f"expected each key once"))
+                elif name is not None:
+                    first[name] = key_line
+                walk(value, path + (name,), key_line)
+        elif isinstance(node, yaml.SequenceNode):
+            for i, item in enumerate(node.value):
+                walk(item, path + (i,), item.start_mark.line + 1)
+
+    if root is not None:
+        walk(root, (), root.start_mark.line + 1)
+    return lines, duplicates
+
+
+def _format_path(path: tuple) -> str:
+    out = ""
+    for part in path:
+        if isinstance(part, int):
+            out += f"[{part}]"
+        elif isinstance(part, str) and re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", part):
+            out += f".{part}" if out else part
+        else:
+            out += f'["{part}"]'
+    return out
+
+
+def _got(value) -> str:
+    if value is None:
+        return "nothing"
+    if isinstance(value, bool):
+        return f"{str(value).lower()} (a boolean)"
+    if isinstance(value, dict):
+        return "a mapping" if value else "an empty mapping"
+    if isinstance(value, list):
+        text = repr(value)
+        return text if len(text) <= 40 else f"a list of {len(value)} items"
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def _closest(word, choices) -> str:
+    if not isinstance(word, str):
+        return ""
+    close = difflib.get_close_matches(word, list(choices), n=1, cutoff=0.5)
+    if not close:
+        close = difflib.get_close_matches(word.lower(), [c.lower() for c in choices], n=1, cutoff=0.5)
+        close = [c for c in choices if c.lower() in close]
+    return f"; did you mean {close[0]!r}?" if close else ""
+
+
+def _is_number(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+# -- checking ---------------------------------------------------------------------------------
+
+@dataclass
+class _ChannelSpec:
+    name: str
+    device: str
+    channel: str
+    bipolar: bool
+    low: float
+    centre: float
+    high: float
+    invert: bool = False
+    dead_zone: float = 0.0
+    curve: tuple | None = None          # ("expo", k) | ("gamma", g) | ("points", xs, ys)
+    smoothing: tuple | None = None      # ("one_euro", min_cutoff, beta, d_cutoff) | ("exponential", tau)
+    rate_limit: float | None = None
+    button: tuple | None = None         # (mode, threshold, release)
+
+
+@dataclass
+class _TargetSpec:
+    kind: str
+    key: object                          # FAP number, muscle name, viseme / expression number, axis
+    sources: list[str]
+    combine: str = "sum"
+    range: tuple[float, float] | None = None
+    gain: float = 1.0
+
+
+class _Checker:
+    """Walks the loaded document once, collecting every problem with its path and line."""
+
+    def __init__(self, data, lines: dict[tuple, int] | None) -> None:
+        self.lines = lines or {}
+        self.problems: list[Problem] = []
+        # the declared names, even where their own entries have problems (so that a bad channel
+        # is reported once, not again at every source that names it)
+        top = data if isinstance(data, dict) else {}
+        self.declared_devices = top.get("devices") if isinstance(top.get("devices"), dict) else {}
+        self.declared_channels = top.get("channels") if isinstance(top.get("channels"), dict) else {}
+
+    def error(self, path: tuple, message: str) -> None:
+        line, p = None, path
+        while line is None:
+            line = self.lines.get(p)
+            if not p:
+                break
+            p = p[:-1]
+        self.problems.append(Problem(_format_path(path), line, message))
+
+    def expect(self, path: tuple, expected: str, value, hint: str = "") -> None:
+        self.error(path, f"expected {expected}, got {_got(value)}{hint}")
+
+    # -- small pieces ------------------------------------------------------------------------
+
+    def mapping(self, path: tuple, value, allowed, what: str, required=()) -> dict | None:
+        """``value`` as a dict with string keys among ``allowed``; None if it is no mapping."""
+        if not isinstance(value, dict):
+            self.expect(path, f"a mapping ({what})", value)
+            return None
+        for key in value:
+            if not isinstance(key, str):
+                self.expect(path + (key,), f"a key among {', '.join(allowed)}", key)
+            elif key not in allowed:
+                self.error(path + (key,), f"unknown key {key!r} in {what}: expected one of "
+                                          f"{', '.join(allowed)}{_closest(key, allowed)}")
+        for key in required:
+            if key not in value:
+                self.error(path, f"missing key {key!r}: {what} needs {', '.join(required)}")
+        return value
+
+    def number(self, path: tuple, value, low=None, high=None, low_open=False, high_open=False,
+               expected: str | None = None) -> float | None:
+        ok = _is_number(value) and math.isfinite(value)
+        if ok and low is not None:
+            ok = value > low if low_open else value >= low
+        if ok and high is not None:
+            ok = value < high if high_open else value <= high
+        if not ok:
+            if expected is None:
+                expected = "a number"
+                if low is not None and high is not None:
+                    expected += f" from {low} to {high}" + (" (exclusive)" if low_open or high_open else "")
+                elif low is not None:
+                    expected = f"a number {'>' if low_open else '>='} {low}"
+            self.expect(path, expected, value)
+            return None
+        return float(value)
+
+    def choice(self, path: tuple, value, choices, what: str):
+        if isinstance(value, str) and value in choices:
+            return value
+        self.expect(path, f"{what}: one of {', '.join(map(str, choices))}", value, _closest(value, choices))
+        return None
+
+    def string(self, path: tuple, value) -> str | None:
+        if isinstance(value, str):
+            return value
+        self.expect(path, "a string", value)
+        return None
+
+    # -- the document ------------------------------------------------------------------------
+
+    def root(self, data) -> tuple[dict, dict, list] | None:
+        if not isinstance(data, dict):
+            self.expect((), "a mapping with the keys devices, channels and targets at the top of the file", data)
+            return None
+        self.mapping((), data, ROOT_KEYS, "a mapping file", required=("devices", "channels", "targets"))
+        if "description" in data:
+            self.string(("description",), data["description"])
+        devices = self.devices(data["devices"]) if "devices" in data else {}
+        channels = self.channels(data["channels"]) if "channels" in data else {}
+        targets = self.targets(data["targets"], channels) if "targets" in data else []
+        return devices, channels, targets
+
+    def devices(self, value) -> dict[str, str]:
+        path = ("devices",)
+        if not isinstance(value, dict) or not value:
+            self.expect(path, "a mapping of device name -> {url: ...} with at least one device", value)
+            return {}
+        out = {}
+        for name, spec in value.items():
+            where = path + (name,)
+            if not isinstance(name, str) or not DEVICE_NAME.match(name):
+                self.expect(where, "a device name of letters, digits, '_' and '-' (no dots)", name)
+                continue
+            spec = self.mapping(where, spec, DEVICE_KEYS, f"device {name!r}", required=("url",))
+            if spec is None:
+                continue
+            if "description" in spec:
+                self.string(where + ("description",), spec["description"])
+            url = spec.get("url")
+            if "url" in spec and not (isinstance(url, str) and URL.match(url)):
+                self.expect(where + ("url",), "a device URL scheme://..., e.g. 'serial:///dev/ttyACM0'", url)
+                url = None
+            options = spec.get("options", {})
+            if not isinstance(options, dict):
+                self.expect(where + ("options",), "a mapping of option -> string, number or boolean", options)
+                options = {}
+            for key, option in options.items():
+                if not isinstance(key, str) or not (isinstance(option, (str, int, float))):
+                    self.expect(where + ("options", key), "an option name with a string, number or boolean", option)
+            if url is not None:
+                out[name] = self.url_with_options(where, url, options)
+        return out
+
+    def url_with_options(self, where: tuple, url: str, options: dict) -> str:
+        """The URL with ``options`` folded into its query (an option given twice is an error)."""
+        if not options:
+            return url
+        parts = urlsplit(url)
+        query = dict(parse_qsl(parts.query))
+        extra = []
+        for key, value in options.items():
+            if key in query:
+                self.error(where + ("options", key), f"option {key!r} is also in the url: expected it once")
+                continue
+            extra.append((key, str(value).lower() if isinstance(value, bool) else str(value)))
+        if not extra:
+            return url
+        base, _, fragment = url.partition("#")
+        return base + ("&" if parts.query else "?") + urlencode(extra) + ("#" + fragment if fragment else "")
+
+    def channels(self, value) -> dict[str, _ChannelSpec]:
+        path = ("channels",)
+        if not isinstance(value, dict):
+            self.expect(path, "a mapping of device.channel -> channel options", value)
+            return {}
+        out = {}
+        for name, spec in value.items():
+            where = path + (name,)
+            m = SOURCE.match(name) if isinstance(name, str) else None
+            if m is None:
+                self.expect(where, "a channel named device.channel (e.g. box.ch0)", name)
+                continue
+            if m.group(1) not in self.declared_devices:
+                self.error(where, f"device {m.group(1)!r} is not defined: expected one of the devices "
+                                  f"({', '.join(map(str, self.declared_devices))})"
+                                  f"{_closest(m.group(1), self.declared_devices)}")
+            parsed = self.channel(where, name, m.group(1), m.group(2), {} if spec is None else spec)
+            if parsed is not None:
+                out[name] = parsed
+        return out
+
+    def channel(self, where: tuple, name: str, device: str, channel: str, spec) -> _ChannelSpec | None:
+        spec = self.mapping(where, spec, CHANNEL_KEYS, f"channel {name!r}")
+        if spec is None:
+            return None
+        before = len(self.problems)
+        polarity = spec.get("range", "unipolar")
+        if "range" in spec:
+            polarity = self.choice(where + ("range",), polarity, RANGES, "a channel range")
+        bipolar = polarity == "bipolar"
+        low = self.number(where + ("min",), spec["min"]) if "min" in spec else (-1.0 if bipolar else 0.0)
+        high = self.number(where + ("max",), spec["max"]) if "max" in spec else 1.0
+        centre = None
+        if "centre" in spec:
+            centre = self.number(where + ("centre",), spec["centre"])
+            if polarity == "unipolar":
+                self.error(where + ("centre",), "centre applies to a bipolar channel: expected range: bipolar "
+                                                "with centre, or no centre")
+        if low is not None and high is not None:
+            if not low < high:
+                self.error(where + ("max",), f"expected max greater than min ({low:g}), got {high:g} "
+                                             f"(use invert: true for a reversed control)")
+            elif centre is not None and bipolar and not low < centre < high:
+                self.error(where + ("centre",), f"expected centre between min ({low:g}) and max ({high:g}), "
+                                                f"got {centre:g}")
+        invert = spec.get("invert", False)
+        if not isinstance(invert, bool):
+            self.expect(where + ("invert",), "true or false", invert)
+        dead = 0.0
+        if "dead_zone" in spec:
+            dead = self.number(where + ("dead_zone",), spec["dead_zone"], 0.0, 1.0, high_open=True,
+                               expected="a number from 0 to 1 (excluding 1): the fraction of the "
+                                        "calibrated range that reads 0")
+        curve = self.curve(where + ("curve",), spec["curve"], bipolar) if "curve" in spec else None
+        smoothing = self.smoothing(where + ("smoothing",), spec["smoothing"]) if "smoothing" in spec else None
+        rate = None
+        if "rate_limit" in spec:
+            rate = self.number(where + ("rate_limit",), spec["rate_limit"], 0.0, low_open=True,
+                               expected="a number > 0 (units per second)")
+        button = self.button(where + ("button",), spec["button"]) if "button" in spec else None
+        if "button" in spec:
+            for key in ("dead_zone", "curve"):
+                if key in spec:
+                    self.error(where + (key,), f"a button channel is 0 or 1: expected no {key} with button")
+        if "description" in spec:
+            self.string(where + ("description",), spec["description"])
+        if len(self.problems) > before:
+            return None
+        if centre is None:
+            centre = (low + high) / 2
+        return _ChannelSpec(name, device, channel, bipolar, low, centre, high, invert, dead, curve,
+                            smoothing, rate, button)
+
+    def curve(self, where: tuple, value, bipolar: bool) -> tuple | None:
+        kind = value.get("type") if isinstance(value, dict) else None
+        if not isinstance(value, dict):
+            self.expect(where, f"a mapping with a type ({', '.join(CURVE_KEYS)})", value)
+            return None
+        if "type" not in value:
+            self.error(where, f"missing key 'type': expected a curve type, one of {', '.join(CURVE_KEYS)}")
+            return None
+        if self.choice(where + ("type",), kind, CURVE_KEYS, "a curve type") is None:
+            return None
+        keys = ("type",) + CURVE_KEYS[kind]
+        if self.mapping(where, value, keys, f"a {kind} curve", required=keys) is None:
+            return None
+        if kind == "linear":
+            return None
+        if kind == "expo":
+            k = self.number(where + ("factor",), value.get("factor"), 0.0, 1.0,
+                            expected="a number from 0 (linear) to 1 (cubic)") if "factor" in value else None
+            return None if k is None else ("expo", k)
+        if kind == "gamma":
+            g = self.number(where + ("gamma",), value.get("gamma"), 0.0, low_open=True) if "gamma" in value else None
+            return None if g is None else ("gamma", g)
+        return self.points(where + ("points",), value.get("points"), bipolar) if "points" in value else None
+
+    def points(self, where: tuple, value, bipolar: bool) -> tuple | None:
+        expected = "a list of at least two [x, y] pairs, each number from 0 to 1"
+        if not isinstance(value, list) or len(value) < 2:
+            self.expect(where, expected, value)
+            return None
+        xs, ys = [], []
+        for i, pair in enumerate(value):
+            if not (isinstance(pair, list) and len(pair) == 2
+                    and all(_is_number(v) and math.isfinite(v) and 0 <= v <= 1 for v in pair)):
+                self.expect(where + (i,), "an [x, y] pair of numbers from 0 to 1", pair)
+                return None
+            xs.append(float(pair[0]))
+            ys.append(float(pair[1]))
+        if xs[0] != 0.0 or xs[-1] != 1.0:
+            self.error(where, f"expected the points to run from x = 0 to x = 1, got x from {xs[0]:g} to {xs[-1]:g}")
+            return None
+        for i in range(1, len(xs)):
+            if not xs[i] > xs[i - 1]:
+                self.error(where + (i,), f"expected x strictly rising (a monotonic curve), got x = {xs[i]:g} "
+                                         f"after x = {xs[i - 1]:g}")
+                return None
+            if ys[i] < ys[i - 1]:
+                self.error(where + (i,), f"expected y never falling (a monotonic curve), got y = {ys[i]:g} "
+                                         f"after y = {ys[i - 1]:g}")
+                return None
+        if bipolar and ys[0] != 0.0:
+            self.error(where + (0,), f"expected [0, 0] first on a bipolar channel (the curve acts on the "
+                                     f"magnitude, so the centre must stay 0), got [0, {ys[0]:g}]")
+            return None
+        return ("points", tuple(xs), tuple(ys))
+
+    def smoothing(self, where: tuple, value) -> tuple | None:
+        if not isinstance(value, dict):
+            self.expect(where, f"a mapping with a type ({', '.join(SMOOTHING_KEYS)})", value)
+            return None
+        if "type" not in value:
+            self.error(where, f"missing key 'type': expected a smoothing type, one of {', '.join(SMOOTHING_KEYS)}")
+            return None
+        kind = self.choice(where + ("type",), value["type"], SMOOTHING_KEYS, "a smoothing type")
+        if kind is None:
+            return None
+        keys = ("type",) + SMOOTHING_KEYS[kind]
+        required = ("type", "tau") if kind == "exponential" else ("type",)
+        if self.mapping(where, value, keys, f"{kind} smoothing", required=required) is None:
+            return None
+        if kind == "exponential":
+            tau = self.number(where + ("tau",), value["tau"], 0.0, low_open=True,
+                              expected="a time constant in seconds > 0") if "tau" in value else None
+            return None if tau is None else ("exponential", tau)
+        params = []
+        for key in SMOOTHING_KEYS["one_euro"]:
+            v = value.get(key, ONE_EURO_DEFAULTS[key])
+            params.append(self.number(where + (key,), v, 0.0, low_open=key != "beta",
+                                      expected="a number >= 0" if key == "beta" else "a frequency in Hz > 0"))
+        return None if None in params else ("one_euro", *params)
+
+    def button(self, where: tuple, value) -> tuple | None:
+        spec = self.mapping(where, value, BUTTON_KEYS, "a button", required=("mode",))
+        if spec is None or "mode" not in spec:
+            return None
+        mode = self.choice(where + ("mode",), spec["mode"], BUTTON_MODES, "a button mode")
+        threshold = self.number(where + ("threshold",), spec.get("threshold", 0.5))
+        release = self.number(where + ("release",), spec["release"]) if "release" in spec else threshold
+        if threshold is not None and release is not None and release > threshold:
+            self.error(where + ("release",), f"expected release <= threshold ({threshold:g}), got {release:g}")
+            return None
+        if None in (mode, threshold, release):
+            return None
+        return (mode, threshold, release)
+
+    def targets(self, value, channels: dict) -> list[_TargetSpec]:
+        path = ("targets",)
+        if not isinstance(value, list) or not value:
+            self.expect(path, "a list of targets (at least one)", value)
+            return []
+        out = []
+        for i, spec in enumerate(value):
+            target = self.target(path + (i,), spec, channels)
+            if target is not None:
+                out.append(target)
+        return out
+
+    def target(self, where: tuple, spec, channels: dict) -> _TargetSpec | None:
+        spec = self.mapping(where, spec, TARGET_KEYS, "a target")
+        if spec is None:
+            return None
+        before = len(self.problems)
+        kinds = [k for k in TARGET_KINDS if k in spec]
+        if len(kinds) != 1:
+            got = f"{' and '.join(kinds)}" if kinds else "none"
+            self.error(where, f"expected exactly one of {', '.join(TARGET_KINDS)} in a target, got {got}")
+            kind, key = None, None
+        else:
+            kind = kinds[0]
+            key = self.target_key(where + (kind,), kind, spec[kind])
+        sources = self.sources(where + ("source",), spec.get("source"), channels) if "source" in spec else None
+        if "source" not in spec:
+            self.error(where, "missing key 'source': expected a source device.channel or a list of them")
+        combine = self.choice(where + ("combine",), spec["combine"], COMBINE_MODES, "a combine mode") \
+            if "combine" in spec else "sum"
+        gain = self.number(where + ("gain",), spec["gain"]) if "gain" in spec else 1.0
+        rng = None
+        if "range" in spec:
+            r = spec["range"]
+            if isinstance(r, list) and len(r) == 2 and all(_is_number(v) and math.isfinite(v) for v in r):
+                rng = (float(r[0]), float(r[1]))
+            else:
+                self.expect(where + ("range",), "two numbers [low, high]" + (
+                    " in degrees" if kind in NEEDS_RANGE[1:] else " in FAPU units" if kind == "fap" else ""), r)
+        elif kind in NEEDS_RANGE:
+            unit = "degrees" if kind != "fap" else "FAPU units"
+            self.error(where, f"missing key 'range': expected range: [low, high] in {unit} for a {kind}: target")
+        if "description" in spec:
+            self.string(where + ("description",), spec["description"])
+        if sources:
+            polarities = {channels[s].bipolar for s in sources}
+            if len(polarities) > 1:
+                self.error(where + ("source",), "expected sources that are all bipolar or all unipolar, got "
+                           + ", ".join(f"{s} ({'bipolar' if channels[s].bipolar else 'unipolar'})" for s in sources))
+        if len(self.problems) > before or kind is None or key is None or not sources:
+            return None
+        return _TargetSpec(kind, key, sources, combine, rng or DEFAULT_RANGES.get(kind), gain)
+
+    def target_key(self, where: tuple, kind: str, value):
+        if isinstance(value, float) and value.is_integer():  # 3.0 is the number 3, as in JSON
+            value = int(value)
+        if kind == "fap":
+            names = fap_names()
+            if isinstance(value, int) and not isinstance(value, bool):
+                if 3 <= value <= N_FAPS:
+                    return value
+                if value in (1, 2):
+                    self.error(where, f"FAP {value} is not a value: expected a FAP 3-68, and a "
+                                      f"{'viseme' if value == 1 else 'expression'}: target for FAP {value}")
+                    return None
+            elif isinstance(value, str):
+                if value in names:
+                    return names.index(value) + 3
+                if value in ("viseme", "expression"):
+                    self.error(where, f"FAP {value!r} is not a value: expected a FAP 3-68, and a {value}: target")
+                    return None
+            self.expect(where, "a FAP name or number 3-68", value, _closest(value, names))
+            return None
+        if kind == "muscle":
+            if isinstance(value, str) and MUSCLE.match(value):
+                return value
+            self.expect(where, "a muscle name of lower-case letters, digits and '_'", value)
+            return None
+        if kind == "viseme":
+            if isinstance(value, int) and not isinstance(value, bool) and value in VISEMES:
+                return value
+            self.expect(where, "a viseme number 1-14", value)
+            return None
+        if kind == "expression":
+            if isinstance(value, int) and not isinstance(value, bool) and 1 <= value <= 6:
+                return value
+            if isinstance(value, str) and value in EXPRESSIONS:
+                return EXPRESSIONS[value]
+            self.expect(where, f"an expression number 1-6 or name ({', '.join(EXPRESSIONS)})", value,
+                        _closest(value, EXPRESSIONS))
+            return None
+        axes = HEAD_AXES if kind == "head" else EYE_AXES[kind]
+        return self.choice(where, value, axes, f"a {kind} axis")
+
+    def sources(self, where: tuple, value, channels: dict) -> list[str] | None:
+        items = [value] if isinstance(value, str) else value
+        if not isinstance(items, list) or not items:
+            self.expect(where, "a source device.channel or a list of them", value)
+            return None
+        out = []
+        for i, source in enumerate(items):
+            at = where if isinstance(value, str) else where + (i,)
+            m = SOURCE.match(source) if isinstance(source, str) else None
+            if m is None:
+                self.expect(at, "a source named device.channel (e.g. box.ch0)", source)
+            elif m.group(1) not in self.declared_devices:
+                self.error(at, f"source {source!r} names device {m.group(1)!r}, which is not defined: expected "
+                               f"one of the devices ({', '.join(map(str, self.declared_devices))})"
+                               f"{_closest(m.group(1), self.declared_devices)}")
+            elif source not in channels:
+                if source not in self.declared_channels:
+                    self.error(at, f"source {source!r} is not a channel of the mapping: expected one of "
+                                   f"the channels{_closest(source, self.declared_channels)} (add it under channels)")
+            else:
+                out.append(source)
+        return out if len(out) == len(items) else None
+
+
+def _check(data, file: str, lines=None, duplicates=()) -> tuple[dict, dict, list]:
+    checker = _Checker(data, lines)
+    checker.problems.extend(duplicates)
+    result = checker.root(data)
+    if checker.problems:
+        checker.problems.sort(key=lambda p: (p.line or 0))
+        raise MappingError(file, checker.problems)
+    return result
+
+
+# -- the compiled mapping ---------------------------------------------------------------------
+
+@dataclass
+class Pose:
+    """One frame for the face: 68 FAP values (FAPU; index 0 = FAP 1, FAP 1 and 2 left 0), FAP 1 and
+    FAP 2 as ``viseme`` (select1, select2, blend) and ``expression`` (select1, intensity1,
+    select2, intensity2), and muscle contractions 0..1 by name. ``Runtime.pose(pose.fap,
+    viseme=pose.viseme, expression=pose.expression)`` draws it."""
+
+    fap: np.ndarray
+    viseme: tuple | None = None
+    expression: tuple | None = None
+    muscles: dict[str, float] = field(default_factory=dict)
+    t_ns: int | None = None
+
+
+@dataclass(frozen=True)
+class ChannelState:
+    """What a monitor shows for one channel: the last raw value (None before any), the shaped
+    value, and the targets it drives."""
+
+    name: str
+    raw: float | None
+    value: float
+    targets: tuple[str, ...]
+
+
+def _curve_function(curve: tuple | None):
+    """The curve as a function of the magnitude 0..1 (None for linear)."""
+    if curve is None:
+        return None
+    if curve[0] == "expo":
+        k = curve[1]
+        return lambda m: m * ((1.0 - k) + k * m * m)
+    if curve[0] == "gamma":
+        g = curve[1]
+        return lambda m: m ** g
+    xs, ys = curve[1], curve[2]
+    last = len(xs) - 2
+
+    def points(m: float) -> float:
+        i = bisect.bisect_right(xs, m) - 1
+        i = 0 if i < 0 else last if i > last else i
+        t = (m - xs[i]) / (xs[i + 1] - xs[i])   # each step is monotonic in m, however close the xs
+        y = ys[i] + t * (ys[i + 1] - ys[i])
+        return ys[i] if y < ys[i] else ys[i + 1] if y > ys[i + 1] else y
+
+    return points
+
+
+class _Channel:
+    """One source channel, shaped in place on every sample (plain floats, no allocation)."""
+
+    __slots__ = ("name", "bipolar", "low", "centre", "k", "k_low", "k_high", "invert", "dead",
+                 "curve", "button", "threshold", "release", "pressed", "latched", "smoother",
+                 "limiter", "timed", "raw", "pre", "value", "out", "t_ns", "seq", "targets")
+
+    def __init__(self, spec: _ChannelSpec) -> None:
+        self.name = spec.name
+        self.bipolar = spec.bipolar
+        self.low, self.centre = spec.low, spec.centre
+        self.k = 1.0 / (spec.high - spec.low)
+        self.k_low = 1.0 / (spec.centre - spec.low)
+        self.k_high = 1.0 / (spec.high - spec.centre)
+        self.invert = spec.invert
+        self.dead = spec.dead_zone
+        self.curve = _curve_function(spec.curve)
+        self.button = spec.button[0] if spec.button else None
+        self.threshold, self.release = (spec.button[1], spec.button[2]) if spec.button else (0.0, 0.0)
+        if spec.smoothing is None:
+            self.smoother = None
+        elif spec.smoothing[0] == "one_euro":
+            self.smoother = OneEuro(*spec.smoothing[1:])
+        else:
+            self.smoother = Exponential(spec.smoothing[1])
+        self.limiter = RateLimit(spec.rate_limit) if spec.rate_limit else None
+        self.timed = self.smoother is not None or self.limiter is not None
+        self.targets: list[str] = []
+        self.reset()
+
+    def reset(self) -> None:
+        self.raw = None
+        self.pre = self.value = self.out = 0.0
+        self.t_ns = None
+        self.seq = -1
+        self.pressed = self.latched = False
+        for f in (self.smoother, self.limiter):
+            if f is not None:
+                f.reset()
+
+    def update(self, raw: float, t_ns: int, seq: int) -> None:
+        self.raw = raw
+        if self.bipolar:
+            d = raw - self.centre
+            x = d * self.k_high if d >= 0.0 else d * self.k_low
+            x = 1.0 if x > 1.0 else -1.0 if x < -1.0 else x
+            if self.invert:
+                x = -x
+        else:
+            x = (raw - self.low) * self.k
+            x = 1.0 if x > 1.0 else 0.0 if x < 0.0 else x
+            if self.invert:
+                x = 1.0 - x
+        if self.button is not None:
+            if self.pressed:
+                if x < self.release:
+                    self.pressed = False
+            elif x >= self.threshold:
+                self.pressed = True
+                self.latched = not self.latched
+            x = 1.0 if (self.latched if self.button == "toggle" else self.pressed) else 0.0
+        else:
+            m = -x if x < 0.0 else x
+            if self.dead:
+                m = 0.0 if m <= self.dead else (m - self.dead) / (1.0 - self.dead)
+            if self.curve is not None:
+                m = self.curve(m)
+            x = -m if x < 0.0 else m
+        self.pre = x
+        if self.smoother is not None:
+            x = self.smoother.step(x, t_ns)
+        if self.limiter is not None:
+            x = self.limiter.step(x, t_ns)
+        self.value = self.out = x
+        self.t_ns = t_ns
+        self.seq = seq
+
+    def preview(self, t_ns: int) -> float:
+        """The value a sample repeating the last input at ``t_ns`` would give (nothing is kept)."""
+        x = self.pre
+        if self.smoother is not None:
+            x = self.smoother.peek(x, t_ns)
+        if self.limiter is not None:
+            x = self.limiter.peek(x, t_ns)
+        return x
+
+
+_SUM, _MAX, _LAST = 0, 1, 2
+
+
+class _Target:
+    """One target compiled: its sources, the affine map from their domain onto the range, a clamp."""
+
+    __slots__ = ("kind", "key", "slots", "sources", "mode", "gain", "x0", "scale", "low", "cmin", "cmax",
+                 "label")
+
+    def __init__(self, spec: _TargetSpec, sources: list[_Channel], bipolar: bool) -> None:
+        self.kind, self.key = spec.kind, spec.key
+        self.sources = tuple(sources)
+        self.mode = (_SUM, _MAX, _LAST)[COMBINE_MODES.index(spec.combine)]
+        self.gain = spec.gain
+        low, high = spec.range
+        if spec.kind in ("head", "eyes", "eye_l", "eye_r"):
+            low, high = low * DEG_TO_AU, high * DEG_TO_AU
+        if spec.kind == "fap":
+            self.slots = (spec.key - 1,)
+        elif spec.kind == "head":
+            self.slots = tuple(n - 1 for n in HEAD_AXES[spec.key])
+        elif spec.kind in EYE_AXES:
+            self.slots = tuple(n - 1 for n in EYE_AXES[spec.kind][spec.key])
+        else:
+            self.slots = ()
+        self.x0 = -1.0 if bipolar else 0.0
+        self.scale = (high - low) / (1.0 - self.x0)
+        self.low = low
+        self.cmin, self.cmax = min(low, high), max(low, high)
+        if spec.kind == "muscle":
+            self.cmin, self.cmax = max(self.cmin, 0.0), min(self.cmax, 1.0)
+        elif spec.kind in ("viseme", "expression"):
+            self.cmin, self.cmax = max(self.cmin, 0.0), min(self.cmax, 63.0)
+        name = ""
+        if spec.kind == "fap":
+            name = faps()[spec.key - 1].name
+        elif spec.kind == "expression":
+            name = next(k for k, v in EXPRESSIONS.items() if v == spec.key)
+        self.label = f"{spec.kind} {spec.key}" + (f" {name}" if name else "")
+
+    def evaluate(self) -> float:
+        sources = self.sources
+        if len(sources) == 1:
+            x = sources[0].out
+        elif self.mode == _SUM:
+            x = 0.0
+            for s in sources:
+                x += s.out
+        elif self.mode == _MAX:
+            x = 0.0
+            for s in sources:
+                v = s.out
+                if (v if v >= 0.0 else -v) > (x if x >= 0.0 else -x):
+                    x = v
+        else:
+            best = sources[0]
+            for s in sources:
+                if s.seq > best.seq:
+                    best = s
+            x = best.out
+        v = self.low + (self.gain * x - self.x0) * self.scale
+        return self.cmin if v < self.cmin else self.cmax if v > self.cmax else v
+
+
+class Mapping:
+    """A checked, compiled mapping: ``feed`` Samples in, take ``pose()`` out.
+
+    ``devices`` is {name: URL} (per-device options folded into the URL's query) for the session
+    to open; Samples whose ``device`` is one of these names are shaped, others are ignored."""
+
+    def __init__(self, file: str, devices: dict[str, str], channels: dict[str, _ChannelSpec],
+                 targets: list[_TargetSpec], description: str = "") -> None:
+        self.file = file
+        self.description = description
+        self.devices = dict(devices)
+        self.bad_values = 0
+        self._seq = 0
+        self._channels = {name: _Channel(spec) for name, spec in channels.items()}
+        self._by_device: dict[str, dict[str, _Channel]] = {}
+        for spec in channels.values():
+            self._by_device.setdefault(spec.device, {})[spec.channel] = self._channels[spec.name]
+        self._timed = tuple(c for c in self._channels.values() if c.timed)
+        compiled = []
+        for spec in targets:
+            sources = [self._channels[s] for s in spec.sources]
+            target = _Target(spec, sources, sources[0].bipolar)
+            compiled.append(target)
+            for s in sources:
+                if target.label not in s.targets:
+                    s.targets.append(target.label)
+        self._faps = tuple(t for t in compiled if t.slots)
+        self._muscles = tuple(t for t in compiled if t.kind == "muscle")
+        self._visemes = tuple(t for t in compiled if t.kind == "viseme")
+        self._expressions = tuple(t for t in compiled if t.kind == "expression")
+        self._muscle_names = tuple(dict.fromkeys(t.key for t in self._muscles))
+        self._shapes = None
+        if self._visemes or self._expressions:
+            from .fap import high_level_faps
+
+            self._shapes = high_level_faps()
+
+    @classmethod
+    def from_data(cls, data, file: str = "<mapping>", *, lines: dict | None = None,
+                  duplicates=()) -> Mapping:
+        """Check and compile an already-loaded document (a dict as ``yaml.safe_load`` gives)."""
+        devices, channels, targets = _check(data, file, lines, duplicates)
+        return cls(file, devices, channels, targets, data.get("description", ""))
+
+    # -- the hot path --------------------------------------------------------------------------
+
+    def feed(self, sample) -> None:
+        """Shape the channels of one Sample (``t_ns``, ``device``, ``values``); filters use ``t_ns``."""
+        channels = self._by_device.get(sample.device)
+        if channels is None:
+            return
+        t_ns = sample.t_ns
+        for name, raw in sample.values.items():
+            channel = channels.get(name)
+            if channel is None:
+                continue
+            try:
+                raw = float(raw)
+            except (TypeError, ValueError):
+                self.bad_values += 1
+                continue
+            if raw != raw:  # NaN (the cheapest test for it): garbage from the device, skipped
+                self.bad_values += 1
+                continue
+            self._seq += 1
+            channel.update(raw, t_ns, self._seq)
+
+    def pose(self, t_ns: int | None = None) -> Pose:
+        """The Pose for the channels as last fed; with ``t_ns``, smoothing and rate limits are
+        carried on to that time with each input held (without changing the state), so the face
+        settles between the samples of devices that only report changes."""
+        if t_ns is None:
+            for c in self._timed:
+                c.out = c.value
+        else:
+            for c in self._timed:
+                c.out = c.preview(t_ns) if c.t_ns is not None and t_ns > c.t_ns else c.value
+        fap = np.zeros(N_FAPS)
+        for t in self._faps:
+            v = t.evaluate()
+            for i in t.slots:
+                fap[i] += v
+        muscles = dict.fromkeys(self._muscle_names, 0.0)
+        for t in self._muscles:
+            muscles[t.key] += t.evaluate()
+        for name, v in muscles.items():
+            muscles[name] = 0.0 if v < 0.0 else 1.0 if v > 1.0 else v
+        viseme = self._viseme(fap) if self._visemes else None
+        expression = self._expression(fap) if self._expressions else None
+        return Pose(fap, viseme, expression, muscles, t_ns)
+
+    def _strengths(self, targets) -> list[tuple[float, int]]:
+        """(strength 0..63, select) per distinct select, strongest first (ties: target order)."""
+        by_key: dict[int, float] = {}
+        for t in targets:
+            by_key[t.key] = by_key.get(t.key, 0.0) + t.evaluate()
+        order = sorted(by_key.items(), key=lambda kv: -kv[1])
+        return [(min(v, 63.0), k) for k, v in order]
+
+    def _viseme(self, fap: np.ndarray) -> tuple:
+        ranked = self._strengths(self._visemes)
+        w, select = ranked[0]
+        for weaker, other in ranked[1:]:
+            if weaker > 0.0:
+                fap += self._shapes["visemes"][other] * (weaker / 63.0)
+        return (select, 0, w) if w > 0.0 else (0, 0, 0.0)
+
+    def _expression(self, fap: np.ndarray) -> tuple:
+        ranked = self._strengths(self._expressions) + [(0.0, 0)]
+        (i1, s1), (i2, s2) = ranked[0], ranked[1]
+        for weaker, other in ranked[2:]:
+            if weaker > 0.0:
+                fap += self._shapes["expressions"][other] * (weaker / 63.0)
+        return (s1 if i1 > 0 else 0, i1, s2 if i2 > 0 else 0, i2)
+
+    # -- for people --------------------------------------------------------------------------
+
+    def channels(self) -> list[ChannelState]:
+        """Every channel: raw value, shaped value and the targets it drives (for a monitor)."""
+        return [ChannelState(c.name, c.raw, c.value, tuple(c.targets)) for c in self._channels.values()]
+
+    def reset(self) -> None:
+        """Every channel back to rest (no sample seen, filters empty, buttons released)."""
+        for c in self._channels.values():
+            c.reset()
+        self._seq = 0
+
+    def __repr__(self) -> str:
+        return (f"Mapping({self.file!r}: {len(self.devices)} devices, {len(self._channels)} channels, "
+                f"{len(self._faps) + len(self._muscles) + len(self._visemes) + len(self._expressions)} targets)")
