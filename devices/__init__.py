@@ -13,6 +13,8 @@ import importlib
 from .base import Counters, Device, DeviceError, DeviceLost, Sample, State, Url
 
 BACKENDS: dict[str, str] = {
+    "can": "devices.can_device:CanDevice",
+    "hid": "devices.hid_device:HidDevice",
     "midi": "devices.midi_device:MidiDevice",
     "osc": "devices.osc_device:OscDevice",
     "serial": "devices.serial_port:SerialDevice",

@@ -18,7 +18,8 @@ vertices; the ICT face when ``../shared/assets/ict_facekit`` is there) it measur
 A second table splits whole frames (``bench_frame_split``): FAP frame (the demo take, where the
 face has feature points; the smooth take's displacements otherwise) -> control points -> DFFD ->
 normals -> draw -> read-back of a 640x480 offscreen image, with the frames per second and the
-share of the frame spent deforming (controls + DFFD + normals).
+share of the frame spent deforming (controls + DFFD + normals). A third table
+(``puppet.inputbench``) pushes samples through each device adapter and its shipped mapping.
 
 The DFFD path is single-threaded scipy; the baseline's BLAS may use threads, so for one-core
 figures run it pinned: ``OPENBLAS_NUM_THREADS=1 taskset -c 1 puppet bench``.
@@ -40,6 +41,7 @@ import numpy as np
 from . import rigid
 from .autorig import rig_for_face
 from .face import Face, load_face
+from .inputbench import bench_inputs
 from .runtime import Runtime
 from .subdivide import subdivide
 
@@ -212,19 +214,26 @@ def run_bench(frames: int = 300, as_json: bool = False, ict: bool = True) -> int
     rows = [bench_face(face, frames, rig) for face, rig in faces]
     split = [bench_frame_split(face, min(frames, 120), rig) for face, rig in faces
              if face.name in ("default", "ict")]
+    inputs = bench_inputs()
     if as_json:
-        print(json.dumps({"deform": rows, "frames": split}, indent=1))
+        print(json.dumps({"deform": rows, "frames": split, "inputs": inputs}, indent=1))
         return 0
     _table(rows, ("face", "vertices", "control_points", "precompute_s", "load_s", "deform_ms",
                   "deform_normals_ms", "realtime_ms", "dense_ms", "ratio"))
     print()
     _table(split, ("face", "input", "size", "controls_ms", "dffd_ms", "normals_ms", "draw_ms", "read_ms",
                    "fps", "deform_share"))
+    print()
+    _table([r for r in inputs if "error" not in r],
+           ("adapter", "samples_s", "paced_samples_s", "latency_median_ms", "latency_p99_ms", "bad_frames"))
+    for row in inputs:
+        if "error" in row:
+            print(f"{row['adapter']}: not measured ({row['error']})")
     return 0
 
 
 def _table(rows: list[dict], header: tuple[str, ...]) -> None:
-    widths = [max(len(h), 12) for h in header]
+    widths = [max(len(h), 12, *(len(str(r[h])) for r in rows if isinstance(r[h], str))) for h in header]
     print("  ".join(f"{h:>{w}}" for h, w in zip(header, widths)))
     for row in rows:
         print("  ".join(f"{row[h]:>{w}.4g}" if isinstance(row[h], float) else f"{row[h]!s:>{w}}"

@@ -25,9 +25,21 @@ def test_the_benchmark_take_is_smooth():
 
 def test_run_bench_prints_json(capsys, monkeypatch):
     monkeypatch.setattr("puppet.bench.bench_faces", lambda ict: [(load_face(), None)])
+    monkeypatch.setattr("puppet.bench.bench_inputs", lambda: [{"adapter": "x", "samples_s": 1.0}])
     assert run_bench(frames=2, as_json=True, ict=False) == 0
     report = json.loads(capsys.readouterr().out)
     assert report["deform"][0]["face"] == "default"
     frame = report["frames"][0]
     assert frame["input"] == "FAP" and frame["fps"] > 0
     assert 0 < frame["deform_share"] < 1
+
+
+def test_every_adapter_carries_samples_through_its_mapping():
+    from puppet.inputbench import bench_inputs
+
+    rows = bench_inputs(seconds=0.3)
+    assert [r.get("error") for r in rows] == [None] * len(rows)
+    for row in rows:
+        assert row["samples_s"] > 100 and row["paced_samples_s"] > 100, row["adapter"]
+        assert row["bad_frames"] == 0
+        assert 0 < row["latency_median_ms"] <= row["latency_p99_ms"]
