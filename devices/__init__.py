@@ -17,6 +17,7 @@ BACKENDS: dict[str, str] = {
     "hid": "devices.hid_device:HidDevice",
     "midi": "devices.midi_device:MidiDevice",
     "osc": "devices.osc_device:OscDevice",
+    "replay": "devices.samplelog:ReplayDevice",
     "serial": "devices.serial_port:SerialDevice",
     "sim": "devices.simulated_serial:SimulatedSerialDevice",
 }

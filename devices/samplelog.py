@@ -1,0 +1,126 @@
+"""Raw sample logs: every Sample of a take, one JSON object per line, and their replay.
+
+A line is ``{"t_ns": 123456789, "device": "box", "values": {"ch0": 512.0, "ch1": 300.0}}``:
+the Sample exactly (JSON keeps floats to the last bit with ``repr``), one line each, written and
+flushed as they come, so a killed recorder leaves every complete line readable (a last, partial
+line is skipped with a warning). The first line may be a header ``{"facepuppet_samples": 1}``.
+
+``ReplayDevice`` (``replay:///path/to/take.samples.jsonl?speed=1``) plays a log back as a device:
+with the original spacing between samples (``speed`` > 0 scales it) or as fast as the reader
+takes (``speed=0``), stamping each replayed Sample with the time of its replay; ``device=NAME``
+keeps one device's samples.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+import warnings
+from collections.abc import Iterator, Mapping
+from pathlib import Path
+from typing import IO
+
+from .base import Device, DeviceError, Sample, Url
+
+HEADER = {"facepuppet_samples": 1}
+
+
+class SampleLogWriter:
+    """Appends Samples to a log, one flushed line each."""
+
+    def __init__(self, path: str | os.PathLike) -> None:
+        self.path = Path(path)
+        self._file: IO[str] = open(self.path, "w", encoding="utf-8")
+        self._file.write(json.dumps(HEADER) + "\n")
+        self.count = 0
+
+    def write(self, sample: Sample) -> None:
+        line = {"t_ns": sample.t_ns, "device": sample.device, "values": dict(sample.values)}
+        self._file.write(json.dumps(line) + "\n")
+        self._file.flush()
+        self.count += 1
+
+    def close(self) -> None:
+        self._file.close()
+
+    def __enter__(self) -> SampleLogWriter:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def read_sample_log(path: str | os.PathLike) -> Iterator[Sample]:
+    """The Samples of a log, streamed; a bad line names the file and line (a partial last one warns)."""
+    with open(path, encoding="utf-8") as file:
+        lines = iter(enumerate(file, 1))
+        for number, text in lines:
+            try:
+                data = json.loads(text)
+            except json.JSONDecodeError:
+                if next(lines, None) is None and not text.endswith("\n"):
+                    warnings.warn(f"{path}:{number}: the last line is incomplete (the recorder stopped "
+                                  "mid-line); skipped", stacklevel=2)
+                    return
+                raise ValueError(f"{path}:{number}: expected a JSON sample, found {text[:60]!r}") from None
+            if data == HEADER:
+                continue
+            yield _sample(data, f"{path}:{number}")
+
+
+def _sample(data: object, where: str) -> Sample:
+    if not (isinstance(data, dict) and isinstance(data.get("t_ns"), int) and isinstance(data.get("device"), str)
+            and isinstance(data.get("values"), dict)):
+        raise ValueError(f"{where}: expected {{\"t_ns\": int, \"device\": str, \"values\": {{...}}}}, found {data!r:.80}")
+    return Sample(data["t_ns"], data["device"], {str(k): float(v) for k, v in data["values"].items()})
+
+
+class ReplayDevice(Device):
+    """A device that plays a sample log back (see module docstring)."""
+
+    def __init__(self, name: str, path: str | os.PathLike, speed: float = 1.0, device: str | None = None) -> None:
+        super().__init__(name)
+        if speed < 0:
+            raise DeviceError(f"replay: speed must be >= 0, got {speed}")
+        self.path, self.speed, self.only = Path(path), speed, device
+        self._samples: Iterator[Sample] | None = None
+        self._origin: tuple[int, int] | None = None  # (first log t_ns, replay start t_ns)
+        self.finished = False
+
+    @classmethod
+    def from_url(cls, url: Url, name: str) -> ReplayDevice:
+        unknown = set(url.options) - {"speed", "device"}
+        if unknown:
+            raise DeviceError(f"replay URL: unknown option(s) {sorted(unknown)}; known: device, speed")
+        return cls(name, url.target, float(url.options.get("speed", 1.0)), url.options.get("device"))
+
+    def _open(self) -> None:
+        if not self.path.is_file():
+            raise FileNotFoundError(f"{self.path}: no such sample log")
+        if self._samples is None:
+            self._samples = (s for s in read_sample_log(self.path) if self.only in (None, s.device))
+
+    def _read(self) -> list[Mapping[str, float]]:
+        sample = next(self._samples, None) if not self.finished else None
+        if sample is None:
+            self.finished = True
+            time.sleep(0.02)
+            return []
+        if self.speed > 0:
+            self._wait_for(sample.t_ns)
+        return [sample.values]
+
+    def _wait_for(self, t_ns: int) -> None:
+        now = time.monotonic_ns()
+        if self._origin is None:
+            self._origin = (t_ns, now)
+        due = self._origin[1] + (t_ns - self._origin[0]) / self.speed
+        while not self._stop.is_set():
+            left = (due - time.monotonic_ns()) / 1e9
+            if left <= 0:
+                return
+            time.sleep(min(left, 0.005))
+
+    def _close(self) -> None:
+        pass

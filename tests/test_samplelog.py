@@ -1,0 +1,79 @@
+"""Raw sample logs round-trip exactly, survive a killed recorder, and replay as a device."""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from devices import open_device
+from devices.base import Sample, State
+from devices.samplelog import ReplayDevice, SampleLogWriter, read_sample_log
+
+values = st.dictionaries(st.text("abcxyz0123._", min_size=1, max_size=8),
+                         st.floats(allow_nan=False, allow_infinity=False), max_size=6)
+samples = st.lists(st.builds(Sample, st.integers(0, 2**62), st.sampled_from(["box", "pad"]), values), max_size=30)
+
+
+@settings(max_examples=60, deadline=None)
+@given(samples)
+def test_a_log_reads_back_exactly(tmp_path_factory, recorded):
+    path = tmp_path_factory.mktemp("log") / "take.samples.jsonl"
+    with SampleLogWriter(path) as log:
+        for sample in recorded:
+            log.write(sample)
+    assert list(read_sample_log(path)) == recorded
+
+
+def test_a_recorder_killed_mid_line_leaves_every_complete_sample(tmp_path):
+    path = tmp_path / "take.samples.jsonl"
+    with SampleLogWriter(path) as log:
+        for i in range(5):
+            log.write(Sample(i, "box", {"ch0": float(i)}))
+    with open(path, "a") as file:
+        file.write('{"t_ns": 5, "device": "bo')
+    with pytest.warns(UserWarning, match="last line is incomplete"):
+        got = list(read_sample_log(path))
+    assert [s.values["ch0"] for s in got] == [0, 1, 2, 3, 4]
+
+
+def test_a_bad_line_in_the_middle_names_file_and_line(tmp_path):
+    path = tmp_path / "bad.jsonl"
+    path.write_text('{"t_ns": 1, "device": "box", "values": {"a": 1}}\nnot json\n{"t_ns": 2, "device": "box", "values": {}}\n')
+    with pytest.raises(ValueError, match=r"bad.jsonl:2: expected a JSON sample"):
+        list(read_sample_log(path))
+
+
+def test_replay_keeps_the_spacing_and_the_values(tmp_path):
+    path = tmp_path / "take.samples.jsonl"
+    with SampleLogWriter(path) as log:
+        for i in range(6):
+            log.write(Sample(1_000_000_000 + i * 40_000_000, "box", {"ch0": float(i)}))
+        log.write(Sample(2_000_000_000, "pad", {"X": 0.5}))
+    device = open_device(f"replay://{path}?device=box", name="box")
+    assert isinstance(device, ReplayDevice)
+    with device:
+        got = []
+        for sample in device.samples(timeout=1.0):
+            got.append(sample)
+            if len(got) == 6:
+                break
+    assert [s.values["ch0"] for s in got] == [0, 1, 2, 3, 4, 5]
+    gaps = [(b.t_ns - a.t_ns) / 1e6 for a, b in zip(got, got[1:])]
+    assert all(35 < gap < 60 for gap in gaps), gaps
+
+
+def test_replay_as_fast_as_possible_and_a_missing_log_is_lost(tmp_path):
+    path = tmp_path / "fast.jsonl"
+    with SampleLogWriter(path) as log:
+        for i in range(200):
+            log.write(Sample(i * 10**9, "box", {"ch0": float(i)}))
+    with ReplayDevice("box", path, speed=0) as device:
+        start = time.monotonic()
+        n = sum(1 for _ in zip(range(200), device.samples(timeout=1.0)))
+        assert n == 200 and time.monotonic() - start < 2.0
+    with ReplayDevice("box", tmp_path / "missing.jsonl") as device:
+        assert device.wait_state(State.LOST, 1.0)
+        assert "no such sample log" in device.counters.last_error
