@@ -34,6 +34,11 @@ def main(argv: list[str] | None = None) -> int:
 
     commands.add_parser("devices", help="list the controllers that are connected (serial, HID, MIDI, CAN)")
 
+    calibrate = commands.add_parser("calibrate", help="record rest and a sweep per channel; write them into the mapping")
+    calibrate.add_argument("--mapping", required=True, help="the mapping YAML to calibrate (a .bak copy is kept)")
+    calibrate.add_argument("--rest", type=_positive_float, default=2.0, help="seconds of rest to record (default 2)")
+    calibrate.add_argument("--sweep", type=_positive_float, default=8.0, help="seconds of sweep to record (default 8)")
+
     bench = commands.add_parser("bench", help="measure Sibson precompute, rig load and per-frame deform")
     bench.add_argument("--json", action="store_true", help="print the results as JSON")
     bench.add_argument("--frames", type=_positive, default=300, help="frames per measurement")
@@ -53,6 +58,8 @@ def main(argv: list[str] | None = None) -> int:
 
         play_take(args.take, size=args.size, view=args.view)
         return 0
+    if args.command == "calibrate":
+        return _calibrate(args)
     if args.command == "devices":
         from devices.discovery import discover, report
 
@@ -83,6 +90,21 @@ def _render(args: argparse.Namespace) -> int:
         print(f"puppet render: {exc.filename or args.take}: {exc.strerror or exc}", file=sys.stderr)
         return 2
     print(f"{args.output}: {count} frames")
+    return 0
+
+
+def _calibrate(args: argparse.Namespace) -> int:
+    """``puppet calibrate``: a bad mapping or device is one line on stderr and exit code 1."""
+    from devices import DeviceError
+
+    from .calibrate import CalibrationError, calibrate
+    from .mapping import MappingError
+
+    try:
+        calibrate(args.mapping, rest_seconds=args.rest, sweep_seconds=args.sweep)
+    except (MappingError, DeviceError, CalibrationError) as exc:
+        print(f"puppet calibrate: {exc}", file=sys.stderr)
+        return 1
     return 0
 
 
