@@ -76,26 +76,17 @@ class OneEuro:
         return self._next(x, t_ns)[0]
 
 
-class Exponential:
-    """First-order low-pass filter with time constant ``tau`` seconds."""
+class _HeldInput:
+    """A filter of one state value that the input drives between timestamps (``_next``)."""
 
-    __slots__ = ("tau", "_t", "_y")
-
-    def __init__(self, tau: float) -> None:
-        if tau <= 0:
-            raise ValueError("exponential filter: tau must be > 0 seconds")
-        self.tau = float(tau)
-        self.reset()
+    __slots__ = ("_t", "_y")
 
     def reset(self) -> None:
         self._t: int | None = None
         self._y = 0.0
 
     def _next(self, x: float, t_ns: int) -> float:
-        te = (t_ns - self._t) * NS
-        if te <= 0.0:
-            return self._y
-        return self._y + (1.0 - math.exp(-te / self.tau)) * (x - self._y)
+        raise NotImplementedError
 
     def step(self, x: float, t_ns: int) -> float:
         if self._t is None:
@@ -108,20 +99,34 @@ class Exponential:
         return x if self._t is None else self._next(x, t_ns)
 
 
-class RateLimit:
+class Exponential(_HeldInput):
+    """First-order low-pass filter with time constant ``tau`` seconds."""
+
+    __slots__ = ("tau",)
+
+    def __init__(self, tau: float) -> None:
+        if tau <= 0:
+            raise ValueError("exponential filter: tau must be > 0 seconds")
+        self.tau = float(tau)
+        self.reset()
+
+    def _next(self, x: float, t_ns: int) -> float:
+        te = (t_ns - self._t) * NS
+        if te <= 0.0:
+            return self._y
+        return self._y + (1.0 - math.exp(-te / self.tau)) * (x - self._y)
+
+
+class RateLimit(_HeldInput):
     """The output follows the input at most ``rate`` units per second."""
 
-    __slots__ = ("rate", "_t", "_y")
+    __slots__ = ("rate",)
 
     def __init__(self, rate: float) -> None:
         if rate <= 0:
             raise ValueError("rate limit must be > 0 units per second")
         self.rate = float(rate)
         self.reset()
-
-    def reset(self) -> None:
-        self._t: int | None = None
-        self._y = 0.0
 
     def _next(self, x: float, t_ns: int) -> float:
         te = (t_ns - self._t) * NS
@@ -130,13 +135,3 @@ class RateLimit:
         step = self.rate * te
         d = x - self._y
         return self._y + step if d > step else self._y - step if d < -step else x
-
-    def step(self, x: float, t_ns: int) -> float:
-        if self._t is None:
-            self._t, self._y = t_ns, x
-        elif t_ns > self._t:
-            self._y, self._t = self._next(x, t_ns), t_ns
-        return self._y
-
-    def peek(self, x: float, t_ns: int) -> float:
-        return x if self._t is None else self._next(x, t_ns)
