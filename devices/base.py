@@ -13,6 +13,7 @@ Samples simply sees none: the face holds its pose.
 from __future__ import annotations
 
 import collections
+import contextlib
 import enum
 import threading
 import time
@@ -120,6 +121,8 @@ class Device(ABC):
             self._ready.notify_all()
         if self._thread is not None:
             self._thread.join(timeout)
+            if self._thread.is_alive():
+                raise DeviceError(f"{self.name}: the reader did not stop within {timeout} s")
             self._thread = None
         self.state = State.CLOSED
 
@@ -164,19 +167,27 @@ class Device(ABC):
             self.state = State.OPENING
             try:
                 self._open()
-            except OSError as exc:
+            except Exception as exc:  # noqa: BLE001 -- whatever the adapter raised: report, retry
                 self._lost(exc)
-                self._stop.wait(wait)
-                wait = min(wait * 2, self.BACKOFF[1])
+                wait = self._back_off(wait)
                 continue
-            self.state, wait = State.OPEN, self.BACKOFF[0]
+            self.state = State.OPEN
+            delivered = self.counters.samples
             try:
                 self._pump()
             except Exception as exc:  # noqa: BLE001 -- any adapter failure: close, report, reopen
                 self._lost(exc)
             finally:
-                self._close()
+                with contextlib.suppress(Exception):
+                    self._close()
+            # a device that fails before delivering anything waits longer each time
+            wait = self.BACKOFF[0] if self.counters.samples > delivered else self._back_off(wait)
         self.state = State.CLOSED
+
+    def _back_off(self, wait: float) -> float:
+        """Wait (unless closing) and return the next, longer wait."""
+        self._stop.wait(wait)
+        return min(wait * 2, self.BACKOFF[1])
 
     def _pump(self) -> None:
         while not self._stop.is_set():

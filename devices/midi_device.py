@@ -1,11 +1,13 @@
 """MIDI controllers (fader boxes, knobs, keyboards) through mido and python-rtmidi.
 
 ``midi://nanoKONTROL2`` opens the first input port whose name contains the given text
-(``?channel=N`` keeps one MIDI channel, 0-15). Messages become channels:
+(``?channel=N`` keeps one MIDI channel, 0-15; ``?cc14=0,1,7`` names the 14-bit controllers).
+Messages become channels:
 
 * control change ``n`` -> ``ccN``, 0..1 (value / 127);
-* 14-bit controllers: a controller 0-31 followed by its LSB partner (``n + 32``) gives ``ccN`` at
-  full resolution, (MSB * 128 + LSB) / 16383; the LSB alone is never a channel of its own;
+* 14-bit controllers, only those named in ``cc14`` (many boxes use controllers 32-63 as buttons,
+  so pairing is never guessed): controller ``n`` (0-31) then its LSB partner ``n + 32`` on the
+  same MIDI channel gives ``ccN`` at full resolution, (MSB * 128 + LSB) / 16383;
 * pitch bend -> ``pitchbend``, -1..1;
 * notes -> ``noteN``, 1 while held (note on with velocity > 0), 0 on release: buttons;
 * anything else (clock, sysex, aftertouch) is ignored.
@@ -18,11 +20,11 @@ the device ``LOST`` and it retries, like any other unplugged controller.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 
 import mido
 
-from .base import Device, DeviceLost, Url
+from .base import Device, DeviceError, DeviceLost, Url
 
 POLL = 0.005
 WAIT = 0.03
@@ -43,18 +45,27 @@ def open_port(name: str):
 class MidiDevice(Device):
     """Channels from a MIDI input port."""
 
-    def __init__(self, name: str, port: str, channel: int | None = None,
+    def __init__(self, name: str, port: str, channel: int | None = None, cc14: Iterable[int] = (),
                  open_input: Callable[[str], object] = open_port) -> None:
         super().__init__(name)
+        if channel is not None and not 0 <= channel <= 15:
+            raise DeviceError(f"{name}: MIDI channel {channel} (expected 0-15)")
+        self.cc14 = frozenset(cc14)
+        if any(not 0 <= c <= 31 for c in self.cc14):
+            raise DeviceError(f"{name}: 14-bit controllers are 0-31, got {sorted(self.cc14)}")
         self.port_name, self.channel = port, channel
         self._open_input = open_input
         self._port = None
-        self._msb: dict[int, int] = {}
+        self._msb: dict[tuple[int, int], int] = {}
 
     @classmethod
     def from_url(cls, url: Url, name: str) -> MidiDevice:
-        channel = url.options.get("channel")
-        return cls(name, url.target.strip("/"), None if channel is None else int(channel))
+        try:
+            channel = url.options.get("channel")
+            cc14 = [int(c) for c in url.options.get("cc14", "").split(",") if c]
+            return cls(name, url.target.strip("/"), None if channel is None else int(channel), cc14)
+        except ValueError as exc:
+            raise DeviceError(f"midi URL: {exc}") from None
 
     def _open(self) -> None:
         self._port = self._open_input(self.port_name)
@@ -79,7 +90,7 @@ class MidiDevice(Device):
         if getattr(message, "channel", None) is not None and self.channel not in (None, message.channel):
             return None
         if message.type == "control_change":
-            return self._controller(message.control, message.value)
+            return self._controller(message.channel, message.control, message.value)
         if message.type == "pitchwheel":
             return {"pitchbend": message.pitch / 8192 if message.pitch < 0 else message.pitch / 8191}
         if message.type in ("note_on", "note_off"):
@@ -87,12 +98,11 @@ class MidiDevice(Device):
             return {f"note{message.note}": 1.0 if held else 0.0}
         return None
 
-    def _controller(self, control: int, value: int) -> dict[str, float] | None:
-        if control < 32:
-            self._msb[control] = value
-            return {f"cc{control}": value / 127}
-        if 32 <= control < 64 and control - 32 in self._msb:
-            msb = self._msb[control - 32]
+    def _controller(self, channel: int, control: int, value: int) -> dict[str, float]:
+        if control in self.cc14:
+            self._msb[channel, control] = value
+        elif control - 32 in self.cc14 and (channel, control - 32) in self._msb:
+            msb = self._msb[channel, control - 32]
             return {f"cc{control - 32}": (msb * 128 + value) / 16383}
         return {f"cc{control}": value / 127}
 

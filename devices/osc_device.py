@@ -42,7 +42,7 @@ class OscDevice(Device):
     @classmethod
     def from_url(cls, url: Url, name: str) -> OscDevice:
         host, _, port = url.target.strip("/").rpartition(":")
-        if not port.isdigit():
+        if not port.isdigit() or int(port) > 65535:
             raise DeviceError(f"osc URL: expected osc://HOST:PORT (e.g. osc://127.0.0.1:39539), got {url.target!r}")
         return cls(name, host or "127.0.0.1", int(port))
 
@@ -55,9 +55,12 @@ class OscDevice(Device):
 
     def _open(self) -> None:
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         sock.settimeout(TIMEOUT)
-        sock.bind((self.host, self.port))
+        try:
+            sock.bind((self.host, self.port))
+        except OSError:
+            sock.close()
+            raise
         self.port = sock.getsockname()[1]
         self._socket = sock
 

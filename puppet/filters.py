@@ -16,9 +16,10 @@ by an assumed sampling rate, so irregular and bursty input is filtered as it rea
   at time ``t`` whatever the sample spacing.
 * ``RateLimit`` -- the output moves toward the input by at most ``rate * te``.
 
-Zero elapsed time means zero change: a sample stamped at (or before) the previous one leaves a
-filter as it was (the limit of every formula above as ``te -> 0``; readings of one device read
-are stamped together).
+Readings of one device read are stamped together, so a reading stamped at the same instant as the
+previous one supersedes it: the filter redoes its last step with the newer value (otherwise a
+batch would leave the filter on its oldest reading). A reading stamped before the previous one
+is ignored: time never goes back.
 
 ``step(x, t_ns)`` filters one sample and keeps the state. ``peek(x, t_ns)`` says what ``step``
 would return, without changing anything: a face drawn between the samples of an event-driven
@@ -36,7 +37,7 @@ NS = 1e-9
 class OneEuro:
     """The 1€ filter; ``min_cutoff`` and ``d_cutoff`` in Hz, ``beta`` in 1 / (units per second)."""
 
-    __slots__ = ("min_cutoff", "beta", "d_cutoff", "_t", "_x", "_dx")
+    __slots__ = ("min_cutoff", "beta", "d_cutoff", "_t", "_x", "_dx", "_before")
 
     def __init__(self, min_cutoff: float = 1.0, beta: float = 0.0, d_cutoff: float = 1.0) -> None:
         if min_cutoff <= 0 or d_cutoff <= 0 or beta < 0:
@@ -48,6 +49,7 @@ class OneEuro:
         self._t: int | None = None
         self._x = 0.0   # previous output (the paper's hatxprev)
         self._dx = 0.0  # previous filtered speed
+        self._before: tuple[int, float, float] | None = None  # the state before the last step
 
     def _next(self, x: float, t_ns: int) -> tuple[float, float]:
         """(output, filtered speed) for ``x`` at ``t_ns``, after at least one sample."""
@@ -62,12 +64,19 @@ class OneEuro:
         return a * x + (1.0 - a) * self._x, dx
 
     def step(self, x: float, t_ns: int) -> float:
+        if self._t is not None and t_ns < self._t:
+            return self._x
+        if self._t is not None and t_ns == self._t:  # a newer reading of the same instant
+            if self._before is None:
+                self._x = x
+                return x
+            self._t, self._x, self._dx = self._before
         if self._t is None:
-            self._t, self._x, self._dx = t_ns, x, 0.0
+            self._t, self._x, self._dx, self._before = t_ns, x, 0.0, None
             return x
-        if t_ns > self._t:
-            self._x, self._dx = self._next(x, t_ns)
-            self._t = t_ns
+        self._before = (self._t, self._x, self._dx)
+        self._x, self._dx = self._next(x, t_ns)
+        self._t = t_ns
         return self._x
 
     def peek(self, x: float, t_ns: int) -> float:
@@ -79,20 +88,29 @@ class OneEuro:
 class _HeldInput:
     """A filter of one state value that the input drives between timestamps (``_next``)."""
 
-    __slots__ = ("_t", "_y")
+    __slots__ = ("_t", "_y", "_before")
 
     def reset(self) -> None:
         self._t: int | None = None
         self._y = 0.0
+        self._before: tuple[int, float] | None = None  # the state before the last step
 
     def _next(self, x: float, t_ns: int) -> float:
         raise NotImplementedError
 
     def step(self, x: float, t_ns: int) -> float:
+        if self._t is not None and t_ns < self._t:
+            return self._y
+        if self._t is not None and t_ns == self._t:  # a newer reading of the same instant
+            if self._before is None:
+                self._y = x
+                return x
+            self._t, self._y = self._before
         if self._t is None:
-            self._t, self._y = t_ns, x
-        elif t_ns > self._t:
-            self._y, self._t = self._next(x, t_ns), t_ns
+            self._t, self._y, self._before = t_ns, x, None
+            return x
+        self._before = (self._t, self._y)
+        self._y, self._t = self._next(x, t_ns), t_ns
         return self._y
 
     def peek(self, x: float, t_ns: int) -> float:

@@ -971,7 +971,7 @@ class Mapping:
                 continue
             try:
                 raw = float(raw)
-            except (TypeError, ValueError):
+            except (TypeError, ValueError, OverflowError):
                 self.bad_values += 1
                 continue
             if raw != raw:  # NaN (the cheapest test for it): garbage from the device, skipped

@@ -116,3 +116,29 @@ def test_an_adapter_bug_in_read_does_not_end_the_thread():
     with Flaky([{"x": 1.0}]) as device:
         assert next(device.samples(timeout=1.0)).values == {"x": 1.0}
     assert device.counters.reconnects == 1 and device.counters.last_error == "adapter bug"
+
+
+def test_a_device_that_fails_every_read_backs_off_instead_of_spinning():
+    class Broken(Scripted):
+        def _read(self):
+            raise ValueError("always")
+
+    with Broken() as device:
+        time.sleep(0.3)
+    assert 2 <= device.counters.reconnects <= 10, device.counters.reconnects
+
+
+def test_an_open_or_close_that_raises_something_odd_keeps_the_thread_alive():
+    class Odd(Scripted):
+        opened = False
+
+        def _open(self):
+            if not self.opened:
+                self.opened = True
+                raise OverflowError("port out of range")
+
+        def _close(self):
+            raise RuntimeError("close failed")
+
+    with Odd([{"x": 2.0}]) as device:
+        assert next(device.samples(timeout=1.0)).values == {"x": 2.0}

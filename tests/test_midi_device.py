@@ -7,7 +7,7 @@ import time
 import mido
 import pytest
 
-from devices import open_device
+from devices import DeviceError, open_device
 from devices.base import DeviceLost, State
 from devices.midi_device import MidiDevice
 
@@ -43,7 +43,7 @@ def box():
             raise DeviceLost(f"no MIDI input port matching {name!r}")
         return port
 
-    device = MidiDevice("faders", "nanoKONTROL2", open_input=open_input).start()
+    device = MidiDevice("faders", "nanoKONTROL2", cc14=[7], open_input=open_input).start()
     assert device.wait_state(State.OPEN, 2.0)
     yield device, port, plugged
     device.close()
@@ -73,9 +73,12 @@ def test_a_14_bit_controller_pair_reads_at_full_resolution(box):
     device, port, _ = box
     port.send_bytes(0xB0, 7, 0x40)          # MSB
     port.send_bytes(0xB0, 39, 0x01)         # its LSB (7 + 32)
-    coarse, fine = _values(device, 2)
+    port.send_bytes(0xB0, 0, 100)           # a plain fader ...
+    port.send_bytes(0xB0, 32, 127)          # ... and a button on 32: not a 14-bit pair (0 is not named)
+    coarse, fine, fader, button = _values(device, 4)
     assert coarse == {"cc7": 0x40 / 127}
     assert fine == {"cc7": (0x40 * 128 + 1) / 16383}
+    assert fader == {"cc0": 100 / 127} and button == {"cc32": 1.0}
 
 
 def test_a_channel_filter_keeps_one_midi_channel():
@@ -97,6 +100,8 @@ def test_no_port_means_lost_and_a_returning_port_reopens(box):
 
 
 def test_a_midi_url_names_the_port_and_channel():
-    device = open_device("midi://nanoKONTROL2?channel=3")
+    device = open_device("midi://nanoKONTROL2?channel=3&cc14=0,1")
     assert isinstance(device, MidiDevice)
-    assert (device.port_name, device.channel) == ("nanoKONTROL2", 3)
+    assert (device.port_name, device.channel, device.cc14) == ("nanoKONTROL2", 3, {0, 1})
+    with pytest.raises(DeviceError, match="channel 16"):
+        open_device("midi://box?channel=16")
