@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
+from urllib.parse import quote
 from dataclasses import dataclass
 
 
@@ -29,15 +30,11 @@ def serial_ports() -> list[Found]:
 
 
 def hid_devices() -> list[Found]:
-    import hid
+    import hid  # noqa: F401 -- a missing hidapi is reported as such
 
-    out = []
-    for info in hid.enumerate():
-        vid, pid = info.get("vendor_id", 0), info.get("product_id", 0)
-        name = " ".join(filter(None, (info.get("manufacturer_string"), info.get("product_string"))))
-        usage = f"usage page 0x{info.get('usage_page', 0):04x} usage 0x{info.get('usage', 0):04x}"
-        out.append(Found("hid", f"hid://{vid:04x}:{pid:04x}", f"{name or 'unnamed'} ({usage})"))
-    return out
+    from .hid_device import available
+
+    return [Found("hid", url, description) for url, description in available()]
 
 
 def midi_ports() -> list[Found]:
@@ -47,7 +44,7 @@ def midi_ports() -> list[Found]:
         names = mido.get_input_names()
     except Exception as exc:  # rtmidi's own SystemError when the machine has no MIDI system
         raise OSError(f"no MIDI system ({str(exc).splitlines()[0]})") from None
-    return [Found("midi", f"midi://{name}", "MIDI input") for name in names]
+    return [Found("midi", f"midi://{quote(name, safe=' ')}", "MIDI input") for name in names]
 
 
 def can_configs() -> list[Found]:
