@@ -96,7 +96,8 @@ def shaped(channel: dict, raws, step_ms=10) -> list[float]:
 
 # -- the shipped mappings, the schema and the checker -----------------------------------------
 
-SHIPPED = ["arduino_sliders.yaml", "gamepad_hid.yaml", "can_joystick.yaml", "midi_faders.yaml", "arkit_osc.yaml"]
+SHIPPED = ["arduino_sliders.yaml", "gamepad_hid.yaml", "can_joystick.yaml", "midi_faders.yaml", "arkit_osc.yaml",
+           "arkit_csv.yaml"]
 
 
 def test_schema_is_a_valid_2020_12_schema():
