@@ -32,6 +32,13 @@ def main(argv: list[str] | None = None) -> int:
     play.add_argument("--size", type=_size, default=(960, 720), help="window size WxH (default 960x720)")
     play.add_argument("--view", choices=VIEWS, default="front", help="camera (default front)")
 
+    live = commands.add_parser("live", help="run a mapping's devices onto the face in a window, live")
+    live.add_argument("--mapping", required=True, help="the mapping YAML")
+    live.add_argument("--record", default=None, metavar="NAME", help="take name for R (default: take)")
+    live.add_argument("--fps", type=_positive, default=30, help="recorded take fps (default 30)")
+    live.add_argument("--size", type=_size, default=(960, 720), help="window size WxH (default 960x720)")
+    live.add_argument("--view", choices=VIEWS, default="front", help="camera (default front)")
+
     commands.add_parser("devices", help="list the controllers that are connected (serial, HID, MIDI, CAN)")
 
     calibrate = commands.add_parser("calibrate", help="record rest and a sweep per channel; write them into the mapping")
@@ -57,6 +64,11 @@ def main(argv: list[str] | None = None) -> int:
         from .window import play_take
 
         play_take(args.take, size=args.size, view=args.view)
+        return 0
+    if args.command == "live":
+        from .live import run_live
+
+        run_live(args.mapping, record=args.record, fps=args.fps, size=args.size, view=args.view)
         return 0
     if args.command == "calibrate":
         return _calibrate(args)

@@ -1,0 +1,255 @@
+"""The live rig in a window: ``puppet live --mapping M.yaml``.
+
+``run_live`` opens a window (``window.open_window``, with ``window.check_display`` first, as
+``puppet play`` does) and a ``LiveSession`` for the mapping, and draws ``session.frame()`` every
+display frame (paced by the window's vsync).
+
+Title: ``<mapping> | 60 fps | 12.3 ms | box: open | REC take_001`` -- the measured frame rate,
+the latency from the newest Sample to the frame drawn (median over the last second; "-- ms"
+until samples arrive) and each device's state; ``REC`` and the take's folder while recording.
+
+Keys: R starts a take (named ``--record NAME``, default "take": folders ``NAME_001``...) and
+stops it; N neutral pose (``session.mapping.reset()``: every channel back to rest); M toggles a
+channel monitor printed to the terminal (channel, raw, shaped, targets; a few times a second);
+Q or Escape quits, finishing any take first so it is complete.
+
+Calibrating a channel has no key here: run ``puppet calibrate --mapping M.yaml``.
+
+No display: a one-line message on stderr and ``SystemExit(2)``, as ``puppet play``.
+"""
+
+from __future__ import annotations
+
+import os
+import statistics
+import sys
+import time
+from collections import deque
+from pathlib import Path
+from typing import Any, TextIO
+
+from .playback import VIEWS, frame_head
+from .render import Renderer
+from .window import NoDisplayError, WindowError, check_display, open_window
+
+MONITOR_PERIOD = 0.25
+"""Seconds between two prints of the channel monitor."""
+
+WINDOW_S = 1.0
+"""The span, in seconds, of the measured fps and the latency median."""
+
+
+class LiveStats:
+    """Frames drawn and sample->drawn latencies over the last ``WINDOW_S`` (times in ns)."""
+
+    def __init__(self, span_ns: int = int(WINDOW_S * 1e9)) -> None:
+        self.span_ns = span_ns
+        self._frames: deque[int] = deque()
+        self._latency: deque[tuple[int, int]] = deque()
+
+    def drawn(self, now_ns: int, newest_sample_ns: int | None, new_samples: bool) -> None:
+        self._frames.append(now_ns)
+        if new_samples and newest_sample_ns is not None:
+            self._latency.append((now_ns, now_ns - newest_sample_ns))
+        cut = now_ns - self.span_ns
+        while self._frames and self._frames[0] <= cut:
+            self._frames.popleft()
+        while self._latency and self._latency[0][0] <= cut:
+            self._latency.popleft()
+
+    @property
+    def fps(self) -> float:
+        return len(self._frames) * 1e9 / self.span_ns
+
+    @property
+    def latency_ms(self) -> float | None:
+        if not self._latency:
+            return None
+        return statistics.median(v for _, v in self._latency) / 1e6
+
+
+def live_title(name: str, fps: float, latency_ms: float | None, states: dict[str, Any],
+               recording: str | None) -> str:
+    """``arduino_sliders | 60 fps | 12.3 ms | box: open | REC take_001``."""
+    parts = [name, f"{fps:.0f} fps", "-- ms" if latency_ms is None else f"{latency_ms:.1f} ms"]
+    parts += [f"{dev}: {getattr(state, 'name', str(state)).lower()}" for dev, state in states.items()]
+    if recording:
+        parts.append(f"REC {recording}")
+    return " | ".join(parts)
+
+
+def monitor_table(channels) -> str:
+    """The channel monitor: one line per channel (``ChannelState``s)."""
+    rows = [f"{'channel':<16} {'raw':>9} {'shaped':>7}  targets"]
+    for c in channels:
+        raw = "-" if c.raw is None else f"{c.raw:.4g}"
+        rows.append(f"{c.name:<16} {raw:>9} {c.value:>7.3f}  {', '.join(c.targets)}")
+    return "\n".join(rows)
+
+
+class LiveView:
+    """A LiveSession in a window: the loop, keys and title. ``run()`` returns when closed.
+
+    ``step()`` is one turn of the loop (tests call it directly on a headless window).
+    """
+
+    def __init__(self, session: Any, window: Any, view: str = "front",
+                 out: TextIO | None = None) -> None:
+        self.session = session
+        self.window = window
+        self.view = view
+        self.out = sys.stdout if out is None else out
+        self.name = Path(session.mapping_path).stem
+        self.stats = LiveStats()
+        self.renderer: Renderer | None = None
+        self.monitor = False
+        self.take: Path | None = None       # the folder being recorded
+        self.takes: list[Path] = []         # finished takes
+        self._quit = False
+        self._monitor_at = -1.0
+        self._title = ""
+        window.exit_key = None  # Escape is ours: the take is finished before the window goes
+        window.key_event_func = self._on_key
+
+    def run(self) -> None:
+        try:
+            while not (self._quit or self.window.is_closing):
+                self.step()
+        finally:
+            self.close()
+
+    def step(self) -> None:
+        window = self.window
+        size = tuple(window.buffer_size)
+        frame = self.session.frame()
+        if min(size) > 0:
+            if self.renderer is None or self.renderer.size != size:
+                self._make_renderer(size)
+            self.renderer.draw(frame.vertices, frame.normals, framebuffer=window.fbo)
+        window.swap_buffers()  # handles the window's events too (keys)
+        self.stats.drawn(time.monotonic_ns(), frame.newest_sample_ns, frame.n_samples > 0)
+        self._set_title(frame.states)
+        now = time.perf_counter()
+        if self.monitor and now - self._monitor_at >= MONITOR_PERIOD:
+            self._monitor_at = now
+            print(monitor_table(self.session.mapping.channels()) + "\n", file=self.out, flush=True)
+
+    def close(self) -> None:
+        try:
+            self._stop_recording()
+        finally:
+            if self.renderer is not None:
+                self.renderer.release()
+                self.renderer = None
+            self.window.close()
+            self.window.destroy()
+
+    # -- keys --------------------------------------------------------------------------------
+
+    def _on_key(self, key: Any, action: Any, modifiers: Any) -> None:
+        keys = self.window.keys
+        if action != keys.ACTION_PRESS:
+            return
+        if key in (keys.Q, keys.ESCAPE):
+            self._stop_recording()
+            self._quit = True
+        elif key == keys.R:
+            if self.session.recording:
+                self._stop_recording()
+            else:
+                self.take = Path(self.session.start_recording())
+                print(f"recording {self.take}", file=sys.stderr)
+        elif key == keys.N:
+            reset = getattr(self.session.mapping, "reset", None)
+            if reset is not None:
+                reset()
+        elif key == keys.M:
+            self.monitor = not self.monitor
+            self._monitor_at = -1.0
+
+    def _stop_recording(self) -> None:
+        if self.session.recording:
+            folder = self.session.stop_recording()
+            self.takes.append(Path(folder))
+            print(f"take saved: {folder}", file=sys.stderr)
+        self.take = None
+
+    # -- drawing -----------------------------------------------------------------------------
+
+    def _make_renderer(self, size: tuple[int, int]) -> None:
+        if self.renderer is not None:
+            self.renderer.release()
+        face = self.session.runtime.face
+        self.renderer = Renderer(face.triangles, len(face.vertices), face.colors, width=size[0],
+                                 height=size[1], samples=0, ctx=self.window.ctx)
+        frame_head(self.renderer, face, self.view)
+        self.window.fbo.viewport = (0, 0, *size)
+
+    def _set_title(self, states: dict[str, Any]) -> None:
+        recording = self.take.name if self.take is not None and self.session.recording else None
+        title = live_title(self.name, self.stats.fps, self.stats.latency_ms, states, recording)
+        if title != self._title:
+            self.window.title = self._title = title
+
+
+def open_session(mapping_path: str | os.PathLike, *, record: str | None = None, fps: int = 30,
+                 devices: dict[str, str] | None = None, record_root: str | os.PathLike | None = None,
+                 face: Any = None):
+    """A LiveSession; ``devices`` replaces mapping devices by name with other URLs."""
+    from devices import open_device
+
+    from .session import LiveSession
+
+    opened = {}
+    try:
+        for name, url in (devices or {}).items():
+            opened[name] = open_device(url, name)
+        return LiveSession(mapping_path, face=face, devices=opened, record_root=record_root,
+                           take_name=record or "take", fps=fps)
+    except BaseException:
+        for device in opened.values():
+            device.close()
+        raise
+
+
+def run_live(mapping_path: str | os.PathLike, *, record: str | None = None, fps: int = 30,
+             size: tuple[int, int] = (960, 720), view: str = "front",
+             devices: dict[str, str] | None = None,
+             record_root: str | os.PathLike | None = None) -> None:
+    """Run the mapping's devices onto the face in a window until Q / Escape or closing it.
+
+    ``devices`` overrides device URLs by name (e.g. ``{"box": "sim://joystick?..."}``); takes go
+    under ``record_root`` (default ``takes/``). Without a usable display this prints
+    ``puppet live: <why>`` on stderr and raises ``SystemExit(2)``.
+    """
+    if view not in VIEWS:
+        raise ValueError(f"view {view!r}: expected one of {VIEWS}")
+    try:
+        check_display()
+    except NoDisplayError as error:
+        _exit(str(error))
+    try:
+        window = open_window(Path(mapping_path).stem, size)
+    except WindowError as error:
+        _exit(str(error))
+    try:
+        session = open_session(mapping_path, record=record, fps=fps, devices=devices,
+                               record_root=record_root)
+    except BaseException:
+        window.close()
+        window.destroy()
+        raise
+    print("keys: R record/stop, N neutral, M channel monitor, Q/Esc quit "
+          "(calibrate a channel with 'puppet calibrate')", file=sys.stderr)
+    live = LiveView(session, window, view)
+    try:
+        live.run()
+    except KeyboardInterrupt:  # Ctrl+C closes like Q (run's finally finishes the take)
+        pass
+    finally:
+        session.close()
+
+
+def _exit(message: str) -> None:
+    print(f"puppet live: {message}", file=sys.stderr)
+    raise SystemExit(2)

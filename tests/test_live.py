@@ -1,0 +1,132 @@
+"""``puppet live``: the no-display exit, the title / stats / monitor helpers, and the live loop
+drawn into a headless (offscreen) moderngl-window window with a simulated slider box."""
+
+from __future__ import annotations
+
+import io
+import sys
+import time
+import types
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from puppet import cli
+from puppet.fapfile import iter_fap
+from puppet.live import LiveStats, LiveView, live_title, monitor_table, open_session
+
+LINUX_LIKE = sys.platform.startswith(("linux", "freebsd", "openbsd", "netbsd"))
+MAPPING = Path(__file__).resolve().parents[1] / "mappings" / "arduino_sliders.yaml"
+SIM_BOX = {"box": "sim://joystick?protocol=ascii&rate=200&channels=6"}
+
+
+@pytest.mark.skipif(not LINUX_LIKE, reason="a display is an X11 / Wayland matter")
+def test_live_without_a_display_says_so_and_exits_2(monkeypatch, capsys):
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    with pytest.raises(SystemExit) as exit_:
+        cli.main(["live", "--mapping", str(MAPPING), "--record", "x", "--fps", "25"])
+    assert exit_.value.code == 2
+    assert capsys.readouterr().err.strip() == (
+        "puppet live: no display to open a window on (DISPLAY is not set)")
+
+
+def test_stats_fps_and_median_latency_over_the_last_second():
+    stats = LiveStats()
+    assert stats.latency_ms is None
+    for k in range(30):  # 30 frames in 0.5 s, latencies 1..3 ms, only frames with new samples
+        t = 10**9 + k * 16_666_667
+        stats.drawn(t, t - (1 + k % 3) * 10**6, new_samples=True)
+        stats.drawn(t + 1, t - 50 * 10**6, new_samples=False)
+    assert stats.fps == 60 and stats.latency_ms == pytest.approx(2.0)
+    stats.drawn(10**10, None, new_samples=False)  # much later: the old ones drop out
+    assert stats.fps == 1 and stats.latency_ms is None
+
+
+def test_title_and_monitor():
+    state = types.SimpleNamespace(name="OPEN")
+    assert live_title("sliders", 59.6, 12.34, {"box": state}, "take_001") == (
+        "sliders | 60 fps | 12.3 ms | box: open | REC take_001")
+    assert live_title("sliders", 0, None, {}, None) == "sliders | 0 fps | -- ms"
+    rows = [types.SimpleNamespace(name="box.ch0", raw=None, value=0.0, targets=("fap3",)),
+            types.SimpleNamespace(name="box.ch1", raw=512.0, value=0.5, targets=("fap12", "fap13"))]
+    table = monitor_table(rows).splitlines()
+    assert table[0].split() == ["channel", "raw", "shaped", "targets"]
+    assert table[1].split() == ["box.ch0", "-", "0.000", "fap3"]
+    assert table[2].split() == ["box.ch1", "512", "0.500", "fap12,", "fap13"]
+
+
+# -- the loop, drawing offscreen --------------------------------------------------------------
+
+
+class _Keys:
+    ACTION_PRESS, ACTION_RELEASE = "press", "release"
+    R, N, M, Q, ESCAPE = "r", "n", "m", "q", "escape"
+
+
+def _headless_window(size):
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", PendingDeprecationWarning)
+            import moderngl_window
+        cls = moderngl_window.get_local_window_cls("headless")
+        window = cls(size=size, gl_version=(3, 3), backend="egl")
+    except Exception as exc:  # noqa: BLE001 -- no EGL: the reason is the skip message
+        pytest.skip(f"headless rendering unavailable: {exc}")
+    window.keys = _Keys
+    return window
+
+
+def test_the_live_loop_draws_records_and_obeys_the_keys(tmp_path):
+    window = _headless_window((96, 72))
+    session = open_session(MAPPING, record="run", fps=30, devices=SIM_BOX, record_root=tmp_path)
+    out = io.StringIO()
+    live = LiveView(session, window, out=out)
+
+    def press(key):
+        live._on_key(key, _Keys.ACTION_PRESS, None)
+
+    def frames(n):
+        for _ in range(n):
+            time.sleep(0.02)
+            live.step()
+
+    try:
+        frames(5)
+        pixels = np.frombuffer(window.fbo.read(components=3), dtype=np.uint8).reshape(72, 96, 3)
+        assert np.ptp(pixels[36].astype(int)) > 60  # a face across the middle row
+        assert window.title.startswith("arduino_sliders | ") and "box: open" in window.title
+        assert " ms" in window.title and "REC" not in window.title
+        assert live.stats.latency_ms is not None  # the sim box streams at 200 Hz
+
+        press(_Keys.R)
+        assert session.recording
+        frames(5)
+        assert window.title.endswith("| REC run_001")
+        press(_Keys.R)
+        assert not session.recording and live.takes == [tmp_path / "run_001"]
+        frames(1)
+        assert "REC" not in window.title
+        take = live.takes[0]
+        with iter_fap(take / "take.fap") as reader:
+            assert sum(1 for _ in reader) >= 2  # ~0.1 s at 30 fps
+        assert (take / "take.json").exists() and (take / "samples.jsonl").stat().st_size > 0
+
+        press(_Keys.M)
+        frames(1)
+        assert "box.ch0" in out.getvalue() and "shaped" in out.getvalue()
+        press(_Keys.M)
+        press(_Keys.N)  # neutral: channels back to rest
+        assert all(c.raw is None for c in session.mapping.channels())
+
+        press(_Keys.R)  # Q finishes a take that is running
+        frames(2)
+        press(_Keys.Q)
+        assert live._quit and not session.recording
+        assert live.takes[-1] == tmp_path / "run_002"
+        live.run()  # returns at once, releasing the renderer and the window
+        assert live.renderer is None
+    finally:
+        session.close()
