@@ -38,6 +38,8 @@ def main(argv: list[str] | None = None) -> int:
     live.add_argument("--fps", type=_positive, default=30, help="recorded take fps (default 30)")
     live.add_argument("--size", type=_size, default=(960, 720), help="window size WxH (default 960x720)")
     live.add_argument("--view", choices=VIEWS, default="front", help="camera (default front)")
+    live.add_argument("--device", action="append", type=_device_override, default=[], metavar="NAME=URL",
+                      help="open the mapping's device NAME at URL instead (e.g. box=sim://joystick); repeatable")
 
     commands.add_parser("devices", help="list the controllers that are connected (serial, HID, MIDI, CAN)")
 
@@ -68,7 +70,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "live":
         from .live import run_live
 
-        run_live(args.mapping, record=args.record, fps=args.fps, size=args.size, view=args.view)
+        run_live(args.mapping, record=args.record, fps=args.fps, size=args.size, view=args.view,
+                 devices=dict(args.device) or None)
         return 0
     if args.command == "calibrate":
         return _calibrate(args)
@@ -118,6 +121,13 @@ def _calibrate(args: argparse.Namespace) -> int:
         print(f"puppet calibrate: {exc}", file=sys.stderr)
         return 1
     return 0
+
+
+def _device_override(text: str) -> tuple[str, str]:
+    name, sep, url = text.partition("=")
+    if not sep or not name or "://" not in url and ":" not in url:
+        raise argparse.ArgumentTypeError(f"expected NAME=URL such as box=sim://joystick, got {text!r}")
+    return name, url
 
 
 def _positive_float(text: str) -> float:

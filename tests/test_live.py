@@ -130,3 +130,13 @@ def test_the_live_loop_draws_records_and_obeys_the_keys(tmp_path):
         assert live.renderer is None
     finally:
         session.close()
+
+
+def test_device_overrides_are_parsed_from_the_command_line():
+    import argparse
+
+    from puppet.cli import _device_override
+
+    assert _device_override("box=sim://joystick?rate=200") == ("box", "sim://joystick?rate=200")
+    with pytest.raises(argparse.ArgumentTypeError, match="NAME=URL"):
+        _device_override("box")
