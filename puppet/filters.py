@@ -34,10 +34,56 @@ TWO_PI = 2.0 * math.pi
 NS = 1e-9
 
 
-class OneEuro:
-    """The 1€ filter; ``min_cutoff`` and ``d_cutoff`` in Hz, ``beta`` in 1 / (units per second)."""
+class _TimedFilter:
+    """What every filter here shares: a state advanced by timestamped readings (``_next``).
 
-    __slots__ = ("min_cutoff", "beta", "d_cutoff", "_t", "_x", "_dx", "_before")
+    ``_state`` is a tuple whose first item is the output. A reading older than the last is
+    ignored; one of the same instant supersedes the last (the step is redone from the state
+    before it); the very first passes through.
+    """
+
+    __slots__ = ("_t", "_state", "_before")
+
+    def reset(self) -> None:
+        self._t: int | None = None
+        self._state: tuple[float, ...] = (0.0,)
+        self._before: tuple[int, tuple[float, ...]] | None = None  # (t, state) before the last step
+
+    def _initial(self, x: float) -> tuple[float, ...]:
+        return (x,)
+
+    def _next(self, x: float, t_ns: int) -> tuple[float, ...]:
+        """The state after reading ``x`` at ``t_ns`` (> the last reading's time)."""
+        raise NotImplementedError
+
+    def step(self, x: float, t_ns: int) -> float:
+        if self._t is not None and t_ns < self._t:
+            return self._state[0]
+        if self._t is not None and t_ns == self._t:  # a newer reading of the same instant
+            if self._before is None:
+                self._t = None
+            else:
+                self._t, self._state = self._before
+        if self._t is None:
+            self._t, self._state, self._before = t_ns, self._initial(x), None
+            return x
+        self._before = (self._t, self._state)
+        self._state, self._t = self._next(x, t_ns), t_ns
+        return self._state[0]
+
+    def peek(self, x: float, t_ns: int) -> float:
+        if self._t is None or t_ns <= self._t:
+            return x if self._t is None else self._state[0]
+        return self._next(x, t_ns)[0]
+
+
+class OneEuro(_TimedFilter):
+    """The 1€ filter; ``min_cutoff`` and ``d_cutoff`` in Hz, ``beta`` in 1 / (units per second).
+
+    Its state is (previous output -- the paper's hatxprev --, previous filtered speed).
+    """
+
+    __slots__ = ("min_cutoff", "beta", "d_cutoff")
 
     def __init__(self, min_cutoff: float = 1.0, beta: float = 0.0, d_cutoff: float = 1.0) -> None:
         if min_cutoff <= 0 or d_cutoff <= 0 or beta < 0:
@@ -45,79 +91,21 @@ class OneEuro:
         self.min_cutoff, self.beta, self.d_cutoff = float(min_cutoff), float(beta), float(d_cutoff)
         self.reset()
 
-    def reset(self) -> None:
-        self._t: int | None = None
-        self._x = 0.0   # previous output (the paper's hatxprev)
-        self._dx = 0.0  # previous filtered speed
-        self._before: tuple[int, float, float] | None = None  # the state before the last step
+    def _initial(self, x: float) -> tuple[float, ...]:
+        return (x, 0.0)
 
-    def _next(self, x: float, t_ns: int) -> tuple[float, float]:
-        """(output, filtered speed) for ``x`` at ``t_ns``, after at least one sample."""
+    def _next(self, x: float, t_ns: int) -> tuple[float, ...]:
+        previous, speed = self._state
         te = (t_ns - self._t) * NS
-        if te <= 0.0:
-            return self._x, self._dx
         r = TWO_PI * self.d_cutoff * te          # alpha = 1 / (1 + tau / te) = r / (1 + r)
         a = r / (1.0 + r)
-        dx = a * ((x - self._x) / te) + (1.0 - a) * self._dx
+        dx = a * ((x - previous) / te) + (1.0 - a) * speed
         r = TWO_PI * (self.min_cutoff + self.beta * abs(dx)) * te
         a = r / (1.0 + r)
-        return a * x + (1.0 - a) * self._x, dx
-
-    def step(self, x: float, t_ns: int) -> float:
-        if self._t is not None and t_ns < self._t:
-            return self._x
-        if self._t is not None and t_ns == self._t:  # a newer reading of the same instant
-            if self._before is None:
-                self._x = x
-                return x
-            self._t, self._x, self._dx = self._before
-        if self._t is None:
-            self._t, self._x, self._dx, self._before = t_ns, x, 0.0, None
-            return x
-        self._before = (self._t, self._x, self._dx)
-        self._x, self._dx = self._next(x, t_ns)
-        self._t = t_ns
-        return self._x
-
-    def peek(self, x: float, t_ns: int) -> float:
-        if self._t is None:
-            return x
-        return self._next(x, t_ns)[0]
+        return (a * x + (1.0 - a) * previous, dx)
 
 
-class _HeldInput:
-    """A filter of one state value that the input drives between timestamps (``_next``)."""
-
-    __slots__ = ("_t", "_y", "_before")
-
-    def reset(self) -> None:
-        self._t: int | None = None
-        self._y = 0.0
-        self._before: tuple[int, float] | None = None  # the state before the last step
-
-    def _next(self, x: float, t_ns: int) -> float:
-        raise NotImplementedError
-
-    def step(self, x: float, t_ns: int) -> float:
-        if self._t is not None and t_ns < self._t:
-            return self._y
-        if self._t is not None and t_ns == self._t:  # a newer reading of the same instant
-            if self._before is None:
-                self._y = x
-                return x
-            self._t, self._y = self._before
-        if self._t is None:
-            self._t, self._y, self._before = t_ns, x, None
-            return x
-        self._before = (self._t, self._y)
-        self._y, self._t = self._next(x, t_ns), t_ns
-        return self._y
-
-    def peek(self, x: float, t_ns: int) -> float:
-        return x if self._t is None else self._next(x, t_ns)
-
-
-class Exponential(_HeldInput):
+class Exponential(_TimedFilter):
     """First-order low-pass filter with time constant ``tau`` seconds."""
 
     __slots__ = ("tau",)
@@ -128,14 +116,13 @@ class Exponential(_HeldInput):
         self.tau = float(tau)
         self.reset()
 
-    def _next(self, x: float, t_ns: int) -> float:
+    def _next(self, x: float, t_ns: int) -> tuple[float, ...]:
+        y = self._state[0]
         te = (t_ns - self._t) * NS
-        if te <= 0.0:
-            return self._y
-        return self._y + (1.0 - math.exp(-te / self.tau)) * (x - self._y)
+        return (y + (1.0 - math.exp(-te / self.tau)) * (x - y),)
 
 
-class RateLimit(_HeldInput):
+class RateLimit(_TimedFilter):
     """The output follows the input at most ``rate`` units per second."""
 
     __slots__ = ("rate",)
@@ -146,10 +133,8 @@ class RateLimit(_HeldInput):
         self.rate = float(rate)
         self.reset()
 
-    def _next(self, x: float, t_ns: int) -> float:
-        te = (t_ns - self._t) * NS
-        if te <= 0.0:
-            return self._y
-        step = self.rate * te
-        d = x - self._y
-        return self._y + step if d > step else self._y - step if d < -step else x
+    def _next(self, x: float, t_ns: int) -> tuple[float, ...]:
+        y = self._state[0]
+        step = self.rate * (t_ns - self._t) * NS
+        d = x - y
+        return (y + step if d > step else y - step if d < -step else x,)
