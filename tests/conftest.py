@@ -1,6 +1,8 @@
 """Shared fixtures. Every test session gets its own coefficient cache: tests never read or write
 the user's."""
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -26,3 +28,21 @@ def face():
 def runtime(face, _private_coefficient_cache):
     """The default face's runtime in float64, so exact properties can be checked exactly."""
     return Runtime(face, dtype=np.float64)
+
+
+@pytest.fixture
+def headless_window():
+    """Make a moderngl-window offscreen (EGL) window answering to a key table; skip where no EGL."""
+    def make(size: tuple[int, int], keys: type):
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", PendingDeprecationWarning)
+                import moderngl_window
+            cls = moderngl_window.get_local_window_cls("headless")
+            window = cls(size=size, gl_version=(3, 3), backend="egl")
+        except Exception as exc:  # noqa: BLE001 -- no EGL: the reason is the skip message
+            pytest.skip(f"headless rendering unavailable: {exc}")
+        window.keys = keys
+        return window
+
+    return make

@@ -7,7 +7,6 @@ import io
 import sys
 import time
 import types
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -66,21 +65,9 @@ class _Keys:
     R, N, M, Q, ESCAPE = "r", "n", "m", "q", "escape"
 
 
-def _headless_window(size):
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", PendingDeprecationWarning)
-            import moderngl_window
-        cls = moderngl_window.get_local_window_cls("headless")
-        window = cls(size=size, gl_version=(3, 3), backend="egl")
-    except Exception as exc:  # noqa: BLE001 -- no EGL: the reason is the skip message
-        pytest.skip(f"headless rendering unavailable: {exc}")
-    window.keys = _Keys
-    return window
 
-
-def test_the_live_loop_draws_records_and_obeys_the_keys(tmp_path):
-    window = _headless_window((96, 72))
+def test_the_live_loop_draws_records_and_obeys_the_keys(tmp_path, headless_window):
+    window = headless_window((96, 72), _Keys)
     session = open_session(MAPPING, record="run", fps=30, devices=SIM_BOX, record_root=tmp_path)
     out = io.StringIO()
     live = LiveView(session, window, out=out)

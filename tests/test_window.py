@@ -247,25 +247,13 @@ class _FakeTime:
         self.now += seconds
 
 
-def _headless_window(size):
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", PendingDeprecationWarning)
-            import moderngl_window
-        cls = moderngl_window.get_local_window_cls("headless")
-        window = cls(size=size, gl_version=(3, 3), backend="egl")
-    except Exception as exc:  # no EGL: the reason is the skip message
-        pytest.skip(f"headless rendering unavailable: {exc}")
-    window.keys = _Keys
-    return window
 
-
-def test_the_player_draws_frames_and_obeys_the_keys(tmp_path, runtime, monkeypatch):
+def test_the_player_draws_frames_and_obeys_the_keys(tmp_path, runtime, monkeypatch, headless_window):
     clock = _FakeTime()
     monkeypatch.setattr(player, "time", types.SimpleNamespace(perf_counter=clock.perf_counter,
                                                                sleep=clock.sleep))
     path = _take(tmp_path / "take.fap", frames=12, fps=10)
-    window = _headless_window((96, 72))
+    window = headless_window((96, 72), _Keys)
     playback = FapPlayback(path, runtime.face, runtime)
     play = player.Player(playback, window)
 
