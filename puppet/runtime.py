@@ -104,7 +104,8 @@ class Runtime:
         self._spread = spread_matrix(rig, self._passive_rows())
         self._interp = np.array([i for i, p in enumerate(rig.control_points) if p.role == "interpolated"],
                                 dtype=np.int64)
-        self._fold()
+        if self.mode == "precomputed":  # the real-time mode applies each region's own coefficients
+            self._fold()
 
     def _queries(self, region) -> np.ndarray:
         return np.vstack([self.face.vertices[region.vertices], self._p0[self._driven[region.name]]])
@@ -156,7 +157,8 @@ class Runtime:
         return order
 
     def _fold(self) -> None:
-        """B = sum over regions of (its coefficients) @ (its rows of M), as one CSR matrix."""
+        """B = sum over regions of (its coefficients) @ (its rows of M), as one CSR matrix
+        (precomputed mode only: a real-time runtime has no ``B``)."""
         n = len(self.rest)
         blocks = []
         for region in self._regions:
