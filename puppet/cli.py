@@ -91,7 +91,8 @@ def _render(args: argparse.Namespace) -> int:
     """``puppet render``: a bad take, face or path is one line on stderr and exit code 2."""
     from .face import FaceFileError, MissingFeaturePointsError, load_face
     from .fapfile import FapError
-    from .playback import TakeError, render_take
+    from .playback import render_take
+    from .takes import TakeError
     from .rig import RigError
 
     try:

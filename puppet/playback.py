@@ -21,6 +21,7 @@ from .face import Face, load_face
 from .fapfile import FapFrame, iter_fap
 from .render import VIEW_DIRECTIONS, Renderer, write_video
 from .runtime import Runtime
+from .takes import TakeError
 
 VIEWS = tuple(VIEW_DIRECTIONS)
 
@@ -114,9 +115,6 @@ def _not_empty(frames: Iterator[np.ndarray], path: str | os.PathLike) -> Iterato
     yield first
     yield from frames
 
-
-class TakeError(ValueError):
-    """A take that cannot be played (no frames)."""
 
 
 def frame_head(renderer: Renderer, face: Face, view: str) -> None:

@@ -11,7 +11,8 @@ from PIL import Image
 from puppet.demo import demo_take, run_demo
 from puppet.fapfile import FapFrame, read_fap, write_fap
 from puppet import cli
-from puppet.playback import FapPlayback, HeldFaps, TakeError, render_take
+from puppet.playback import FapPlayback, HeldFaps, render_take
+from puppet.takes import TakeError
 
 
 def _frame(values: dict[int, float], viseme=None) -> FapFrame:
