@@ -104,6 +104,12 @@ class Device(ABC):
     def _close(self) -> None:
         """Release the hardware; must not raise."""
 
+    def wire_info(self) -> dict:
+        """What a take must keep to rebuild this device's wire later (JSON-able; e.g. a HID
+        report descriptor read from the hardware). Most devices are fully described by their
+        URL and return ``{}``."""
+        return {}
+
     # -- what callers use --------------------------------------------------------------------
 
     def start(self) -> Device:
