@@ -40,7 +40,7 @@ the device (``device.bus.shutdown()``).
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from typing import Any
 from urllib.parse import unquote
 
@@ -188,6 +188,29 @@ class SignalDecoder:
         return out
 
 
+    def encode(self, values: Mapping[str, float]) -> tuple[int, bytes]:
+        """The frame (id, data) that ``decode`` turns back into ``values``, which must hold exactly
+        one frame id's signals: each raw value is the integer nearest ``(value - offset) / scale``,
+        clamped to the signal's bits, so a value no raw value decodes to exactly comes back
+        different (the caller checks). For replaying logged readings (``simulated_can.CanTwin``)."""
+        for frame_id, (nbytes, _, _, plan) in self._plans.items():
+            if {p[0] for p in plan} == set(values):
+                break
+        else:
+            raise ValueError(f"no frame carries exactly the signals {sorted(values)}")
+        le = be = 0
+        for name, big, shift, mask, sign, identity, scale, offset in plan:
+            value = values[name]
+            raw = round(value) if identity else round((value - offset) / scale)
+            raw = max(-sign, min(raw, sign - 1)) if sign else max(0, min(raw, mask))
+            if big:
+                be |= (raw & mask) << shift
+            else:
+                le |= (raw & mask) << shift
+        data = bytes(a | b for a, b in zip(le.to_bytes(nbytes, "little"), be.to_bytes(nbytes, "big")))
+        return frame_id, data
+
+
 class CantoolsDecoder:
     """DBC messages decoded by cantools itself (multiplexed and float signals included)."""
 
@@ -206,6 +229,20 @@ class CantoolsDecoder:
             raise BadFrame(f"frame 0x{frame_id:x}: {exc}") from None
         rename = self._names
         return {rename.get((message.name, k), k): float(v) for k, v in values.items()}
+
+    def encode(self, values: Mapping[str, float]) -> tuple[int, bytes]:
+        """The frame (id, data) of the message whose signals ``values`` names (all of them, or the
+        ones a multiplexer value selects), encoded by cantools: ``decode``'s inverse."""
+        for message in self._messages.values():
+            signals = {self._names.get((message.name, s.name), s.name): s.name for s in message.signals}
+            if set(values) <= set(signals):
+                try:
+                    data = message.encode({signals[k]: v for k, v in values.items()}, scaling=True,
+                                          strict=False)
+                except Exception as exc:  # cantools' EncodeError and friends: values it cannot pack
+                    raise ValueError(f"message {message.name}: {exc}") from None
+                return message.frame_id, data
+        raise ValueError(f"no message carries the signals {sorted(values)}")
 
 
 def load_dbc(path: str, decoder: str = "auto") -> SignalDecoder | CantoolsDecoder:
@@ -251,8 +288,11 @@ class CanDevice(Device):
             raise DeviceError(f"{name}: decoder {decoder!r} (auto, own or cantools)")
         if not 1 <= timeout_ms <= 1000:
             raise DeviceError(f"{name}: timeout_ms {timeout_ms} (expected 1..1000)")
+        self._dbc_text: str | None = None
         try:
             if dbc is not None:
+                with open(dbc, encoding="latin-1", newline="") as f:  # any bytes, kept exactly
+                    self._dbc_text = f.read()
                 self.decoder: SignalDecoder | CantoolsDecoder = load_dbc(dbc, decoder)
             else:
                 self.decoder = SignalDecoder(_signal(s) for s in signals)  # type: ignore[union-attr]
@@ -293,6 +333,14 @@ class CanDevice(Device):
         bus_kwargs = {k: can.util.cast_from_string(v) for k, v in o.items()}
         return cls(name, interface, unquote(channel) or None, signals=signals, dbc=dbc, decoder=decoder,
                    filter=filt, timeout_ms=timeout_ms, bus_kwargs=bus_kwargs)
+
+    def wire_info(self) -> dict:
+        """What decodes the frames, so a take decodes as recorded later: the DBC file's text (even
+        after the file changed or moved), or the hand-given signals (they may come from a
+        mapping, not the URL)."""
+        if self._dbc_text is not None:
+            return {"dbc": self._dbc_text}
+        return {"signals": [asdict(s) for s in self.decoder.signals]}
 
     # -- Device ------------------------------------------------------------------------------
 

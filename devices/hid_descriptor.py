@@ -39,7 +39,7 @@ Scaling (``ReportLayout``, unless ``raw=True``):
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -348,6 +348,40 @@ class ReportDecoder:
                 out[name] = v * (a if v >= 0 else b) if mode == 4 else (v - lo) * a
         return out
 
+    def encode(self, values: Mapping[str, float]) -> bytes:
+        """Report data (no ID byte) that ``decode`` turns back into ``values``: the inverse of the
+        scaling, for replaying logged readings as reports (``devices.simulated_hid.HidTwin``).
+        Each value becomes the nearest raw value in its field (clamped to the logical range, as
+        ``decode`` clamps); a value that no raw value decodes to exactly therefore comes back
+        different, which the caller checks. Padding and constant bits are 0. ValueError names a
+        channel ``values`` lacks; a non-finite value raises ValueError or OverflowError."""
+        bits = 0
+        for c in self.channels:
+            if c.name not in values:
+                raise ValueError(f"report {c.report_id} needs a value for channel {c.name!r}")
+            raw = self._raw(c, float(values[c.name]))
+            bits |= (raw & ((1 << c.bit_size) - 1)) << c.bit_offset
+        return bits.to_bytes(self.length, "little")
+
+    def _raw(self, c: Channel, value: float) -> int:
+        """The raw field value that ``decode`` scales to ``value`` (or nearest to it)."""
+        lo, hi = c.logical_min, c.logical_max
+        field_lo, field_hi = (-(1 << (c.bit_size - 1)), (1 << (c.bit_size - 1)) - 1) if c.signed \
+            else (0, (1 << c.bit_size) - 1)
+        if self.raw or c.kind == RAW:
+            return _clamp(round(value), field_lo, field_hi)
+        if c.kind == BUTTON_KIND:
+            return 1 if value else 0
+        if c.kind == HAT_KIND:
+            if value == -1.0:  # centred: any value outside the logical range that fits the field
+                return hi + 1 if hi < field_hi else lo - 1 if lo > field_lo else lo
+            return _clamp(lo + round(value * (hi - lo + 1) / 360.0), lo, hi)
+        if lo < 0:
+            raw = round(value * hi) if value >= 0 else round(value * -lo)
+        else:
+            raw = lo + round(value * (hi - lo))
+        return _clamp(raw, lo, hi)
+
     def decode_array(self, reports: np.ndarray) -> np.ndarray:
         """Channel values of many reports' data at once: (n, >= length) uint8 -> (n, channels)."""
         reports = np.asarray(reports, dtype=np.uint8)
@@ -393,6 +427,10 @@ class ReportDecoder:
         return out
 
 
+def _clamp(value: int, lo: int, hi: int) -> int:
+    return lo if value < lo else hi if value > hi else value
+
+
 class ReportLayout:
     """Every input channel of a device, by report ID, and the decoding of raw reports.
 
@@ -413,6 +451,16 @@ class ReportLayout:
     @classmethod
     def from_descriptor(cls, descriptor: bytes | Sequence[int], raw: bool = False) -> ReportLayout:
         return cls(channels_of(parse_descriptor(descriptor)), raw)
+
+    def encode(self, values: Mapping[str, float]) -> bytes:
+        """The raw report (with its ID byte when numbered) that ``decode`` turns back into
+        ``values``, which must hold exactly the channels of one report ID (as ``decode`` returns
+        them); see ``ReportDecoder.encode``. ValueError when no report carries those channels."""
+        for report_id, decoder in self.decoders.items():
+            if set(decoder.names) == set(values):
+                prefix = bytes([report_id]) if self.numbered else b""
+                return prefix + decoder.encode(values)
+        raise ValueError(f"no input report carries exactly the channels {sorted(values)}")
 
     def decode(self, report: bytes, has_id: bool | None = None) -> dict[str, float] | None:
         """The channel values of one raw report, or None if it is not one this layout knows

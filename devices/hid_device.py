@@ -32,6 +32,7 @@ with an ``OSError`` that says so in ``counters.last_error``, so a live session n
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import asdict
 from typing import Any
 from urllib.parse import quote, unquote
 
@@ -84,6 +85,7 @@ class HidDevice(Device):
         if self.fields is not None:
             self.layout = ReportLayout([f.channel() for f in self.fields], raw)
         self.info: dict[str, str] = {}
+        self.descriptor: bytes | None = None  # the report descriptor read at the last open
 
     @classmethod
     def from_url(cls, url: Url, name: str, *, fields: Sequence[FieldSpec | Mapping[str, Any]] | None = None,
@@ -174,6 +176,7 @@ class HidDevice(Device):
         except (OSError, ValueError, AttributeError) as exc:
             raise OSError(f"{self.name}: cannot read the HID report descriptor ({exc or type(exc).__name__}); "
                           "name the channels with ?fields=name:bit_offset:bit_size;...") from None
+        self.descriptor = bytes(descriptor)
         try:
             layout = ReportLayout.from_descriptor(descriptor, self.raw)
         except DescriptorError as exc:
@@ -181,6 +184,16 @@ class HidDevice(Device):
         if not layout.channels:
             raise OSError(f"{self.name}: the HID report descriptor declares no input values")
         return layout
+
+    def wire_info(self) -> dict:
+        """What names and places the channels, so a take can rebuild the same reports later: the
+        fields given by hand (they may come from a mapping, not the URL), else the report
+        descriptor read from the hardware (hex); ``{}`` before the descriptor was first read."""
+        if self.fields is not None:
+            return {"fields": [{k: v for k, v in asdict(f).items() if k != "extra"} for f in self.fields]}
+        if self.descriptor is None:
+            return {}
+        return {"report_descriptor": self.descriptor.hex()}
 
     def _read(self) -> list[dict[str, float]]:
         dev = self._dev

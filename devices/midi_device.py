@@ -15,16 +15,21 @@ Messages become channels:
 The port opener is injected (``open_input``, mido's by default) so tests can feed real
 ``mido.Message`` objects without an ALSA sequencer; a port that fails to open or vanishes makes
 the device ``LOST`` and it retries, like any other unplugged controller.
+
+``MidiTwin`` is the wire twin (``devices.twin``): a ``MidiDevice`` opened from the logged URL on a
+``MessagePort``, fed the messages that make each logged reading.
 """
 
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Iterable, Mapping
+from collections import deque
+from collections.abc import Callable, Iterable, Iterator, Mapping
 
 import mido
 
 from .base import Device, DeviceError, DeviceLost, Url
+from .twin import Twin
 
 POLL = 0.005
 WAIT = 0.03
@@ -59,11 +64,11 @@ class MidiDevice(Device):
         self._msb: dict[tuple[int, int], int] = {}
 
     @classmethod
-    def from_url(cls, url: Url, name: str) -> MidiDevice:
+    def from_url(cls, url: Url, name: str, open_input: Callable[[str], object] = open_port) -> MidiDevice:
         try:
             channel = url.options.get("channel")
             cc14 = [int(c) for c in url.options.get("cc14", "").split(",") if c]
-            return cls(name, url.target.strip("/"), None if channel is None else int(channel), cc14)
+            return cls(name, url.target.strip("/"), None if channel is None else int(channel), cc14, open_input)
         except ValueError as exc:
             raise DeviceError(f"midi URL: {exc}") from None
 
@@ -110,3 +115,80 @@ class MidiDevice(Device):
         if self._port is not None:
             self._port.close()
             self._port = None
+
+
+class MessagePort:
+    """A MIDI input port fed in process (``send``): what a twin opens instead of a real port."""
+
+    def __init__(self) -> None:
+        self._messages: deque[mido.Message] = deque()
+        self.closed = False
+
+    def send(self, message: mido.Message) -> None:
+        self._messages.append(message)
+
+    def iter_pending(self) -> Iterator[mido.Message]:
+        while self._messages:
+            yield self._messages.popleft()
+
+    def close(self) -> None:
+        self.closed = True
+
+
+class MidiTwin(Twin):
+    """``midi://`` wires: the ``MidiDevice`` of the logged URL reading a ``MessagePort``, fed the
+    ``mido.Message``s that make each logged reading (on the device's MIDI channel, or 0).
+
+    ``ccN`` is a control change of ``round(value * 127)``; a 14-bit controller's value that is
+    such a step goes as its MSB alone (what the adapter reads from an MSB), any other as the
+    LSB, led by the MSB when the last one sent differs (the adapter then makes two Samples, the
+    second the reading's); ``pitchbend`` a pitch wheel; ``noteN`` a note on (velocity 127) for
+    a nonzero value, a note off for 0. Values are clamped to the message's range: what no
+    message makes comes back different.
+    """
+
+    def __init__(self, device: MidiDevice, port: MessagePort, url: str) -> None:
+        self.port = port
+        self._msb: dict[int, int] = {}  # 14-bit controller -> the MSB last sent
+        super().__init__(device, url)
+
+    @classmethod
+    def from_url(cls, url: str, name: str, wire_info: Mapping) -> MidiTwin:
+        port = MessagePort()
+        return cls(MidiDevice.from_url(Url.parse(url), name, open_input=lambda _name: port), port, url)
+
+    def _put(self, values: Mapping[str, float]) -> int:
+        if len(values) != 1:
+            raise ValueError(f"a MIDI message sets one channel, not {len(values)}")
+        [(key, value)] = values.items()
+        messages = self._messages(key, float(value))
+        for message in messages:
+            self.port.send(message)
+        return len(messages)
+
+    def _messages(self, key: str, value: float) -> list[mido.Message]:
+        channel = self.device.channel or 0
+        if key == "pitchbend":
+            pitch = round(value * (8192 if value < 0 else 8191))
+            return [mido.Message("pitchwheel", channel=channel, pitch=_clamp(pitch, -8192, 8191))]
+        if key.startswith("note") and key[4:].isdigit():
+            kind = "note_on" if value else "note_off"
+            return [mido.Message(kind, channel=channel, note=int(key[4:]), velocity=127 if value else 0)]
+        if key.startswith("cc") and key[2:].isdigit():
+            control = int(key[2:])
+            step = _clamp(round(value * 127), 0, 127)
+            if control not in self.device.cc14:
+                return [mido.Message("control_change", channel=channel, control=control, value=step)]
+            if step / 127 == value:
+                self._msb[control] = step
+                return [mido.Message("control_change", channel=channel, control=control, value=step)]
+            msb, lsb = divmod(_clamp(round(value * 16383), 0, 16383), 128)
+            lead = [] if self._msb.get(control) == msb else [
+                mido.Message("control_change", channel=channel, control=control, value=msb)]
+            self._msb[control] = msb
+            return lead + [mido.Message("control_change", channel=channel, control=control + 32, value=lsb)]
+        raise ValueError(f"no MIDI message sets a channel named {key!r}")
+
+
+def _clamp(value: int, lo: int, hi: int) -> int:
+    return lo if value < lo else hi if value > hi else value

@@ -13,6 +13,9 @@ rig should not listen on the network by accident) and turns OSC messages into ch
 
 Packets are parsed with python-osc's own packet parser; a datagram that is not OSC is counted in
 ``bad_frames`` and skipped.
+
+``OscTwin`` is the wire twin (``devices.twin``): an ``OscDevice`` on a free loopback port, sent
+each logged reading as OSC over UDP.
 """
 
 from __future__ import annotations
@@ -20,9 +23,13 @@ from __future__ import annotations
 import socket
 from collections.abc import Mapping
 
+from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
+from pythonosc.osc_message import OscMessage
+from pythonosc.osc_message_builder import OscMessageBuilder
 from pythonosc.osc_packet import OscPacket, ParseError
 
 from .base import Device, DeviceError, Url
+from .twin import Twin
 
 BLEND_VALUE = "/VMC/Ext/Blend/Val"
 BLEND_APPLY = "/VMC/Ext/Blend/Apply"
@@ -106,3 +113,52 @@ class OscDevice(Device):
 
 def _is_number(value: object) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+class OscTwin(Twin):
+    """``osc://`` wires: an ``OscDevice`` bound on a free loopback port (not the logged one, which
+    a live rig may hold), sent each logged reading in one datagram built by python-osc, its
+    values as doubles (OSC type ``d``), so every float but NaN comes back bit for bit.
+
+    A one-channel reading is a plain message (``/name value``); a reading of several channels is
+    what a VMC face tracker sends, ``/VMC/Ext/Blend/Val name value`` for each and
+    ``/VMC/Ext/Blend/Apply``, in one bundle; so is a one-channel reading whose name is a VMC
+    address (as a plain message it would be read as VMC).
+    """
+
+    def __init__(self, device: OscDevice, sender: socket.socket, url: str) -> None:
+        self.sender = sender
+        super().__init__(device, url)
+
+    @classmethod
+    def from_url(cls, url: str, name: str, wire_info: Mapping) -> OscTwin:
+        OscDevice.from_url(Url.parse(url), name)  # the logged URL must be a valid one
+        return cls(OscDevice(name, "127.0.0.1", 0), socket.socket(socket.AF_INET, socket.SOCK_DGRAM), url)
+
+    def _put(self, values: Mapping[str, float]) -> int:
+        self.sender.sendto(_datagram(values), self.device.address)
+        return 1
+
+    def close(self) -> None:
+        super().close()
+        self.sender.close()
+
+
+def _datagram(values: Mapping[str, float]) -> bytes:
+    """One reading as OSC: a plain message for one channel, else a VMC bundle."""
+    if len(values) == 1 and "/" + next(iter(values)) not in (BLEND_VALUE, BLEND_APPLY):
+        [(name, value)] = values.items()
+        return _message("/" + name, value).dgram
+    bundle = OscBundleBuilder(IMMEDIATELY)
+    for name, value in values.items():
+        bundle.add_content(_message(BLEND_VALUE, name, value))
+    bundle.add_content(_message(BLEND_APPLY))
+    return bundle.build().dgram
+
+
+def _message(address: str, *args: str | float) -> OscMessage:
+    builder = OscMessageBuilder(address)
+    for arg in args:
+        kind = builder.ARG_TYPE_STRING if isinstance(arg, str) else builder.ARG_TYPE_DOUBLE
+        builder.add_arg(arg if isinstance(arg, str) else float(arg), kind)
+    return builder.build()

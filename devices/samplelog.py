@@ -5,6 +5,14 @@ the Sample exactly (JSON keeps floats to the last bit with ``repr``), one line e
 flushed as they come, so a killed recorder leaves every complete line readable (a last, partial
 line is skipped with a warning). The first line may be a header ``{"facepuppet_samples": 1}``.
 
+A take's log also carries **events**, the things besides Samples that decide what a take
+records, so that replaying the log reproduces its .fap exactly:
+``{"t_ns": ..., "event": "frame"}`` (the recorder wrote its frames up to here),
+``{"t_ns": ..., "event": "hold", "states": {"box": "lost"}}`` (a device went away: the pose is
+held from ``t_ns``; the gap in the take), ``{"t_ns": ..., "event": "resume"}`` (every device is
+back) and ``{"t_ns": ..., "event": "reset"}`` (the performer asked for the neutral pose).
+``read_take_log`` yields both, in order; ``read_sample_log`` only the Samples.
+
 ``ReplayDevice`` (``replay:///path/to/take.samples.jsonl?speed=1``) plays a log back as a device:
 with the original spacing between samples (``speed`` > 0 scales it) or as fast as the reader
 takes (``speed=0``), stamping each replayed Sample with the time of its replay; ``device=NAME``
@@ -18,6 +26,7 @@ import os
 import time
 import warnings
 from collections.abc import Iterator, Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO
 
@@ -26,8 +35,20 @@ from .base import Device, DeviceError, Sample, Url
 HEADER = {"facepuppet_samples": 1}
 
 
+EVENTS = ("frame", "hold", "resume", "reset")
+
+
+@dataclass(frozen=True)
+class LogEvent:
+    """Something besides a Sample that a take's log records (see the module docstring)."""
+
+    t_ns: int
+    kind: str
+    data: dict = field(default_factory=dict)
+
+
 class SampleLogWriter:
-    """Appends Samples to a log, one flushed line each."""
+    """Appends Samples (and events) to a log, one flushed line each."""
 
     def __init__(self, path: str | os.PathLike) -> None:
         self.path = Path(path)
@@ -41,6 +62,10 @@ class SampleLogWriter:
         self._file.flush()
         self.count += 1
 
+    def event(self, event: LogEvent) -> None:
+        self._file.write(json.dumps({"t_ns": event.t_ns, "event": event.kind, **event.data}) + "\n")
+        self._file.flush()
+
     def close(self) -> None:
         self._file.close()
 
@@ -52,7 +77,13 @@ class SampleLogWriter:
 
 
 def read_sample_log(path: str | os.PathLike) -> Iterator[Sample]:
-    """The Samples of a log, streamed; a bad line names the file and line (a partial last one warns)."""
+    """The Samples of a log, streamed (events skipped)."""
+    return (entry for entry in read_take_log(path) if isinstance(entry, Sample))
+
+
+def read_take_log(path: str | os.PathLike) -> Iterator[Sample | LogEvent]:
+    """The Samples and events of a log, streamed in order; a bad line names the file and line
+    (a partial last one warns)."""
     with open(path, encoding="utf-8") as file:
         lines = iter(enumerate(file, 1))
         for number, text in lines:
@@ -66,7 +97,17 @@ def read_sample_log(path: str | os.PathLike) -> Iterator[Sample]:
                 raise ValueError(f"{path}:{number}: expected a JSON sample, found {text[:60]!r}") from None
             if data == HEADER:
                 continue
-            yield _sample(data, f"{path}:{number}")
+            if isinstance(data, dict) and "event" in data:
+                yield _event(data, f"{path}:{number}")
+            else:
+                yield _sample(data, f"{path}:{number}")
+
+
+def _event(data: dict, where: str) -> LogEvent:
+    kind, t_ns = data.pop("event"), data.pop("t_ns", None)
+    if kind not in EVENTS or not isinstance(t_ns, int):
+        raise ValueError(f"{where}: expected an event {EVENTS} with an integer t_ns, found {kind!r} at {t_ns!r}")
+    return LogEvent(t_ns, kind, data)
 
 
 def _sample(data: object, where: str) -> Sample:

@@ -44,7 +44,7 @@ import tempfile
 import threading
 import time
 import tty
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 
 from .base import DeviceError, Url
 from .serial_port import (
@@ -54,6 +54,7 @@ from .serial_port import (
     encode_slip_frame,
     make_parser,
 )
+from .twin import Twin
 
 PENDING_MAX = 8192      # bytes waiting for the reader before whole readings are dropped
 MAX_BATCH = 0.1         # at most this many seconds of readings are caught up after a stall
@@ -269,6 +270,25 @@ class PtyJoystick:
                 self._stop.wait(0.01)
 
 
+def _joystick(url: Url, paced: bool) -> PtyJoystick:
+    """The PtyJoystick a sim://joystick URL describes: sending at the URL's rate when ``paced``,
+    else only when told (``rate=None``: a twin writes the logged readings itself)."""
+    if url.target.strip("/") != "joystick":
+        raise DeviceError(f"sim URL: expected sim://joystick?protocol=ascii&rate=200, got target {url.target!r}")
+    options = url.options
+    unknown = set(options) - {"protocol", "rate", "channels", "format", "style"}
+    if unknown:
+        raise DeviceError(f"sim URL: unknown option(s) {sorted(unknown)}")
+    channels = options.get("channels", "6")
+    try:
+        rate = float(options.get("rate", "200"))
+        names = [f"ch{i}" for i in range(int(channels))] if channels.isdigit() else channels.split(",")
+        return PtyJoystick(options.get("protocol", "ascii"), (rate if rate > 0 else math.inf) if paced else None,
+                           fmt=options.get("format", "i16"), style=options.get("style", "csv"), names=names)
+    except ValueError as exc:
+        raise DeviceError(f"sim URL: {exc}") from None
+
+
 class SimulatedSerialDevice(SerialDevice):
     """``sim://joystick?...``: a SerialDevice reading a PtyJoystick it starts itself."""
 
@@ -280,22 +300,7 @@ class SimulatedSerialDevice(SerialDevice):
 
     @classmethod
     def from_url(cls, url: Url, name: str) -> SimulatedSerialDevice:
-        if url.target.strip("/") != "joystick":
-            raise DeviceError(f"sim URL: expected sim://joystick?protocol=ascii&rate=200, got target {url.target!r}")
-        options = dict(url.options)
-        unknown = set(options) - {"protocol", "rate", "channels", "format", "style"}
-        if unknown:
-            raise DeviceError(f"sim URL: unknown option(s) {sorted(unknown)}")
-        channels = options.get("channels", "6")
-        try:
-            rate = float(options.get("rate", "200"))
-            names = [f"ch{i}" for i in range(int(channels))] if channels.isdigit() else channels.split(",")
-            joystick = PtyJoystick(options.get("protocol", "ascii"), rate if rate > 0 else math.inf,
-                                   fmt=options.get("format", "i16"), style=options.get("style", "csv"),
-                                   names=names)
-        except ValueError as exc:
-            raise DeviceError(f"sim URL: {exc}") from None
-        return cls(name, joystick)
+        return cls(name, _joystick(url, paced=True))
 
     def _open(self) -> None:
         if not self._joystick_started:  # once: after that, unplug() and replug() are the test's
@@ -309,4 +314,62 @@ class SimulatedSerialDevice(SerialDevice):
         self._joystick_started = False
 
 
-__all__ = ["PtyJoystick", "SimulatedSerialDevice", "encode_reading", "sine_sliders"]
+# -- wire twins ---------------------------------------------------------------------------------
+
+class SerialTwin(Twin):
+    """``serial://`` and ``sim://`` wires: a PtyJoystick sending nothing by itself (``rate=None``),
+    a serial adapter reading its pseudo-terminal with the logged protocol, format and channel
+    names, and logged readings written on it as the adapter parses them.
+
+    ascii readings go as ``name=value`` pairs with ``repr`` floats, which parse back bit for bit
+    (NaN and infinities excepted: the parser refuses them, so the adapter reports a bad frame);
+    the line must stay within ``MAX_LINE`` bytes. cobs and slip frames carry the values in the
+    adapter's channel order, as int16 (integers -32768..32767 only) or float32 (float32 values
+    only): anything else comes back different or cannot be packed.
+    """
+
+    def __init__(self, device: SerialDevice, joystick: PtyJoystick, url: str) -> None:
+        self.joystick = joystick
+        super().__init__(device, url)
+
+    @classmethod
+    def from_url(cls, url: str, name: str, wire_info: Mapping) -> SerialTwin:
+        options = Url.parse(url).options
+        joystick = PtyJoystick(rate=None)  # only a carrier: the twin writes the wire bytes
+        decoding = {k: v for k, v in options.items() if k in ("protocol", "format", "channels")}
+        try:
+            device = SerialDevice.from_url(Url("serial", joystick.path, decoding), name)
+        except DeviceError:
+            joystick.close()
+            raise
+        return cls(device, joystick.start(), url)
+
+    def _put(self, values: Mapping[str, float]) -> int:
+        device = self.device
+        if device.protocol == "ascii":
+            line = ",".join(f"{k}={float(v)!r}" for k, v in values.items()) + "\n"
+            data = line.encode("ascii")
+        else:
+            names = device.channels or [f"ch{i}" for i in range(len(values))]
+            if set(names) != set(values):
+                raise ValueError(f"a {device.protocol} frame carries the channels {list(names)} in order")
+            data = encode_reading([values[k] for k in names], device.protocol, device.fmt)
+        if not self.joystick.write(data):
+            raise ValueError(f"{len(data)} bytes do not fit the pseudo-terminal")
+        return 1
+
+    def close(self) -> None:
+        super().close()
+        self.joystick.close()
+
+
+class SimTwin(SerialTwin):
+    """``sim://joystick`` wires: the ``SimulatedSerialDevice`` itself, its joystick unpaced."""
+
+    @classmethod
+    def from_url(cls, url: str, name: str, wire_info: Mapping) -> SimTwin:
+        joystick = _joystick(Url.parse(url), paced=False)
+        return cls(SimulatedSerialDevice(name, joystick), joystick, url)
+
+
+__all__ = ["PtyJoystick", "SerialTwin", "SimTwin", "SimulatedSerialDevice", "encode_reading", "sine_sliders"]

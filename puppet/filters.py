@@ -71,6 +71,16 @@ class _TimedFilter:
         self._state, self._t = self._next(x, t_ns), t_ns
         return self._state[0]
 
+    def snapshot(self) -> list:
+        """The filter's state as JSON-able data (floats kept exact), for ``restore``."""
+        before = None if self._before is None else [self._before[0], list(self._before[1])]
+        return [self._t, list(self._state), before]
+
+    def restore(self, data: list) -> None:
+        t, state, before = data
+        self._t, self._state = t, tuple(state)
+        self._before = None if before is None else (before[0], tuple(before[1]))
+
     def peek(self, x: float, t_ns: int) -> float:
         if self._t is None or t_ns <= self._t:
             return x if self._t is None else self._state[0]

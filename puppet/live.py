@@ -9,7 +9,7 @@ the latency from the newest Sample to the frame drawn (median over the last seco
 until samples arrive) and each device's state; ``REC`` and the take's folder while recording.
 
 Keys: R starts a take (named ``--record NAME``, default "take": folders ``NAME_001``...) and
-stops it; N neutral pose (``session.mapping.reset()``: every channel back to rest); M toggles a
+stops it; N neutral pose (``session.neutral()``: every channel back to rest, in the take too); M toggles a
 channel monitor printed to the terminal (channel, raw, shaped, targets; a few times a second);
 Q or Escape quits, finishing any take first so it is complete.
 
@@ -160,9 +160,7 @@ class LiveView:
                 self.take = Path(self.session.start_recording())
                 print(f"recording {self.take}", file=sys.stderr)
         elif key == keys.N:
-            reset = getattr(self.session.mapping, "reset", None)
-            if reset is not None:
-                reset()
+            self.session.neutral()
         elif key == keys.M:
             self.monitor = not self.monitor
             self._monitor_at = -1.0

@@ -85,6 +85,8 @@ from urllib.parse import parse_qsl, urlencode, urlsplit
 import numpy as np
 import yaml
 
+from devices.base import Sample
+
 from .face import AU
 from .faptable import N_FAPS, faps
 from .filters import Exponential, OneEuro, RateLimit
@@ -839,6 +841,24 @@ class _Channel:
         self.t_ns = t_ns
         self.seq = seq
 
+    _STATE = ("raw", "pre", "value", "out", "t_ns", "seq", "pressed", "latched")
+
+    def snapshot(self) -> dict:
+        """Everything ``update`` has built up, as JSON-able data (see ``Mapping.snapshot``)."""
+        data = {key: getattr(self, key) for key in self._STATE}
+        for key in ("smoother", "limiter"):
+            f = getattr(self, key)
+            data[key] = None if f is None else f.snapshot()
+        return data
+
+    def restore(self, data: dict) -> None:
+        for key in self._STATE:
+            setattr(self, key, data[key])
+        for key in ("smoother", "limiter"):
+            f = getattr(self, key)
+            if f is not None and data.get(key) is not None:
+                f.restore(data[key])
+
     def preview(self, t_ns: int) -> float:
         """The value a sample repeating the last input at ``t_ns`` would give (nothing is kept)."""
         x = self.pre
@@ -926,6 +946,7 @@ class Mapping:
         self.devices = dict(devices)
         self.bad_values = 0
         self._seq = 0
+        self._specs = dict(channels)
         self._channels = {name: _Channel(spec) for name, spec in channels.items()}
         self._by_device: dict[str, dict[str, _Channel]] = {}
         for spec in channels.values():
@@ -1034,11 +1055,53 @@ class Mapping:
         """Every channel: raw value, shaped value and the targets it drives (for a monitor)."""
         return [ChannelState(c.name, c.raw, c.value, tuple(c.targets)) for c in self._channels.values()]
 
+    def drives(self, channel: str) -> tuple[set[int], set[str]]:
+        """What a channel (``device.channel``) moves: its FAP slots (0-based) and the high-level
+        kinds (``viseme``, ``expression``, ``muscle``) among its targets."""
+        if channel not in self._channels:
+            raise KeyError(f"{self.file}: no channel {channel!r}; channels: {', '.join(self._channels)}")
+        c = self._channels[channel]
+        slots: set[int] = set()
+        kinds: set[str] = set()
+        for t in (*self._faps, *self._muscles, *self._visemes, *self._expressions):
+            if c in t.sources:
+                slots.update(t.slots)
+                if t.kind in ("viseme", "expression", "muscle"):
+                    kinds.add(t.kind)
+        return slots, kinds
+
     def reset(self) -> None:
         """Every channel back to rest (no sample seen, filters empty, buttons released)."""
         for c in self._channels.values():
             c.reset()
         self._seq = 0
+
+    def snapshot(self) -> dict:
+        """The state the fed Samples left (raw and shaped values, filters, buttons), JSON-able
+        and exact: a take keeps it from its first frame, so replaying the take's log from it
+        gives the same poses as the live session did."""
+        return {"seq": self._seq, "channels": {name: c.snapshot() for name, c in self._channels.items()}}
+
+    def restore(self, snapshot: dict, recorded: Mapping | None = None) -> None:
+        """Take up a ``snapshot`` made by ``recorded`` (default: this mapping): exactly for every
+        channel shaped the same in both, and for the others by feeding their last raw input
+        again (their filters start settled on it). A re-mapped take starts from where the
+        performer's hands were."""
+        self.reset()
+        self._seq = snapshot["seq"]
+        specs = self._specs if recorded is None else recorded._specs
+        readings: dict[tuple[int, str], dict[str, float]] = {}
+        for name, data in snapshot["channels"].items():
+            channel = self._channels.get(name)
+            if channel is None:
+                continue
+            if specs.get(name) == self._specs[name]:
+                channel.restore(data)
+            elif data["raw"] is not None and data["t_ns"] is not None:
+                device, _, source = name.partition(".")
+                readings.setdefault((data["t_ns"], device), {})[source] = data["raw"]
+        for (t_ns, device), values in sorted(readings.items()):
+            self.feed(Sample(t_ns, device, values))
 
     def __repr__(self) -> str:
         return (f"Mapping({self.file!r}: {len(self.devices)} devices, {len(self._channels)} channels, "

@@ -20,13 +20,16 @@ Holding the pose
     their filtered values. When the device is back (OPEN) the clock runs again.
 
 Recording
-    ``start_recording()`` opens a ``TakeRecorder``; tick k of the take is at
-    ``t0 + k / fps`` (t0: the clock when recording started). Each frame writes the Pose for
-    every tick that has passed since the last written one, evaluated *between* the Samples
-    (ticks before a Sample's timestamp are written before that Sample is fed), so the .fap has
-    exactly ``fps`` frames per second of take time whatever the loop rate, and a slow loop
-    still writes the poses the performer made rather than repeating the latest one.
-
+    ``start_recording()`` opens a ``TakeRecorder`` and a ``TakeClock`` (``puppet.takeclock``):
+    tick k of the take is at ``t0 + k / fps`` (t0: the clock when recording started), written
+    *between* the Samples, so the .fap has exactly ``fps`` frames per second of take time
+    whatever the loop rate, and a slow loop still writes the poses the performer made. Every
+    Sample goes to the take's raw log, and so does every other thing that decides a frame --
+    a device lost (``hold``: the gap in the take) or back (``resume``), the neutral key
+    (``reset``), a loop frame that wrote ticks (``frame``) -- together with the mapping's state
+    at t0 in the take's metadata, so that ``puppet.replay`` rebuilds the .fap exactly.
+    ``layer=`` (a ``takeclock.Layer``) records a pass over an earlier take: the face shows and
+    the take gets the base take's frames with the armed FAPs replaced by the live pose.
 Muscles
     ``Pose.muscles`` is carried in the Frame but not drawn: the runtime has FAP drivers only
     (``Runtime.fap_controls``); muscle targets do nothing to the mesh yet.
@@ -48,9 +51,13 @@ from pathlib import Path
 import numpy as np
 
 from devices import Device, State, open_device
+from devices.base import Sample
+from devices.samplelog import LogEvent
 
 from .mapping import Pose, load_mapping
 from .runtime import Runtime
+from .takeclock import Layer, TakeClock
+from .takes import TakeRecorder, take_fap
 
 
 @dataclass
@@ -73,9 +80,13 @@ class LiveSession:
 
     def __init__(self, mapping_path: str | os.PathLike, *, face=None,
                  devices: dict[str, Device] | None = None, record_root: str | os.PathLike | None = None,
-                 take_name: str = "take", fps: int = 30) -> None:
+                 take_name: str = "take", fps: int = 30, layer_over: str | os.PathLike | None = None,
+                 arm: list[str] | tuple[str, ...] = ()) -> None:
         self.mapping_path = Path(mapping_path)
         self.mapping = load_mapping(mapping_path)  # checked before anything opens
+        self.layer_over = None if layer_over is None else take_fap(layer_over)
+        self.arm = tuple(arm)
+        self.layer = None if self.layer_over is None else Layer.armed(self.layer_over, self.mapping, self.arm)
         if isinstance(face, Runtime):
             self.runtime = face
         else:
@@ -114,14 +125,15 @@ class LiveSession:
         self._vertices = np.empty_like(self.runtime.rest)
         self._normals = np.empty_like(self.runtime.rest)
         self._hold_ns: int | None = None    # pose time of the last frame with every device open
+        self._held = False                  # whether the pose is held (a device away)
         self._last_pose_ns: int | None = None
         self._have_mesh = False
+        self._reset_at: int | None = None   # the neutral key, applied at the next frame
         self.newest_sample_ns: int | None = None
         self.samples_fed = 0
         self.frames = 0
         self._recorder = None
-        self._t0 = 0
-        self._tick = 0
+        self._clock: TakeClock | None = None
 
     # -- the live loop ----------------------------------------------------------------------
 
@@ -133,34 +145,67 @@ class LiveSession:
         if all(s is State.OPEN for s in states.values()):
             pose_ns = now
             self._hold_ns = now
+            if self._held:
+                self._held = False
+                self._apply(LogEvent(now, "resume"))
         else:
             pose_ns = now if self._hold_ns is None else min(now, self._hold_ns)
+            if not self._held and self._hold_ns is not None:
+                self._held = True
+                away = {n: s.name.lower() for n, s in states.items() if s is not State.OPEN}
+                self._apply(LogEvent(self._hold_ns, "hold", {"states": away}))
+        if self._reset_at is not None:
+            self._apply(LogEvent(self._reset_at, "reset"))
+            self._reset_at = None
 
         if len(batches) == 1:
             samples = batches[0]
         else:
             samples = list(heapq.merge(*batches, key=lambda s: s.t_ns))
-        recorder = self._recorder
         for sample in samples:
-            if recorder is not None:
-                self._write_ticks(sample.t_ns)
-                recorder.sample(sample)
-            self.mapping.feed(sample)
+            self._apply(sample)
             if self.newest_sample_ns is None or sample.t_ns > self.newest_sample_ns:
                 self.newest_sample_ns = sample.t_ns
         self.samples_fed += len(samples)
-        if recorder is not None:
-            self._write_ticks(now + 1)  # every tick at or before now
+        if self._clock is not None and self._clock.due(now):
+            self._apply(LogEvent(now, "frame"))
 
         pose = self.mapping.pose(pose_ns)
-        if samples or pose_ns != self._last_pose_ns or not self._have_mesh:
-            d, motions = self.runtime.fap_controls(pose.fap, viseme=pose.viseme, expression=pose.expression)
+        if samples or pose_ns != self._last_pose_ns or not self._have_mesh or self.layer is not None:
+            fap, viseme, expression = pose.fap, pose.viseme, pose.expression
+            if self.layer is not None:
+                fap, viseme, expression = self._layered(now, pose)
+            d, motions = self.runtime.fap_controls(fap, viseme=viseme, expression=expression)
             self.runtime.deform_with_normals(d, motions, out=self._vertices, normals_out=self._normals)
             self._have_mesh = True
         # else: nothing changed since the last frame (a held pose): the buffers already hold it
         self._last_pose_ns = pose_ns
         self.frames += 1
         return Frame(self._vertices, self._normals, pose, now, self.newest_sample_ns, states, len(samples))
+
+    def neutral(self, now_ns: int | None = None) -> None:
+        """Every channel back to rest (the neutral key), at the next frame (and so in the take)."""
+        self._reset_at = time.monotonic_ns() if now_ns is None else int(now_ns)
+
+    def _apply(self, entry: Sample | LogEvent) -> None:
+        """One Sample or event: into the take (its log and its clock) while recording."""
+        if self._clock is not None:
+            if isinstance(entry, Sample):
+                self._recorder.sample(entry)
+            else:
+                self._recorder.event(entry)
+            self._clock.apply(entry)
+        elif isinstance(entry, Sample):
+            self.mapping.feed(entry)
+        elif entry.kind == "reset":
+            self.mapping.reset()
+
+    def _layered(self, now: int, pose: Pose):
+        """The layered pass as shown: the base take where the take is now (its start before)."""
+        k = 0
+        if self._clock is not None:
+            k = max(0, (now - self._clock.t0_ns) * self.fps // 1_000_000_000)
+        return self.layer.merge(k, pose)
 
     @property
     def states(self) -> dict[str, State]:
@@ -176,33 +221,28 @@ class LiveSession:
         """Start a take under ``record_root`` (its first frame is at ``now_ns``, default now)."""
         if self._recorder is not None:
             raise RuntimeError("already recording")
-        from .takes import TakeRecorder
-
+        t0 = time.monotonic_ns() if now_ns is None else int(now_ns)
+        hold_ns = self._hold_ns if self._held else None
+        layer = None
+        if self.layer_over is not None:
+            self.layer = Layer.armed(self.layer_over, self.mapping, self.arm)  # from the base's start
+            layer = Layer.armed(self.layer_over, self.mapping, self.arm)
+        extra = {"t0_ns": t0, "hold_ns": hold_ns, "mapping_state": self.mapping.snapshot(),
+                 "wire": {name: d.wire_info() for name, d in self.devices.items()},
+                 "layer": None if layer is None else layer.spec()}
         self._recorder = TakeRecorder(self.record_root, self.take_name, self.fps,
-                                      mapping_path=self.mapping_path, devices=self.urls)
-        self._t0 = time.monotonic_ns() if now_ns is None else int(now_ns)
-        self._tick = 0
+                                      mapping_path=self.mapping_path, devices=self.urls, extra=extra)
+        self._clock = TakeClock(self.mapping, self._recorder.frame, t0, self.fps, hold_ns=hold_ns, layer=layer)
         return self._recorder.folder
 
     def stop_recording(self) -> Path:
         """Finish the take (frames up to the last ``frame()``); returns its folder."""
         if self._recorder is None:
             raise RuntimeError("not recording")
-        recorder, self._recorder = self._recorder, None
+        recorder, self._recorder, self._clock = self._recorder, None, None
+        if self.layer_over is not None:  # the next pass shows the base from its start again
+            self.layer = Layer.armed(self.layer_over, self.mapping, self.arm)
         return recorder.close()
-
-    def _tick_ns(self, k: int) -> int:
-        return self._t0 + (k * 1_000_000_000) // self.fps
-
-    def _write_ticks(self, before_ns: int) -> None:
-        """Write the pose of every tick strictly before ``before_ns`` not yet written."""
-        recorder = self._recorder
-        while (t := self._tick_ns(self._tick)) < before_ns:
-            if self._hold_ns is not None and any(d.state is not State.OPEN for d in self.devices.values()):
-                t = min(t, self._hold_ns)
-            pose = self.mapping.pose(t)
-            recorder.frame(pose.fap, pose.viseme, pose.expression)
-            self._tick += 1
 
     # -- closing ----------------------------------------------------------------------------
 

@@ -8,9 +8,11 @@ succeeds twice, so two recorders can never write into one take) with
 * ``samples.jsonl``: every raw Sample as it arrived (``devices.samplelog``), flushed per sample,
   so the take can be re-mapped later;
 * ``take.json``: the metadata -- name, fps, start time (UTC, ISO 8601), the mapping's path and
-  text, the devices' URLs, and, once the recorder closes, the frame and sample counts. It is
-  written when recording starts and rewritten (atomically) when it ends, so a take that crashed
-  still says what it was.
+  text, the devices' URLs, what the session adds to replay the take exactly (``t0_ns``: the
+  clock of frame 0, ``mapping_state``: the mapping's state then, ``hold_ns``, ``wire``: each
+  device's ``wire_info()``, ``layer``: the base take of a layered pass) and, once the recorder
+  closes, the frame and sample counts. It is written when recording starts and rewritten
+  (atomically) when it ends, so a take that crashed still says what it was.
 
 A killed recorder leaves a readable take: every complete frame and every complete sample line.
 """
@@ -21,14 +23,14 @@ import datetime as _dt
 import json
 import os
 import re
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from devices.base import Sample
-from devices.samplelog import SampleLogWriter, read_sample_log
+from devices.samplelog import LogEvent, SampleLogWriter, read_sample_log, read_take_log
 
 from .fapfile import FapStream, FapWriter, read_fap
 
@@ -61,7 +63,8 @@ class TakeRecorder:
     """Records one take: raw Samples as they come, Pose frames at the take's fps."""
 
     def __init__(self, root: str | os.PathLike, name: str, fps: int = 25, *,
-                 mapping_path: str | os.PathLike | None = None, devices: Mapping[str, str] | None = None) -> None:
+                 mapping_path: str | os.PathLike | None = None, devices: Mapping[str, str] | None = None,
+                 extra: Mapping[str, object] | None = None) -> None:
         if fps not in FPS_CHOICES:
             raise TakeError(f"take fps {fps}: choose one of {FPS_CHOICES}")
         self.folder = next_take_folder(root, name)
@@ -70,7 +73,7 @@ class TakeRecorder:
             "name": name, "fps": fps, "started": _dt.datetime.now(_dt.timezone.utc).isoformat(),
             "mapping": None if mapping_path is None else str(mapping_path),
             "mapping_text": None if mapping_path is None else Path(mapping_path).read_text("utf-8"),
-            "devices": dict(devices or {}), "frames": None, "samples": None,
+            "devices": dict(devices or {}), **dict(extra or {}), "frames": None, "samples": None,
         }
         self._write_meta()
         self._fap = FapWriter(self.folder / FAP_NAME, fps, f"{name}_{self.folder.name[-3:]}")
@@ -81,14 +84,13 @@ class TakeRecorder:
         """Log one raw Sample (call for every Sample, in arrival order)."""
         self._log.write(sample)
 
+    def event(self, event: LogEvent) -> None:
+        """Log one event (hold, resume, reset, frame) in its place among the Samples."""
+        self._log.event(event)
+
     def frame(self, fap: np.ndarray, viseme: tuple | None = None, expression: tuple | None = None) -> None:
         """Write one frame: 68 low-level FAP values (FAPU; FAP 1/2 columns ignored) and the blends."""
-        values = np.asarray(fap, dtype=float)
-        mask = np.ones(68, dtype=bool)
-        mask[:2] = viseme is not None, expression is not None
-        self._fap.write_frame(values, mask,
-                              viseme=None if viseme is None else (*viseme[:3], 0),
-                              expression=None if expression is None else (*expression[:4], 0, 0))
+        write_pose(self._fap, fap, viseme, expression)
         self.frames += 1
 
     def close(self) -> Path:
@@ -111,6 +113,16 @@ class TakeRecorder:
         partial.replace(self.folder / META_NAME)
 
 
+def write_pose(writer: FapWriter, fap: np.ndarray, viseme: tuple | None = None,
+               expression: tuple | None = None) -> None:
+    """Write a Pose's values as one .fap frame: FAPs 3..68 always, FAP 1 / 2 when given."""
+    mask = np.ones(68, dtype=bool)
+    mask[:2] = viseme is not None, expression is not None
+    writer.write_frame(np.asarray(fap, dtype=float), mask,
+                       viseme=None if viseme is None else (*viseme[:3], 0),
+                       expression=None if expression is None else (*expression[:4], 0, 0))
+
+
 @dataclass
 class Take:
     """A recorded take, read back."""
@@ -129,8 +141,12 @@ class Take:
     def stream(self) -> FapStream:
         return read_fap(self.fap_path)
 
-    def samples(self):
+    def samples(self) -> Iterator[Sample]:
         return read_sample_log(self.log_path)
+
+    def entries(self) -> Iterator[Sample | LogEvent]:
+        """The log's Samples and events, in order (what replay feeds a ``TakeClock``)."""
+        return read_take_log(self.log_path)
 
 
 def open_take(folder: str | os.PathLike) -> Take:
@@ -144,3 +160,13 @@ def open_take(folder: str | os.PathLike) -> Take:
     except json.JSONDecodeError as exc:
         raise TakeError(f"{meta_path}:{exc.lineno}: not valid JSON ({exc.msg})") from None
     return Take(folder, meta)
+
+
+def take_fap(path: str | os.PathLike) -> Path:
+    """The .fap of a take given as its folder or as the .fap itself."""
+    path = Path(path)
+    if path.is_dir():
+        return open_take(path).fap_path
+    if not path.exists():
+        raise TakeError(f"{path}: no such take (expected a take folder or a .fap file)")
+    return path

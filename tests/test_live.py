@@ -15,6 +15,7 @@ import pytest
 from puppet import cli
 from puppet.fapfile import iter_fap
 from puppet.live import LiveStats, LiveView, live_title, monitor_table, open_session
+from puppet.takes import open_take
 
 LINUX_LIKE = sys.platform.startswith(("linux", "freebsd", "openbsd", "netbsd"))
 MAPPING = Path(__file__).resolve().parents[1] / "mappings" / "arduino_sliders.yaml"
@@ -105,14 +106,14 @@ def test_the_live_loop_draws_records_and_obeys_the_keys(tmp_path, headless_windo
         frames(1)
         assert "box.ch0" in out.getvalue() and "shaped" in out.getvalue()
         press(_Keys.M)
-        press(_Keys.N)  # neutral: channels back to rest
-        assert all(c.raw is None for c in session.mapping.channels())
 
         press(_Keys.R)  # Q finishes a take that is running
+        press(_Keys.N)  # neutral: channels back to rest, noted in the take
         frames(2)
         press(_Keys.Q)
         assert live._quit and not session.recording
         assert live.takes[-1] == tmp_path / "run_002"
+        assert any(getattr(e, "kind", None) == "reset" for e in open_take(live.takes[-1]).entries())
         live.run()  # returns at once, releasing the renderer and the window
         assert live.renderer is None
     finally:

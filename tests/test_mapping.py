@@ -733,3 +733,36 @@ def test_throughput_and_latency_are_reported(capsys):
               f"(6 channels each); sample -> Pose median {latencies[len(latencies) // 2] / 1000:.1f} us, "
               f"p99 {latencies[int(len(latencies) * 0.99)] / 1000:.1f} us")
     assert one > 0 and six > 0
+
+
+# -- snapshots: where a take starts --------------------------------------------------------------
+
+SMOOTH = {"min": 0, "max": 1000, "smoothing": {"type": "one_euro", "min_cutoff": 1.0, "beta": 0.3}}
+
+
+def _fed(doc, raws):
+    m = Mapping.from_data(doc)
+    for i, raw in enumerate(raws):
+        m.feed(Sample(1_000 * MS + i * 7 * MS, "box", {"ch0": raw}))
+    return m
+
+
+@given(st.lists(st.floats(0, 1000), min_size=1, max_size=30), st.integers(0, 200))
+@settings(max_examples=40, deadline=None)
+def test_a_restored_snapshot_carries_on_exactly(raws, later_ms):
+    live = _fed(base(**SMOOTH), raws)
+    snapshot = json.loads(json.dumps(live.snapshot()))  # as a take's metadata keeps it
+    restored = Mapping.from_data(base(**SMOOTH))
+    restored.restore(snapshot)
+    t = 2_000 * MS + later_ms * MS
+    for m in (live, restored):
+        m.feed(Sample(t, "box", {"ch0": 500.0}))
+    assert restored.pose(t + 5 * MS).fap.tolist() == live.pose(t + 5 * MS).fap.tolist()
+
+
+def test_a_snapshot_restored_into_a_differently_shaped_channel_starts_from_its_raw_input():
+    live = _fed(base(**SMOOTH), [0, 900, 900, 900])
+    other = Mapping.from_data(base(**{**SMOOTH, "max": 900}))
+    other.restore(live.snapshot(), live)
+    channel = other.channels()[0]
+    assert channel.raw == 900 and channel.value == 1.0  # settled on the last input, shaped anew

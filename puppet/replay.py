@@ -1,0 +1,110 @@
+"""A take's raw log played again into a new .fap: through its own mapping, another mapping, or
+through the devices' own wires.
+
+``retake(take, out)`` rebuilds the take's mapping from the text it recorded, restores the state
+the mapping had at the take's first frame (``take.json``'s ``mapping_state``) and drives a
+``TakeClock`` with the log's Samples and events, exactly as the live session did: the .fap
+comes out identical, byte for byte. What it proves: the log holds everything the take is made
+of, so a take can always be re-mapped or re-rendered.
+
+* ``mapping=other.yaml`` re-maps the take: the new mapping starts from the take's state at its
+  first frame (``Mapping.restore``: exactly where its channels are shaped as before) and turns
+  the same performance into other FAPs.
+* ``through_devices=True`` sends every logged reading through its device's wire -- serial
+  lines or frames on a pseudo-terminal, HID reports from the fake HID source, CAN frames on a
+  virtual bus, MIDI messages, OSC datagrams (``devices.twin``) -- where the real adapter reads
+  it back; the values it decodes are fed with the logged timestamp (a deterministic clock: the
+  adapter's own stamp says when the bytes came back, not when the performer moved). A wire that
+  does not carry a value exactly stops the replay with the device, channel and both values.
+"""
+
+from __future__ import annotations
+
+import filecmp
+import os
+from collections.abc import Iterator
+from contextlib import ExitStack
+from dataclasses import dataclass
+from pathlib import Path
+
+from devices.base import Sample
+from devices.samplelog import LogEvent
+
+from .fapfile import FapWriter, iter_fap
+from .mapping import load_mapping, parse_mapping
+from .takeclock import Layer, TakeClock
+from .takes import Take, TakeError, open_take, write_pose
+
+
+@dataclass(frozen=True)
+class Retake:
+    """What a replay wrote: the .fap, its frame count, and whether it equals the take's own .fap
+    (None when re-mapped: a different mapping is not expected to agree)."""
+
+    path: Path
+    frames: int
+    identical: bool | None
+
+
+def retake(take: str | os.PathLike | Take, out: str | os.PathLike, *, mapping: str | os.PathLike | None = None,
+           through_devices: bool = False) -> Retake:
+    """Replay ``take``'s raw log into the .fap ``out`` (see the module docstring)."""
+    take = take if isinstance(take, Take) else open_take(take)
+    meta = take.meta
+    missing = [key for key in ("t0_ns", "mapping_state", "mapping_text") if meta.get(key) is None]
+    if missing:
+        raise TakeError(f"{take.folder}: the take has no {', '.join(missing)} in its metadata, so its log "
+                        "cannot be replayed (it was not recorded by a live session)")
+    recorded = parse_mapping(meta["mapping_text"], meta.get("mapping") or "<take mapping>")
+    mapper = recorded if mapping is None else load_mapping(mapping)
+    mapper.restore(meta["mapping_state"], recorded)
+    with iter_fap(take.fap_path) as reader:
+        name = reader.header.name
+    out = Path(out)
+    if out.resolve() == take.fap_path.resolve():
+        raise TakeError(f"{out}: that is the take's own .fap; write the replay elsewhere")
+    with ExitStack() as stack:
+        writer = stack.enter_context(FapWriter(out, meta["fps"], name))
+        clock = TakeClock(mapper, lambda *frame: write_pose(writer, *frame), meta["t0_ns"], meta["fps"],
+                          hold_ns=meta.get("hold_ns"), layer=_layer(take))
+        entries = take.entries()
+        if through_devices:
+            entries = _through_devices(entries, take, stack)
+        for entry in entries:
+            clock.apply(entry)
+    identical = filecmp.cmp(out, take.fap_path, shallow=False) if mapping is None else None
+    return Retake(out, clock.frames, identical)
+
+
+def _layer(take: Take) -> Layer | None:
+    """The take's base layer, found where it was or, moved with its takes, beside this take."""
+    spec = take.meta.get("layer")
+    if spec is None:
+        return None
+    over = Path(spec["over"])
+    if not over.exists():
+        beside = take.folder.parent / over.parent.name / over.name
+        if not beside.exists():
+            raise TakeError(f"{take.folder}: this take was layered over {over}, which is gone")
+        spec = {**spec, "over": str(beside)}
+    return Layer.from_spec(spec)
+
+
+def _through_devices(entries: Iterator[Sample | LogEvent], take: Take,
+                     stack: ExitStack) -> Iterator[Sample | LogEvent]:
+    """The entries, each Sample's values replaced by what its device's real adapter read back."""
+    from devices.twin import open_twin
+
+    urls, wire = take.meta.get("devices") or {}, take.meta.get("wire") or {}
+    twins = {}
+    for entry in entries:
+        if isinstance(entry, Sample):
+            twin = twins.get(entry.device)
+            if twin is None:
+                if entry.device not in urls:
+                    raise TakeError(f"{take.folder}: the log has samples of device {entry.device!r}, "
+                                    "which the take's metadata does not list")
+                twin = twins[entry.device] = open_twin(urls[entry.device], entry.device, wire.get(entry.device))
+                stack.callback(twin.close)
+            entry = Sample(entry.t_ns, entry.device, twin.exchange(entry.values).values)
+        yield entry

@@ -1,0 +1,135 @@
+"""Replaying a take's raw log: a live take (pulled plug, neutral key and all) comes back as the
+identical .fap, through the mapping or through the devices' own wires; another mapping re-maps
+it; a layered pass replaces only its armed FAPs."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from devices import State, open_device
+from puppet.fapfile import read_fap
+from puppet.replay import retake
+from puppet.runtime import Runtime
+from puppet.session import LiveSession
+from puppet.takes import TakeError, open_take
+
+ROOT = Path(__file__).resolve().parents[1]
+MAPPING = ROOT / "mappings" / "arduino_sliders.yaml"
+JOYSTICK = "sim://joystick?protocol=ascii&rate=200&channels=6"
+
+
+@pytest.fixture(scope="module")
+def shared_runtime(face):
+    return Runtime(face)
+
+
+def _session(runtime, root, **options):
+    return LiveSession(MAPPING, face=runtime, devices={"box": open_device(JOYSTICK, "box")},
+                       record_root=root, fps=30, **options)
+
+
+def _frames_for(session, seconds):
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        session.frame()
+        time.sleep(0.01)
+
+
+def _open(session):
+    deadline = time.monotonic() + 5
+    while not (session.frame().states["box"] is State.OPEN and session.samples_fed):
+        assert time.monotonic() < deadline, "the simulated box never opened"
+        time.sleep(0.01)
+
+
+@pytest.fixture(scope="module")
+def live_take(shared_runtime, tmp_path_factory):
+    """A take of the simulated slider box with everything that can happen live: a start mid-motion,
+    the plug pulled and put back, the neutral key."""
+    session = _session(shared_runtime, tmp_path_factory.mktemp("takes"))
+    try:
+        _open(session)
+        session.start_recording()
+        _frames_for(session, 0.4)
+        box = session.devices["box"]
+        box.joystick.unplug()
+        assert box.wait_state(State.LOST, 5.0)
+        _frames_for(session, 0.2)
+        box.joystick.replug()
+        assert box.wait_state(State.OPEN, 5.0)
+        _frames_for(session, 0.3)
+        session.neutral()
+        _frames_for(session, 0.3)
+        return open_take(session.stop_recording())
+    finally:
+        session.close()
+
+
+def test_the_log_notes_the_gap_and_the_neutral_key(live_take):
+    kinds = [getattr(e, "kind", "sample") for e in live_take.entries()]
+    assert "hold" in kinds and "resume" in kinds and "reset" in kinds
+    assert kinds.index("hold") < kinds.index("resume") < kinds.index("reset")
+    assert live_take.meta["frames"] >= 30 and live_take.meta["t0_ns"] > 0
+
+
+def test_a_live_take_replays_to_the_identical_fap(live_take, tmp_path):
+    result = retake(live_take, tmp_path / "again.fap")
+    assert result.identical, "the replayed .fap differs from the recorded one"
+    assert result.frames == live_take.meta["frames"]
+
+
+def test_another_mapping_re_maps_the_take(live_take, tmp_path):
+    text = MAPPING.read_text().replace("{fap: open_jaw, source: box.ch0, range: [0, 700]}",
+                                       "{fap: open_jaw, source: box.ch0, range: [0, 350]}")
+    other = tmp_path / "half_jaw.yaml"
+    other.write_text(text)
+    result = retake(live_take, tmp_path / "remapped.fap", mapping=other)
+    assert result.identical is None and result.frames == live_take.meta["frames"]
+    original = live_take.stream().values
+    remapped = read_fap(result.path).values
+    jaw = 2  # FAP 3, open_jaw
+    moving = original[:, jaw] > 20
+    assert moving.any()
+    assert np.all(remapped[moving, jaw] < original[moving, jaw])
+    others = np.delete(np.arange(68), jaw)
+    np.testing.assert_array_equal(remapped[:, others], original[:, others])  # the same channels, restored
+
+
+def test_a_take_cannot_be_replayed_over_itself_or_without_its_state(live_take, tmp_path):
+    with pytest.raises(TakeError, match="own .fap"):
+        retake(live_take, live_take.fap_path)
+    folder = tmp_path / "old_take"
+    folder.mkdir()
+    (folder / "take.json").write_text('{"name": "old", "fps": 30}')
+    with pytest.raises(TakeError, match="t0_ns"):
+        retake(folder, tmp_path / "x.fap")
+
+
+def test_a_layered_pass_replaces_only_its_armed_faps(live_take, shared_runtime, tmp_path):
+    session = _session(shared_runtime, tmp_path, layer_over=live_take.folder, arm=["box.ch0"])
+    try:
+        _open(session)
+        session.start_recording()
+        _frames_for(session, 0.5)
+        layered = open_take(session.stop_recording())
+    finally:
+        session.close()
+    base = live_take.stream().values
+    new = layered.stream().values
+    n = min(len(base), len(new))
+    jaw = 2
+    np.testing.assert_array_equal(np.delete(new[:n], jaw, axis=1)[:, 2:], np.delete(base[:n], jaw, axis=1)[:, 2:])
+    assert not np.array_equal(new[:n, jaw], base[:n, jaw])
+    assert layered.meta["layer"]["slots"] == [jaw]
+    assert retake(layered, tmp_path / "layered_again.fap").identical
+
+
+def test_arming_something_that_drives_nothing_is_refused(live_take, shared_runtime, tmp_path):
+    with pytest.raises(KeyError, match="no channel 'box.ch9'"):
+        _session(shared_runtime, tmp_path, layer_over=live_take.folder, arm=["box.ch9"])
+    with pytest.raises(ValueError, match="FAP number"):
+        _session(shared_runtime, tmp_path, layer_over=live_take.folder, arm=["jaw please"])
