@@ -155,7 +155,12 @@ def open_twin(url: str, name: str, wire_info: Mapping | None = None) -> Twin:
         module = importlib.import_module(module_name)
     except ImportError as exc:
         raise DeviceError(f"{name}: the twin of {url!r} needs {exc.name!r} (pip install {exc.name})") from None
-    return getattr(module, class_name).from_url(url, name, wire_info or {})
+    try:
+        return getattr(module, class_name).from_url(url, name, wire_info or {})
+    except DeviceError as exc:
+        if str(exc).startswith(f"{name}: "):
+            raise
+        raise DeviceError(f"{name}: no twin for {url!r}: {exc}") from None
 
 
 __all__ = ["TWINS", "Twin", "differences", "open_twin"]

@@ -11,7 +11,8 @@ angles are read as radians (``mappings/arkit_csv.yaml`` says how they reach the 
 
 ``read_live_link_csv`` yields ``(t_ns, {name: value})`` with ``t_ns`` counted from the first row;
 ``import_csv`` feeds each row as a ``Sample(t_ns, "csv", values)`` through a mapping into a take
-(``puppet.takes``): every row in the raw sample log, and the Pose sampled at ``k / fps`` seconds
+(``puppet.takes``, written by a ``TakeClock`` as a live take is, so ``puppet replay --mapping``
+can re-map it): every row in the raw sample log, and the Pose sampled at ``k / fps`` seconds
 for every frame time up to the last row. Every problem in a file is a ``CsvError`` naming
 ``file:line:``.
 """
@@ -26,8 +27,10 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from devices.base import Sample
+from devices.samplelog import LogEvent
 
 from .mapping import load_mapping
+from .takeclock import TakeClock
 from .takes import TakeRecorder
 
 DEVICE = "csv"
@@ -159,30 +162,19 @@ def import_csv(csv_path: str | os.PathLike, root: str | os.PathLike, name: str =
     leaves no half take behind."""
     rows = list(read_live_link_csv(csv_path, csv_fps))
     mapping = load_mapping(mapping_path)
-    recorder = TakeRecorder(root, name, fps, mapping_path=mapping_path, devices=mapping.devices)
-    recorder.meta["source"] = str(csv_path)
+    extra = {"source": str(csv_path), "t0_ns": 0, "hold_ns": None, "mapping_state": mapping.snapshot(),
+             "wire": {}, "layer": None}
+    recorder = TakeRecorder(root, name, fps, mapping_path=mapping_path, devices=mapping.devices, extra=extra)
+    clock = TakeClock(mapping, recorder.frame, 0, fps)
     try:
-        k = 0
-
-        def frame_ns(k: int) -> int:
-            return k * 1_000_000_000 // fps
-
         for t_ns, values in rows:
-            while frame_ns(k) < t_ns:
-                _frame(recorder, mapping, frame_ns(k))
-                k += 1
             sample = Sample(t_ns, DEVICE, values)
             recorder.sample(sample)
-            mapping.feed(sample)
-        end = rows[-1][0] if rows else -1
-        while frame_ns(k) <= end:
-            _frame(recorder, mapping, frame_ns(k))
-            k += 1
+            clock.apply(sample)
+        if rows:
+            end = LogEvent(rows[-1][0], "frame")
+            recorder.event(end)
+            clock.apply(end)
     finally:
         recorder.close()
     return recorder.folder
-
-
-def _frame(recorder: TakeRecorder, mapping, t_ns: int) -> None:
-    pose = mapping.pose(t_ns)
-    recorder.frame(pose.fap, pose.viseme, pose.expression)

@@ -27,10 +27,36 @@ def main(argv: list[str] | None = None) -> int:
     render.add_argument("--fps", type=_positive_float, default=None, help="video fps (default: the take's)")
     render.add_argument("--face", default=None, help="a face mesh with feature points (default: the embedded face)")
 
-    play = commands.add_parser("play", help="play a .fap take in a window, in real time")
-    play.add_argument("take", help="the .fap file")
-    play.add_argument("--size", type=_size, default=(960, 720), help="window size WxH (default 960x720)")
-    play.add_argument("--view", choices=VIEWS, default="front", help="camera (default front)")
+    for command, help_text in (("play", "play a take (a .fap or a take folder) in a window, in real time"),
+                               ("replay", "play a take in a window; or replay its raw log through its devices' "
+                                          "wires or another mapping into a new .fap")):
+        play = commands.add_parser(command, help=help_text)
+        play.add_argument("take", help="the .fap file or take folder")
+        play.add_argument("--size", type=_size, default=(960, 720), help="window size WxH (default 960x720)")
+        play.add_argument("--view", choices=VIEWS, default="front", help="camera (default front)")
+    play.add_argument("--through-devices", action="store_true",
+                      help="re-encode the raw log into each device's wire format and read it back with the "
+                           "real adapters; the new .fap must equal the recorded one")
+    play.add_argument("--mapping", default=None, help="re-map the take's raw log with this mapping YAML")
+    play.add_argument("-o", "--output", default=None,
+                      help="the new .fap (default: replay.fap or remap-<mapping>.fap in the take folder)")
+    play.add_argument("--no-window", action="store_true", help="write the new .fap only; do not play it")
+
+    export = commands.add_parser("export", help="export a take to glTF binary (.glb), animated by morph targets")
+    export.add_argument("take", help="the .fap file or take folder")
+    export.add_argument("-o", "--output", required=True, help="the .glb to write")
+    export.add_argument("--mode", choices=("morph", "frames"), default="morph",
+                        help="morph: a compressed morph-target basis (default); frames: one target per frame")
+    export.add_argument("--max-frames", type=_positive, default=None, help="export only the first N frames")
+
+    arkit = commands.add_parser("import-arkit", help="import a Live Link Face / ARKit blendshape CSV as a take")
+    arkit.add_argument("csv", help="the CSV file")
+    arkit.add_argument("--mapping", default=None, help="ARKit names -> FAPs (default: mappings/arkit_csv.yaml)")
+    arkit.add_argument("--name", default="arkit", help="take name (default arkit: folders arkit_001, ...)")
+    arkit.add_argument("--takes", default="takes", help="folder for takes (default takes)")
+    arkit.add_argument("--fps", type=int, choices=(25, 30, 50, 60), default=30, help="take fps (default 30)")
+    arkit.add_argument("--csv-fps", type=_positive_float, default=60.0,
+                       help="the rate of the timecodes' frame field (default 60)")
 
     live = commands.add_parser("live", help="run a mapping's devices onto the face in a window, live")
     live.add_argument("--mapping", required=True, help="the mapping YAML")
@@ -40,6 +66,10 @@ def main(argv: list[str] | None = None) -> int:
     live.add_argument("--view", choices=VIEWS, default="front", help="camera (default front)")
     live.add_argument("--device", action="append", type=_device_override, default=[], metavar="NAME=URL",
                       help="open the mapping's device NAME at URL instead (e.g. box=sim://joystick); repeatable")
+    live.add_argument("--layer-over", default=None, metavar="TAKE",
+                      help="record passes over this take: it plays under you, and only --arm is replaced")
+    live.add_argument("--arm", default="", metavar="A,B",
+                      help="what a layered pass replaces: channels (box.ch0), FAP numbers or names, viseme, expression")
 
     commands.add_parser("devices", help="list the controllers that are connected (serial, HID, MIDI, CAN)")
 
@@ -67,11 +97,20 @@ def main(argv: list[str] | None = None) -> int:
 
         play_take(args.take, size=args.size, view=args.view)
         return 0
+    if args.command == "replay":
+        return _replay(args)
+    if args.command == "export":
+        return _export(args)
+    if args.command == "import-arkit":
+        return _import_arkit(args)
     if args.command == "live":
         from .live import run_live
 
+        if args.layer_over and not args.arm:
+            parser.error("--layer-over needs --arm: what the pass replaces")
         run_live(args.mapping, record=args.record, fps=args.fps, size=args.size, view=args.view,
-                 devices=dict(args.device) or None)
+                 devices=dict(args.device) or None, layer_over=args.layer_over,
+                 arm=[a for a in args.arm.split(",") if a])
         return 0
     if args.command == "calibrate":
         return _calibrate(args)
@@ -106,6 +145,68 @@ def _render(args: argparse.Namespace) -> int:
         print(f"puppet render: {exc.filename or args.take}: {exc.strerror or exc}", file=sys.stderr)
         return 2
     print(f"{args.output}: {count} frames")
+    return 0
+
+
+def _replay(args: argparse.Namespace) -> int:
+    """``puppet replay``: a window on the take, or its log replayed into a new .fap (then shown)."""
+    from devices import DeviceError
+
+    from .fapfile import FapError
+    from .mapping import MappingError
+    from .replay import retake
+    from .takes import TakeError, open_take
+    from .window import play_take
+
+    path = args.take
+    if args.through_devices or args.mapping or args.output:
+        try:
+            take = open_take(args.take)
+            name = "replay.fap" if args.mapping is None else f"remap-{Path(args.mapping).stem}.fap"
+            result = retake(take, args.output or take.folder / name, mapping=args.mapping,
+                            through_devices=args.through_devices)
+        except (TakeError, FapError, MappingError, DeviceError, ValueError) as exc:
+            print(f"puppet replay: {exc}", file=sys.stderr)
+            return 2
+        same = {True: "identical to the recorded take.fap",
+                False: "DIFFERS from the recorded take.fap", None: "re-mapped"}[result.identical]
+        print(f"{result.path}: {result.frames} frames, {same}")
+        if result.identical is False:
+            return 1
+        path = result.path
+    if not args.no_window:
+        play_take(path, size=args.size, view=args.view)
+    return 0
+
+
+def _export(args: argparse.Namespace) -> int:
+    """``puppet export``: a take to .glb; a bad take is one line on stderr and exit code 2."""
+    from .fapfile import FapError
+    from .gltf import export_glb
+    from .takes import TakeError
+
+    try:
+        info = export_glb(args.take, args.output, mode=args.mode, max_frames=args.max_frames)
+    except (FapError, TakeError, ValueError, OSError) as exc:
+        print(f"puppet export: {exc}", file=sys.stderr)
+        return 2
+    print(f"{args.output}: {info['frames']} frames, {info['targets']} morph targets, "
+          f"largest vertex error {info['max_error']:.2g}, {info['bytes']:,} bytes")
+    return 0
+
+
+def _import_arkit(args: argparse.Namespace) -> int:
+    """``puppet import-arkit``: a Live Link Face CSV to a take; a bad file is one line, exit code 2."""
+    from .arkit import DEFAULT_MAPPING, CsvError, import_csv
+    from .mapping import MappingError
+
+    try:
+        folder = import_csv(args.csv, args.takes, args.name, args.fps, args.mapping or DEFAULT_MAPPING,
+                            args.csv_fps)
+    except (CsvError, MappingError, OSError) as exc:
+        print(f"puppet import-arkit: {exc}", file=sys.stderr)
+        return 2
+    print(folder)
     return 0
 
 

@@ -39,15 +39,6 @@ FRAMES_LIMIT = 256
 _EXACT_SVD_LIMIT = 1500
 
 
-def _fap_path(take_or_fap_path: str | os.PathLike) -> Path:
-    path = Path(take_or_fap_path)
-    if path.is_dir():
-        from .takes import open_take
-
-        return open_take(path).fap_path
-    return path
-
-
 def _basis(D: np.ndarray, max_k: int, explained: float,
            tolerance: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Weights (F, k) and targets (k, C) with D ~= weights @ targets (truncated SVD): the fewest
@@ -132,7 +123,7 @@ def export_glb(take_or_fap_path: str | os.PathLike, out_path: str | os.PathLike,
         raise ValueError(f"mode {mode!r}: expected 'morph' or 'frames'")
     if max_frames is not None and max_frames < 1:
         raise ValueError(f"max_frames must be at least 1, got {max_frames}")
-    playback = FapPlayback(_fap_path(take_or_fap_path), face)
+    playback = FapPlayback(take_or_fap_path, face)
     runtime, face = playback.runtime, playback.face
     rest = np.asarray(runtime.rest, dtype=np.float64)
     rest32 = rest.astype(np.float32)

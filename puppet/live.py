@@ -30,6 +30,7 @@ from typing import Any, TextIO
 
 from .playback import VIEWS, frame_head
 from .render import Renderer
+from .takes import TakeError
 from .window import NoDisplayError, WindowError, check_display, open_window
 
 MONITOR_PERIOD = 0.25
@@ -127,6 +128,9 @@ class LiveView:
                 self._make_renderer(size)
             self.renderer.draw(frame.vertices, frame.normals, framebuffer=window.fbo)
         window.swap_buffers()  # handles the window's events too (keys)
+        if self.take is not None and not self.session.recording:  # the take stopped on its own
+            print(f"take not complete: {self.session.record_error}", file=sys.stderr)
+            self.take = None
         self.stats.drawn(time.monotonic_ns(), frame.newest_sample_ns, frame.n_samples > 0)
         self._set_title(frame.states)
         now = time.perf_counter()
@@ -157,8 +161,12 @@ class LiveView:
             if self.session.recording:
                 self._stop_recording()
             else:
-                self.take = Path(self.session.start_recording())
-                print(f"recording {self.take}", file=sys.stderr)
+                try:
+                    self.take = Path(self.session.start_recording())
+                except TakeError as error:  # an unwritable folder: say so, keep performing
+                    print(f"not recording: {error}", file=sys.stderr)
+                else:
+                    print(f"recording {self.take}", file=sys.stderr)
         elif key == keys.N:
             self.session.neutral()
         elif key == keys.M:
@@ -192,7 +200,7 @@ class LiveView:
 
 def open_session(mapping_path: str | os.PathLike, *, record: str | None = None, fps: int = 30,
                  devices: dict[str, str] | None = None, record_root: str | os.PathLike | None = None,
-                 face: Any = None):
+                 face: Any = None, layer_over: str | os.PathLike | None = None, arm: list[str] = ()):
     """A LiveSession; ``devices`` replaces mapping devices by name with other URLs."""
     from devices import open_device
 
@@ -203,7 +211,7 @@ def open_session(mapping_path: str | os.PathLike, *, record: str | None = None, 
         for name, url in (devices or {}).items():
             opened[name] = open_device(url, name)
         return LiveSession(mapping_path, face=face, devices=opened, record_root=record_root,
-                           take_name=record or "take", fps=fps)
+                           take_name=record or "take", fps=fps, layer_over=layer_over, arm=arm)
     except BaseException:
         for device in opened.values():
             device.close()
@@ -213,11 +221,13 @@ def open_session(mapping_path: str | os.PathLike, *, record: str | None = None, 
 def run_live(mapping_path: str | os.PathLike, *, record: str | None = None, fps: int = 30,
              size: tuple[int, int] = (960, 720), view: str = "front",
              devices: dict[str, str] | None = None,
-             record_root: str | os.PathLike | None = None) -> None:
+             record_root: str | os.PathLike | None = None, layer_over: str | os.PathLike | None = None,
+             arm: list[str] = ()) -> None:
     """Run the mapping's devices onto the face in a window until Q / Escape or closing it.
 
     ``devices`` overrides device URLs by name (e.g. ``{"box": "sim://joystick?..."}``); takes go
-    under ``record_root`` (default ``takes/``). Without a usable display this prints
+    under ``record_root`` (default ``takes/``); ``layer_over`` and ``arm`` record layered passes
+    over an earlier take (``puppet.takeclock.Layer``). Without a usable display this prints
     ``puppet live: <why>`` on stderr and raises ``SystemExit(2)``.
     """
     if view not in VIEWS:
@@ -232,7 +242,7 @@ def run_live(mapping_path: str | os.PathLike, *, record: str | None = None, fps:
         _exit(str(error))
     try:
         session = open_session(mapping_path, record=record, fps=fps, devices=devices,
-                               record_root=record_root)
+                               record_root=record_root, layer_over=layer_over, arm=arm)
     except BaseException:
         window.close()
         window.destroy()

@@ -21,7 +21,7 @@ from .face import Face, load_face
 from .fapfile import FapFrame, iter_fap
 from .render import VIEW_DIRECTIONS, Renderer, write_video
 from .runtime import Runtime
-from .takes import TakeError
+from .takes import TakeError, take_fap
 
 VIEWS = tuple(VIEW_DIRECTIONS)
 
@@ -62,11 +62,11 @@ def held_low_level(frames: Iterable[FapFrame], runtime: Runtime) -> Iterator[np.
 
 
 class FapPlayback:
-    """Streams a .fap take as (vertices, normals) per frame on a face."""
+    """Streams a .fap take (the file, or a take folder) as (vertices, normals) per frame on a face."""
 
     def __init__(self, path: str | os.PathLike, face: Face | None = None,
                  runtime: Runtime | None = None) -> None:
-        self.path = Path(path)
+        self.path = take_fap(path)
         with iter_fap(self.path) as reader:
             self.header = reader.header
         self.face = face if face is not None else load_face()

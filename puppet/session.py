@@ -57,7 +57,7 @@ from devices.samplelog import LogEvent
 from .mapping import Pose, load_mapping
 from .runtime import Runtime
 from .takeclock import Layer, TakeClock
-from .takes import TakeRecorder, take_fap
+from .takes import TakeError, TakeRecorder, take_fap
 
 
 @dataclass
@@ -134,6 +134,7 @@ class LiveSession:
         self.frames = 0
         self._recorder = None
         self._clock: TakeClock | None = None
+        self.record_error: str | None = None  # why the last take stopped on its own
 
     # -- the live loop ----------------------------------------------------------------------
 
@@ -188,14 +189,23 @@ class LiveSession:
         self._reset_at = time.monotonic_ns() if now_ns is None else int(now_ns)
 
     def _apply(self, entry: Sample | LogEvent) -> None:
-        """One Sample or event: into the take (its log and its clock) while recording."""
+        """One Sample or event: into the take (its log and its clock) while recording. A write
+        that fails (disk full, the folder gone) ends the take, marked incomplete, and the live
+        face goes on: ``record_error`` says what happened."""
         if self._clock is not None:
-            if isinstance(entry, Sample):
-                self._recorder.sample(entry)
-            else:
-                self._recorder.event(entry)
-            self._clock.apply(entry)
-        elif isinstance(entry, Sample):
+            try:
+                if isinstance(entry, Sample):
+                    self._recorder.sample(entry)
+                else:
+                    self._recorder.event(entry)
+                self._clock.apply(entry)
+                return
+            except OSError as exc:
+                recorder, self._recorder, self._clock = self._recorder, None, None
+                self.record_error = (f"{recorder.folder}: recording stopped after {recorder.frames} frames: "
+                                     f"{exc.strerror or exc}")
+                recorder.abandon(self.record_error)
+        if isinstance(entry, Sample):
             self.mapping.feed(entry)
         elif entry.kind == "reset":
             self.mapping.reset()
@@ -230,8 +240,12 @@ class LiveSession:
         extra = {"t0_ns": t0, "hold_ns": hold_ns, "mapping_state": self.mapping.snapshot(),
                  "wire": {name: d.wire_info() for name, d in self.devices.items()},
                  "layer": None if layer is None else layer.spec()}
-        self._recorder = TakeRecorder(self.record_root, self.take_name, self.fps,
-                                      mapping_path=self.mapping_path, devices=self.urls, extra=extra)
+        try:
+            self._recorder = TakeRecorder(self.record_root, self.take_name, self.fps,
+                                          mapping_path=self.mapping_path, devices=self.urls, extra=extra)
+        except OSError as exc:
+            raise TakeError(f"{self.record_root}: cannot make a take folder there: {exc.strerror or exc}") from exc
+        self.record_error = None
         self._clock = TakeClock(self.mapping, self._recorder.frame, t0, self.fps, hold_ns=hold_ns, layer=layer)
         return self._recorder.folder
 

@@ -12,7 +12,8 @@ succeeds twice, so two recorders can never write into one take) with
   clock of frame 0, ``mapping_state``: the mapping's state then, ``hold_ns``, ``wire``: each
   device's ``wire_info()``, ``layer``: the base take of a layered pass) and, once the recorder
   closes, the frame and sample counts. It is written when recording starts and rewritten
-  (atomically) when it ends, so a take that crashed still says what it was.
+  (atomically) when it ends, so a take that crashed still says what it was; ``complete`` is true
+  only once the recorder closed normally (a failed write leaves it false, with ``error``).
 
 A killed recorder leaves a readable take: every complete frame and every complete sample line.
 """
@@ -74,10 +75,14 @@ class TakeRecorder:
             "mapping": None if mapping_path is None else str(mapping_path),
             "mapping_text": None if mapping_path is None else Path(mapping_path).read_text("utf-8"),
             "devices": dict(devices or {}), **dict(extra or {}), "frames": None, "samples": None,
+            "complete": False, "error": None,
         }
-        self._write_meta()
-        self._fap = FapWriter(self.folder / FAP_NAME, fps, f"{name}_{self.folder.name[-3:]}")
-        self._log = SampleLogWriter(self.folder / LOG_NAME)
+        try:
+            self._write_meta()
+            self._fap = FapWriter(self.folder / FAP_NAME, fps, f"{name}_{self.folder.name[-3:]}")
+            self._log = SampleLogWriter(self.folder / LOG_NAME)
+        except OSError as exc:
+            raise TakeError(f"{self.folder}: cannot start the take: {exc.strerror or exc}") from exc
         self.frames = 0
 
     def sample(self, sample: Sample) -> None:
@@ -94,11 +99,27 @@ class TakeRecorder:
         self.frames += 1
 
     def close(self) -> Path:
-        """Finish the take (final counts in its metadata); returns its folder."""
+        """Finish the take (final counts in its metadata, marked complete); returns its folder."""
         self._fap.close()
         self._log.close()
-        self.meta.update(frames=self.frames, samples=self._log.count)
+        self.meta.update(frames=self.frames, samples=self._log.count, complete=True)
         self._write_meta()
+        return self.folder
+
+    def abandon(self, reason: str) -> Path:
+        """Stop after a failed write (disk full, folder gone): close what can be closed and say
+        in the metadata, if it can still be written, that the take is incomplete and why. What
+        reached the disk stays readable to its last complete frame and line."""
+        for part in (self._fap, self._log):
+            try:
+                part.close()
+            except OSError:
+                pass
+        self.meta.update(frames=self.frames, samples=self._log.count, complete=False, error=reason)
+        try:
+            self._write_meta()
+        except OSError:
+            pass  # take.json still says "complete": false from the start
         return self.folder
 
     def __enter__(self) -> TakeRecorder:

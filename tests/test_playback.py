@@ -93,7 +93,7 @@ def test_puppet_render_reports_a_bad_take_in_one_line(tmp_path, capsys):
     assert cli.main(["render", str(take), "-o", str(tmp_path / "bad.mp4")]) == 2
     assert capsys.readouterr().err.strip() == f"puppet render: {take}:2: expected a mask line of 68 flags (0 or 1), found 3 flags"
     assert cli.main(["render", str(tmp_path / "missing.fap"), "-o", str(tmp_path / "x.mp4")]) == 2
-    assert "missing.fap: No such file or directory" in capsys.readouterr().err
+    assert "missing.fap: no such take (expected a take folder or a .fap file)" in capsys.readouterr().err
 
 
 def test_the_demo_writes_a_video_and_a_still(tmp_path, egl):

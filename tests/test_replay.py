@@ -4,6 +4,7 @@ it; a layered pass replaces only its armed FAPs."""
 
 from __future__ import annotations
 
+import os
 import time
 from pathlib import Path
 
@@ -73,7 +74,7 @@ def test_the_log_notes_the_gap_and_the_neutral_key(live_take):
     kinds = [getattr(e, "kind", "sample") for e in live_take.entries()]
     assert "hold" in kinds and "resume" in kinds and "reset" in kinds
     assert kinds.index("hold") < kinds.index("resume") < kinds.index("reset")
-    assert live_take.meta["frames"] >= 30 and live_take.meta["t0_ns"] > 0
+    assert live_take.meta["frames"] >= 30 and live_take.meta["t0_ns"] > 0 and live_take.meta["complete"]
 
 
 def test_a_live_take_replays_to_the_identical_fap(live_take, tmp_path):
@@ -133,3 +134,72 @@ def test_arming_something_that_drives_nothing_is_refused(live_take, shared_runti
         _session(shared_runtime, tmp_path, layer_over=live_take.folder, arm=["box.ch9"])
     with pytest.raises(ValueError, match="FAP number"):
         _session(shared_runtime, tmp_path, layer_over=live_take.folder, arm=["jaw please"])
+
+
+# -- recording faults ----------------------------------------------------------------------------
+
+def test_an_unwritable_take_folder_is_a_clear_error_before_anything_is_written(shared_runtime, tmp_path):
+    root = tmp_path / "locked"
+    root.mkdir()
+    root.chmod(0o500)
+    if os.access(root, os.W_OK):  # root ignores permissions: use a path under a file instead
+        root = tmp_path / "a_file" / "takes"
+        root.parent.write_text("")
+    session = _session(shared_runtime, root)
+    try:
+        _open(session)
+        with pytest.raises(TakeError, match="cannot make a take folder"):
+            session.start_recording()
+        assert not session.recording
+        session.frame()  # the live face goes on
+    finally:
+        session.close()
+
+
+def test_a_full_disk_ends_the_take_marked_incomplete_and_the_face_goes_on(shared_runtime, tmp_path):
+    session = _session(shared_runtime, tmp_path)
+    try:
+        _open(session)
+        folder = session.start_recording()
+        _frames_for(session, 0.3)
+        recorder = session._recorder
+        written = recorder.frames
+        recorder._log._file.close()
+        recorder._log._file = open("/dev/full", "w", encoding="utf-8")  # the kernel's own ENOSPC
+        _frames_for(session, 0.2)
+        assert not session.recording and "No space left on device" in session.record_error
+        f = session.frame()
+        assert f.vertices.shape == shared_runtime.rest.shape
+    finally:
+        session.close()
+    take = open_take(folder)
+    assert take.meta["complete"] is False and "No space left" in take.meta["error"]
+    assert len(take.stream()) >= written > 0  # every frame written before the disk filled
+
+
+# -- the command line ----------------------------------------------------------------------------
+
+def test_puppet_replay_writes_and_checks_a_new_fap(live_take, tmp_path, capsys):
+    from puppet import cli
+
+    out = tmp_path / "cli.fap"
+    assert cli.main(["replay", str(live_take.folder), "-o", str(out), "--no-window"]) == 0
+    assert capsys.readouterr().out.strip() == f"{out}: {live_take.meta['frames']} frames, identical to the recorded take.fap"
+    assert cli.main(["replay", str(tmp_path / "nope"), "-o", str(out), "--no-window"]) == 2
+    assert "nope: not a take (no take.json)" in capsys.readouterr().err
+
+
+def test_an_imported_arkit_take_can_be_re_mapped(tmp_path):
+    from puppet.arkit import DEFAULT_MAPPING, import_csv
+
+    names = ["JawOpen", "MouthSmileLeft", "MouthSmileRight", "BrowInnerUp"]
+    rows = [f"00:00:00:{i:02d}.000,4," + ",".join(f"{(i * (k + 1) % 17) / 16:.4f}" for k in range(4))
+            for i in range(40)]
+    csv = tmp_path / "face.csv"
+    csv.write_text("Timecode,BlendShapeCount," + ",".join(names) + "\n" + "\n".join(rows) + "\n")
+    folder = import_csv(csv, tmp_path / "takes", fps=30)
+    assert retake(folder, tmp_path / "again.fap").identical
+    stronger = tmp_path / "stronger.yaml"
+    stronger.write_text(DEFAULT_MAPPING.read_text())
+    remapped = retake(folder, tmp_path / "remap.fap", mapping=stronger)
+    np.testing.assert_array_equal(read_fap(remapped.path).values, open_take(folder).stream().values)

@@ -1,0 +1,483 @@
+"""Waters muscles: the classic vector muscle, Zhou & Liu's improved one, and muscles on control points.
+
+Two kinds of muscle, both plain data (``muscles_to_json`` / ``muscles_from_json`` for the rig file):
+
+* :class:`LinearMuscle` (Waters 1987): a fixed end ``m_o`` on the bone, an insertion ``m_i`` in
+  the skin, a zone of half-angle ``alpha`` (degrees) about the axis m_o -> m_i, and the radial
+  fall-off radii ``r_e`` and ``r_f`` (Waters' Rs and Rf). A point P at distance D = |P - m_o|,
+  at angle mu from the axis, moves toward m_o by::
+
+      u(P) = c * pull * A(mu) * R(D) * (m_o - P) / D
+      A(mu) = cos(pi/2 * mu / alpha)              for mu < alpha, else 0
+      R(D)  = sin(pi/2 * D / r_e)                 for D <= r_e       (Waters: cos((1 - D/Rs) pi/2))
+            = cos(pi/2 * (D - r_e) / (r_f - r_e)) for r_e < D <= r_f, else 0
+
+  c is the contraction (0..1 normal, larger for experiments) and ``pull`` the travel of a point at
+  full effect at c = 1 (mesh units). Waters' own angular factor, cos(mu), jumps from cos(alpha)
+  to 0 at the zone's edge and tears the skin there at any contraction; cos(pi/2 mu/alpha) is 1 on
+  the axis like his and reaches 0 at the edge, so the only failure left is the one Zhou & Liu
+  study: near m_o the pull grows faster than the distance (slope c pull pi / (2 r_e)), and once
+  that slope passes 1 points are dragged past the fixed end: a spike, and triangles fold over.
+* :class:`Sphincter` (Waters' elliptical sphincter): a centre and an ellipsoid of semi-axes
+  ``radii`` along the face axes; with q the ellipsoidal distance (1 on the boundary), a point
+  moves in the frontal (x, y) plane toward the centre by ``c * squeeze * F(q) * (centre - P)_xy``,
+  F(q) = cos^2(pi/2 q) for q < 1: ``squeeze`` is the fraction of the way to the centre at c = 1.
+
+Three ways to apply them:
+
+* **Classic** (``MuscleModel(..., mode="classic")``): the formulas above on every vertex, summed
+  over muscles; one sparse product per frame.
+* **Improved** (``mode="improved"``, after Zhou & Liu; their equations are not reproduced here, so
+  these are our forms). (1) A *repulsive spring* near the attractor (the fixed end, or the
+  sphincter's centre): against the muscle's pull (unit stiffness, classic travel u) the vertex is
+  held at its rest place by a spring of stiffness ``k(rho) = w * (D / rho - 1)``, rho the
+  vertex's distance to the attractor after moving: zero at rest, rising hyperbolically without
+  bound as the vertex nears the bone. ``w`` fades from 1 at the attractor to 0 at ``r_e`` (q = 1
+  for a sphincter): ``w = 1 - smoothstep(D / r_e)``. The balance ``delta (1 + k) = u`` with
+  ``rho = D - delta`` is a quadratic whose root in [0, D) is::
+
+      delta = 2 u D / (D + u + sqrt((D + u)^2 - 4 (1 - w) u D))
+
+  so the travel is u far from the bone (w = 0), u D / (D + u) at it (w = 1), and a vertex never
+  reaches the fixed end: the spike is gone and, along any ray from the fixed end, the order of
+  points is kept. (2) *Edge constraints*: for every triangle corner, a spring from the vertex to
+  the opposite edge keeps the corner's height above that edge (measured in the plane normal to
+  the triangle's rest normal) at least ``EDGE_MIN_HEIGHT`` of its rest height. It is
+  compression-only, so ordinary motion is untouched; where two muscles' fields, or the surface's
+  curvature, squeeze a triangle, a few vectorised Jacobi relaxation sweeps (position-based: each
+  violated constraint moves the vertex and the two edge ends along the edge's in-plane normal by
+  inverse-mass-weighted shares, averaged per vertex) push it back before it can flip. A triangle
+  folds exactly when a corner crosses its opposite edge, so this is the constraint that matters.
+* **Control points** (``control_point_displacements``, Zhang & Chen): the muscles move the rig's
+  active control points inside their zones, and DFFD spreads that over the skin. The points move
+  by the improved law (1): a control point that crossed its muscle's fixed end would turn the
+  whole region it controls inside out, and there is no mesh between control points to hold it.
+
+Adaptive placement (Zhou & Liu): a muscle end is stored as coefficients in the frame of three
+MPEG-4 feature points (``place`` / ``frame_coefficients``), so the same recipe places it on any
+face that has the feature points; ``default_muscles(face)`` does this for the default set and
+puts each end on the nearest skin vertex (the muscle formulas use 3D distances to the ends, so an
+end floating off the skin would shift every zone).
+
+The muscle set, 9 pairs after Waters' face model (whose muscle table, as commonly reproduced,
+has zygomatic major, angular depressor, frontalis inner / major / outer, levator labii superioris
+("labi nasi"), levator labii superioris alaeque nasi ("inner labi nasi"), lateral corrugator and a
+secondary frontalis strand). We keep the first eight; the secondary frontalis, a fourth strand
+over the same forehead the three frontalis strands already raise, is replaced by the
+**risorius**, so the lower face also gets a sideways lip-corner puller (FACS AU20; the FAPs
+stretch_l/r_cornerlip), which Waters' set lacks. The sphincters are orbicularis oris (around the
+lips' meeting point) and orbicularis oculi (around each eye). The jaw, the lower lip and the lids
+proper are driven by FAPs and rigid parts, not muscles.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+__all__ = [
+    "LinearMuscle", "Sphincter", "Muscle", "MuscleModel", "MODES", "place", "frame_coefficients",
+    "default_muscles", "mirror_muscle", "control_point_displacements", "folded_triangles",
+    "muscles_to_json", "muscles_from_json",
+]
+
+MODES = ("classic", "improved")
+EDGE_MIN_HEIGHT = 0.2  # edge constraints keep a corner's height above this share of its rest height
+EDGE_ITERATIONS = 30  # most relaxation sweeps per frame (it stops as soon as nothing is violated)
+
+
+@dataclass
+class LinearMuscle:
+    """A Waters linear (vector) muscle; see the module docstring for the displacement it makes."""
+
+    name: str
+    fixed: np.ndarray  # m_o, (3,): the end on the bone
+    insertion: np.ndarray  # m_i, (3,): the end in the skin
+    alpha: float  # half-angle of the zone about the axis m_o -> m_i, degrees
+    r_e: float  # Waters' Rs: the radial fall-off starts here (distance from m_o)
+    r_f: float  # Waters' Rf: and reaches zero here
+    pull: float  # travel at full effect for contraction 1, mesh units
+
+
+@dataclass
+class Sphincter:
+    """A Waters elliptical sphincter: pulls toward ``center`` in the frontal plane."""
+
+    name: str
+    center: np.ndarray  # (3,)
+    radii: np.ndarray  # (3,) semi-axes of the zone along the face's x, y, z
+    squeeze: float  # share of the way to the centre a point near it travels at contraction 1
+
+
+Muscle = LinearMuscle | Sphincter
+
+
+# -- the displacement laws ----------------------------------------------------------------------
+
+def _smoothstep(s: np.ndarray) -> np.ndarray:
+    s = np.clip(s, 0.0, 1.0)
+    return s * s * (3.0 - 2.0 * s)
+
+
+def _linear_field(m: LinearMuscle, points: np.ndarray):
+    """(rows, unit direction to m_o, classic travel per unit contraction, D, repulsion weight w)
+    for the points inside the muscle's zone."""
+    axis = np.asarray(m.insertion, float) - np.asarray(m.fixed, float)
+    rel = points - np.asarray(m.fixed, float)
+    dist = np.linalg.norm(rel, axis=1)
+    cos_mu = rel @ axis / np.maximum(dist * np.linalg.norm(axis), 1e-300)
+    mu = np.arccos(np.clip(cos_mu, -1.0, 1.0))
+    alpha = np.radians(m.alpha)
+    rows = np.flatnonzero((dist > 0) & (dist < m.r_f) & (mu < alpha))
+    d, angle = dist[rows], mu[rows]
+    radial = np.where(d <= m.r_e, np.sin(0.5 * np.pi * d / m.r_e),
+                      np.cos(0.5 * np.pi * (d - m.r_e) / (m.r_f - m.r_e)))
+    travel = m.pull * np.cos(0.5 * np.pi * angle / alpha) * radial
+    direction = -rel[rows] / d[:, None]
+    return rows, direction, travel, d, 1.0 - _smoothstep(d / m.r_e)
+
+
+def _sphincter_field(s: Sphincter, points: np.ndarray):
+    """The same five arrays for a sphincter (travel per unit contraction, toward the centre in x, y)."""
+    rel = points - np.asarray(s.center, float)
+    q = np.linalg.norm(rel / np.asarray(s.radii, float), axis=1)
+    flat = rel.copy()
+    flat[:, 2] = 0.0
+    dist = np.linalg.norm(flat, axis=1)
+    rows = np.flatnonzero((q < 1.0) & (dist > 0))
+    d, qq = dist[rows], q[rows]
+    travel = s.squeeze * np.cos(0.5 * np.pi * qq) ** 2 * d
+    return rows, -flat[rows] / d[:, None], travel, d, 1.0 - _smoothstep(qq)
+
+
+def _field(m: Muscle, points: np.ndarray):
+    return _linear_field(m, points) if isinstance(m, LinearMuscle) else _sphincter_field(m, points)
+
+
+def repelled_travel(travel: np.ndarray, dist: np.ndarray, weight: np.ndarray) -> np.ndarray:
+    """The improved law's travel toward the attractor: classic travel ``travel`` held back by the
+    repulsive spring k(rho) = weight * (dist / rho - 1) (see the module docstring); always below
+    ``dist`` where weight > 0, equal to ``travel`` where weight = 0 and travel < dist."""
+    total = dist + travel
+    root = np.sqrt(np.maximum(total * total - 4.0 * (1.0 - weight) * travel * dist, 0.0))
+    return 2.0 * travel * dist / np.maximum(total + root, 1e-300)
+
+
+def control_point_displacements(muscles: Sequence[Muscle], contractions: Mapping[str, float],
+                                points: np.ndarray) -> np.ndarray:
+    """Displacements (n, 3) of control points (n, 3) for muscle contractions {name: c}: each muscle
+    moves the points inside its zone by the improved law (no point crosses its fixed end); the
+    caller spreads them over the skin (DFFD, ``Runtime.deform``)."""
+    points = np.asarray(points, dtype=float)
+    out = np.zeros_like(points)
+    for m in _contracting(muscles, contractions):
+        rows, direction, travel, dist, weight = _field(m, points)
+        c = float(contractions[m.name])
+        out[rows] += repelled_travel(c * travel, dist, weight)[:, None] * direction
+    return out
+
+
+def _contracting(muscles: Sequence[Muscle], contractions: Mapping[str, float]) -> list[Muscle]:
+    """The muscles with a non-zero contraction; an unknown name is an error that lists the known."""
+    known = {m.name for m in muscles}
+    unknown = sorted(set(contractions) - known)
+    if unknown:
+        raise KeyError(f"unknown muscle(s) {unknown}; known: {sorted(known)}")
+    return [m for m in muscles if contractions.get(m.name, 0.0) != 0.0]
+
+
+# -- vertex modes -------------------------------------------------------------------------------
+
+class MuscleModel:
+    """Muscles acting on the vertices of one mesh, classic or improved (see module docstring).
+
+    Everything that depends on the rest mesh is computed once here: each muscle's rows, directions
+    and travels, the classic mode's sparse matrix (3V x muscles) and, for the improved mode, the
+    triangle corners the edge constraints watch. ``movable`` (vertex indices, default all) limits
+    which vertices muscles move (the default face: its skin, not the eyeballs and teeth).
+    """
+
+    def __init__(self, vertices: np.ndarray, triangles: np.ndarray, muscles: Sequence[Muscle],
+                 mode: str = "classic", movable: np.ndarray | None = None) -> None:
+        if mode not in MODES:
+            raise ValueError(f"mode {mode!r}: expected one of {MODES}")
+        self.rest = np.asarray(vertices, dtype=float)
+        self.muscles = list(muscles)
+        self.mode = mode
+        mask = np.zeros(len(self.rest), dtype=bool)
+        mask[np.arange(len(self.rest)) if movable is None else np.asarray(movable)] = True
+        self._fields = {}
+        for m in self.muscles:
+            rows, direction, travel, dist, weight = _field(m, self.rest)
+            keep = mask[rows]
+            self._fields[m.name] = (rows[keep], direction[keep], travel[keep], dist[keep], weight[keep])
+        self._classic = self._classic_matrix()
+        self._edges = _EdgeConstraints(self.rest, np.asarray(triangles), mask, self._reached())
+
+    def _classic_matrix(self) -> sp.csr_matrix:
+        """G (3V x muscles): the classic displacement is G @ contractions, raveled (V, 3)."""
+        rows, cols, vals = [], [], []
+        for j, (r, direction, travel, _, _) in enumerate(self._fields.values()):
+            rows.append((3 * r[:, None] + np.arange(3)).ravel())
+            cols.append(np.full(3 * len(r), j))
+            vals.append((travel[:, None] * direction).ravel())
+        shape = (3 * len(self.rest), len(self.muscles))
+        if not rows:
+            return sp.csr_matrix(shape)
+        return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=shape)
+
+    def _reached(self) -> np.ndarray:
+        """Vertices some muscle can move."""
+        reached = np.zeros(len(self.rest), dtype=bool)
+        for rows, *_ in self._fields.values():
+            reached[rows] = True
+        return reached
+
+    def displace(self, contractions: Mapping[str, float]) -> np.ndarray:
+        """Vertex displacements (V, 3) for contractions {muscle name: c}; missing muscles rest."""
+        active = _contracting(self.muscles, contractions)
+        if self.mode == "classic":
+            c = np.array([float(contractions.get(m.name, 0.0)) for m in self.muscles])
+            return (self._classic @ c).reshape(-1, 3)
+        out = np.zeros_like(self.rest)
+        for m in active:
+            rows, direction, travel, dist, weight = self._fields[m.name]
+            out[rows] += repelled_travel(float(contractions[m.name]) * travel, dist, weight)[:, None] * direction
+        if active:
+            self._edges.relax(out)
+        return out
+
+
+class _EdgeConstraints:
+    """Compression-only springs from each triangle corner to its opposite edge (improved mode).
+
+    Built once per mesh for the triangles around the vertices the muscles reach; ``relax`` runs
+    Jacobi sweeps on a displacement field in place until no corner is below ``EDGE_MIN_HEIGHT`` of
+    its rest height (or ``EDGE_ITERATIONS`` sweeps).
+    """
+
+    def __init__(self, rest: np.ndarray, triangles: np.ndarray, movable: np.ndarray, reached: np.ndarray) -> None:
+        tri = triangles[reached[triangles].any(axis=1) & movable[triangles].any(axis=1)].astype(np.int64)
+        self.rest = rest
+        self.corner = tri.ravel()  # vertex v of each corner, its opposite edge a -> b below
+        self.a = np.roll(tri, -1, axis=1).ravel()
+        self.b = np.roll(tri, -2, axis=1).ravel()
+        normal = np.cross(rest[tri[:, 1]] - rest[tri[:, 0]], rest[tri[:, 2]] - rest[tri[:, 0]])
+        self.normal = np.repeat(normal / np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300), 3, axis=0)
+        height, _, _ = self._heights(rest)
+        self.floor = EDGE_MIN_HEIGHT * height
+        self.inv_mass = movable.astype(float)
+        self.n = len(rest)
+
+    def _heights(self, x: np.ndarray):
+        """Signed corner heights above the opposite edge, the edge's in-plane unit normal, and the
+        foot of the corner along the edge (0 at a, 1 at b)."""
+        pa, pb, pv = x[self.a], x[self.b], x[self.corner]
+        edge = pb - pa
+        across = np.cross(self.normal, edge)
+        across /= np.maximum(np.linalg.norm(across, axis=1, keepdims=True), 1e-300)
+        t = np.clip(np.einsum("ij,ij->i", pv - pa, edge) / np.maximum(np.einsum("ij,ij->i", edge, edge), 1e-300), 0, 1)
+        return np.einsum("ij,ij->i", pv - pa, across), across, t
+
+    def relax(self, displacement: np.ndarray) -> None:
+        for _ in range(EDGE_ITERATIONS):
+            height, across, t = self._heights(self.rest + displacement)
+            bad = np.flatnonzero(height < self.floor)
+            if len(bad) == 0:
+                return
+            self._push(displacement, bad, self.floor[bad] - height[bad], across[bad], t[bad])
+
+    def _push(self, displacement: np.ndarray, bad: np.ndarray, deficit: np.ndarray,
+              across: np.ndarray, t: np.ndarray) -> None:
+        """One Jacobi sweep: each violated corner's position-based correction, averaged per vertex."""
+        ids = np.concatenate([self.corner[bad], self.a[bad], self.b[bad]])
+        grad = np.concatenate([np.ones(len(bad)), t - 1.0, -t])  # d height / d position, along `across`
+        w = self.inv_mass[ids] * grad
+        denom = np.maximum(np.bincount(np.tile(np.arange(len(bad)), 3), weights=w * grad, minlength=len(bad)), 1e-300)
+        step = np.tile(deficit / denom, 3) * w
+        vec = np.tile(across, (3, 1)) * step[:, None]
+        count = np.maximum(np.bincount(ids, weights=(w != 0).astype(float), minlength=self.n), 1.0)
+        for k in range(3):
+            displacement[:, k] += np.bincount(ids, weights=vec[:, k], minlength=self.n) / count
+
+
+def folded_triangles(rest: np.ndarray, deformed: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Boolean mask of triangles whose normal turned against its rest normal (dot < 0)."""
+    def normals(x: np.ndarray) -> np.ndarray:
+        return np.cross(x[triangles[:, 1]] - x[triangles[:, 0]], x[triangles[:, 2]] - x[triangles[:, 0]])
+    return np.einsum("ij,ij->i", normals(np.asarray(deformed, float)), normals(np.asarray(rest, float))) < 0
+
+
+# -- adaptive placement ---------------------------------------------------------------------------
+
+def _frame(corners: np.ndarray) -> np.ndarray:
+    """Rows A, B - A, C - A and the triangle's normal scaled to its size (sqrt of twice the area),
+    turned forward (+z) so that mirroring a face mirrors the frame."""
+    a, b, c = corners
+    n = np.cross(b - a, c - a)
+    size = np.linalg.norm(n)
+    n = n / np.sqrt(size) if size > 0 else n
+    return np.array([a, b - a, c - a, -n if n[2] < 0 else n])
+
+
+def place(feature_points: Mapping[str, np.ndarray], ids: Sequence[str], coefficients: Sequence[float]) -> np.ndarray:
+    """The point w_a A + w_b B + w_c C + h n of the frame of feature points ``ids`` = (A, B, C),
+    for ``coefficients`` (w_a, w_b, w_c, h): barycentric weights (normalised to sum 1) and an
+    offset along the triangle's forward normal in units of the triangle's size. The same
+    coefficients place the same anatomical point on another face (Zhou & Liu's adaptive muscles)."""
+    frame = _frame(np.array([feature_points[i] for i in ids], dtype=float))
+    wa, wb, wc, h = (float(x) for x in coefficients)
+    total = wa + wb + wc
+    return frame[0] + (wb * frame[1] + wc * frame[2]) / total + h * frame[3]
+
+
+def frame_coefficients(point: np.ndarray, feature_points: Mapping[str, np.ndarray], ids: Sequence[str]) -> np.ndarray:
+    """The coefficients (w_a, w_b, w_c, h) that ``place`` turns back into ``point``: how a muscle
+    end drawn on one face is written down for every face."""
+    frame = _frame(np.array([feature_points[i] for i in ids], dtype=float))
+    wb, wc, h = np.linalg.solve(frame[1:].T, np.asarray(point, float) - frame[0])
+    return np.array([1.0 - wb - wc, wb, wc, h])
+
+
+# -- the default muscles ----------------------------------------------------------------------------
+
+# Left-side recipes (the face's own left, +x). An end is (feature point ids, (w_a, w_b, w_c, h));
+# r_e and r_f are multiples of the muscle's length, pull a multiple of r_e.
+LINEAR_RECIPES = {
+    # name: (fixed end, insertion, alpha (deg), r_e / length, r_f / length)
+    "zygomatic_major": ((("5.3", "10.7", "5.1"), (0.5, 0.35, 0.15, 0)), (("8.3", "5.1", "8.5"), (0.85, 0.15, 0, 0)), 22, 1.0, 1.4),
+    "depressor_anguli_oris": ((("2.11", "2.13", "2.1"), (0.75, 0.25, 0, 0)), (("8.3", "8.7", "2.11"), (0.9, 0, 0.1, 0)), 25, 1.0, 1.4),
+    "frontalis_inner": ((("11.1", "11.3", "4.1"), (0.75, 0.2, 0.05, 0)), (("4.1", "11.1", "4.3"), (0.9, 0.1, 0, 0)), 18, 1.0, 1.3),
+    "frontalis_major": ((("11.3", "11.1", "4.3"), (0.55, 0.45, 0, 0)), (("4.3", "11.3", "4.1"), (0.9, 0.1, 0, 0)), 18, 1.0, 1.3),
+    "frontalis_outer": ((("11.3", "4.5", "11.1"), (0.9, 0.1, 0, 0)), (("4.5", "11.3", "3.7"), (0.9, 0.1, 0, 0)), 18, 1.0, 1.3),
+    "levator_labii_superioris": ((("3.9", "5.3", "9.13"), (0.3, 0.4, 0.3, 0)), (("8.5", "9.1", "8.3"), (0.8, 0.2, 0, 0)), 20, 1.0, 1.3),
+    "levator_labii_alaeque_nasi": ((("9.7", "3.11", "9.13"), (0.4, 0.4, 0.2, 0)), (("9.1", "8.5", "9.5"), (0.6, 0.4, 0, 0)), 18, 1.0, 1.3),
+    "corrugator_supercilii": ((("4.1", "9.7", "3.11"), (0.3, 0.6, 0.1, 0)), (("4.3", "4.1", "3.13"), (0.7, 0.3, 0, 0)), 20, 1.0, 1.4),
+    "risorius": ((("2.13", "5.1", "10.7"), (0.5, 0.4, 0.1, 0)), (("8.3", "5.1", "8.7"), (0.95, 0.05, 0, 0)), 20, 1.0, 1.3),
+}
+PULL = 0.15  # a linear muscle's pull at contraction 1, as a share of its r_e
+SPHINCTER_RECIPES = {
+    # name: (centre, (feature points whose distance scales the radii), radii / that distance, squeeze)
+    "orbicularis_oris": ((("2.2", "2.3", "8.3"), (0.5, 0.5, 0, 0)), ("8.3", "8.4"), (0.7, 0.45, 0.5), 0.3),
+    "orbicularis_oculi_l": ((("3.5", "3.7", "3.11"), (1, 0, 0, 0)), ("3.7", "3.11"), (1.15, 0.95, 0.8), 0.35),
+}
+# Feature point ids of the face's left side and their mirror on the right (MPEG-4 numbering is
+# not a plain odd/even rule: 3.7 pairs with 3.12, 8.10 with 8.9, ...); ids on the mid-line are
+# their own mirror.
+MIRROR_IDS = {
+    "2.4": "2.5", "2.6": "2.7", "2.8": "2.9", "2.11": "2.12", "2.13": "2.14", "3.1": "3.2", "3.3": "3.4",
+    "3.5": "3.6", "3.7": "3.12", "3.9": "3.10", "3.11": "3.8", "3.13": "3.14", "4.1": "4.2", "4.3": "4.4",
+    "4.5": "4.6", "5.1": "5.2", "5.3": "5.4", "8.3": "8.4", "8.5": "8.6", "8.7": "8.8", "8.10": "8.9",
+    "9.1": "9.2", "9.5": "9.4", "9.7": "9.6", "9.13": "9.14", "10.7": "10.8", "10.9": "10.10", "11.3": "11.2",
+}
+MIRROR_IDS |= {v: k for k, v in MIRROR_IDS.items()}
+
+
+def default_muscles(face) -> list[Muscle]:
+    """The default muscle set (module docstring) placed on ``face`` by its feature points: 9 pairs
+    of linear muscles named ``<muscle>_l`` / ``_r`` and the three sphincters, ends on the skin."""
+    fp = {k: np.asarray(v, float) for k, v in face.feature_points.items()}
+    skin = np.asarray(face.vertices, float)[face.parts.get("skin", np.arange(len(face.vertices)))]
+    muscles: list[Muscle] = []
+    for name, recipe in LINEAR_RECIPES.items():
+        muscles.append(_linear_from_recipe(f"{name}_l", recipe, fp, skin, _same))
+        muscles.append(_linear_from_recipe(f"{name}_r", recipe, fp, skin, _mirrored))
+    for name, recipe in SPHINCTER_RECIPES.items():
+        muscles.append(_sphincter_from_recipe(name, recipe, fp, _same))
+        if name.endswith("_l"):
+            muscles.append(_sphincter_from_recipe(name[:-2] + "_r", recipe, fp, _mirrored))
+    return muscles
+
+
+def _same(fid: str) -> str:
+    return fid
+
+
+def _mirrored(fid: str) -> str:
+    return MIRROR_IDS.get(fid, fid)
+
+
+def _on_skin(point: np.ndarray, skin: np.ndarray) -> np.ndarray:
+    return skin[np.argmin(np.einsum("ij,ij->i", skin - point, skin - point))].copy()
+
+
+def _linear_from_recipe(name: str, recipe: tuple, fp: Mapping[str, np.ndarray], skin: np.ndarray,
+                        rename: Callable[[str], str]) -> LinearMuscle:
+    (fixed_ids, fixed_w), (ins_ids, ins_w), alpha, r_e, r_f = recipe
+    fixed = _on_skin(place(fp, [rename(i) for i in fixed_ids], fixed_w), skin)
+    insertion = _on_skin(place(fp, [rename(i) for i in ins_ids], ins_w), skin)
+    length = float(np.linalg.norm(insertion - fixed))
+    return LinearMuscle(name, fixed, insertion, float(alpha), r_e * length, r_f * length, PULL * r_e * length)
+
+
+def _sphincter_from_recipe(name: str, recipe: tuple, fp: Mapping[str, np.ndarray],
+                           rename: Callable[[str], str]) -> Sphincter:
+    (ids, weights), (p, q), radii, squeeze = recipe
+    scale = float(np.linalg.norm(fp[rename(p)] - fp[rename(q)]))
+    center = place(fp, [rename(i) for i in ids], weights)
+    return Sphincter(name, center, scale * np.asarray(radii, float), float(squeeze))
+
+
+def mirror_muscle(m: Muscle, name: str | None = None) -> Muscle:
+    """The muscle mirrored across the plane x = 0 (the face's mid-line)."""
+    flip = np.array([-1.0, 1.0, 1.0])
+    if isinstance(m, LinearMuscle):
+        return LinearMuscle(name or m.name, m.fixed * flip, m.insertion * flip, m.alpha, m.r_e, m.r_f, m.pull)
+    return Sphincter(name or m.name, m.center * flip, m.radii.copy(), m.squeeze)
+
+
+# -- JSON -------------------------------------------------------------------------------------------
+
+def muscles_to_json(muscles: Sequence[Muscle]) -> list[dict]:
+    """Plain JSON data (lists of floats) for the rig file."""
+    out = []
+    for m in muscles:
+        if isinstance(m, LinearMuscle):
+            out.append({"kind": "linear", "name": m.name, "fixed": _floats(m.fixed), "insertion": _floats(m.insertion),
+                        "alpha": float(m.alpha), "r_e": float(m.r_e), "r_f": float(m.r_f), "pull": float(m.pull)})
+        else:
+            out.append({"kind": "sphincter", "name": m.name, "center": _floats(m.center),
+                        "radii": _floats(m.radii), "squeeze": float(m.squeeze)})
+    return out
+
+
+def muscles_from_json(obj: Sequence[Mapping]) -> list[Muscle]:
+    """Muscles from ``muscles_to_json`` data; a bad entry raises ValueError naming it."""
+    muscles: list[Muscle] = []
+    for i, entry in enumerate(obj):
+        try:
+            muscles.append(_muscle_from_dict(entry))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ValueError(f"muscle #{i} ({entry.get('name', '?') if isinstance(entry, Mapping) else entry!r}): "
+                             f"{type(exc).__name__}: {exc}") from exc
+    return muscles
+
+
+def _muscle_from_dict(d: Mapping) -> Muscle:
+    kind = d["kind"]
+    if kind == "linear":
+        m = LinearMuscle(str(d["name"]), _vec(d["fixed"]), _vec(d["insertion"]), float(d["alpha"]),
+                         float(d["r_e"]), float(d["r_f"]), float(d["pull"]))
+        if not (0 < m.r_e < m.r_f and 0 < m.alpha < 180):
+            raise ValueError("needs 0 < r_e < r_f and 0 < alpha < 180")
+        return m
+    if kind == "sphincter":
+        s = Sphincter(str(d["name"]), _vec(d["center"]), _vec(d["radii"]), float(d["squeeze"]))
+        if not np.all(s.radii > 0):
+            raise ValueError("radii must be positive")
+        return s
+    raise ValueError(f"kind {kind!r}: expected 'linear' or 'sphincter'")
+
+
+def _vec(x) -> np.ndarray:
+    v = np.asarray(x, dtype=float)
+    if v.shape != (3,):
+        raise ValueError(f"expected 3 numbers, got {x!r}")
+    return v
+
+
+def _floats(v: np.ndarray) -> list[float]:
+    return [float(x) for x in v]
