@@ -35,7 +35,9 @@ def open_device(url: str, name: str | None = None) -> Device:
     except ImportError as exc:
         raise DeviceError(f"device URL {url!r}: the {parsed.scheme} backend needs {exc.name!r} "
                           f"(pip install {exc.name})") from None
-    return getattr(module, class_name).from_url(parsed, name or url)
+    device = getattr(module, class_name).from_url(parsed, name or url)
+    device.url = url
+    return device
 
 
 __all__ = ["BACKENDS", "Counters", "Device", "DeviceError", "DeviceLost", "Sample", "State", "Url", "open_device"]

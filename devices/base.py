@@ -83,6 +83,7 @@ class Device(ABC):
 
     def __init__(self, name: str) -> None:
         self.name = name
+        self.url: str | None = None  # the URL it was opened by (``open_device``), for a take's record
         self.state = State.CLOSED
         self.counters = Counters()
         self._queue: collections.deque[Sample] = collections.deque(maxlen=self.QUEUE)

@@ -21,6 +21,7 @@ import struct
 import time
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
+from typing import Self
 
 from .base import Device, DeviceError, Sample, State, Url
 
@@ -94,14 +95,16 @@ class Twin(ABC):
         expected = self._send(values)
         got: list[Sample] = []
         deadline = time.monotonic() + timeout
-        while len(got) < expected:
+        while True:
+            got += device.drain()
+            if len(got) >= expected:
+                break
             if device.counters.bad_frames != bad:
                 raise DeviceError(f"{device.name}: the {self.url!r} adapter rejected {dict(values)} "
                                   f"as a bad frame ({device.counters.last_error or 'no detail'})")
             if time.monotonic() > deadline:
                 raise DeviceError(f"{device.name}: no Sample from the {self.url!r} adapter within "
                                   f"{timeout} s of sending {dict(values)}")
-            got += device.drain()
             time.sleep(POLL)
         if len(got) > expected:
             raise DeviceError(f"{device.name}: the {self.url!r} adapter made {len(got)} Samples of "
@@ -117,7 +120,7 @@ class Twin(ABC):
         """Stop the adapter and release the simulated transport (subclasses extend this)."""
         self.device.close()
 
-    def __enter__(self) -> Twin:
+    def __enter__(self) -> Self:
         return self
 
     def __exit__(self, *exc: object) -> None:

@@ -208,15 +208,18 @@ def bench_faces(ict: bool) -> list[tuple[Face, object]]:
     return faces
 
 
-def run_bench(frames: int = 300, as_json: bool = False, ict: bool = True) -> int:
-    """Measure every mesh and print two tables (or JSON); return the process exit code."""
+def run_bench(frames: int = 300, as_json: bool = False, ict: bool = True, flood_seconds: float = 60.0,
+              take_seconds: float = 3600.0) -> int:
+    """Measure every mesh, the inputs and the live pipeline; print tables (or JSON); return the
+    process exit code."""
     faces = bench_faces(ict)
     rows = [bench_face(face, frames, rig) for face, rig in faces]
     split = [bench_frame_split(face, min(frames, 120), rig) for face, rig in faces
              if face.name in ("default", "ict")]
     inputs = bench_inputs()
+    live = _bench_live(faces[0][0], flood_seconds, take_seconds)
     if as_json:
-        print(json.dumps({"deform": rows, "frames": split, "inputs": inputs}, indent=1))
+        print(json.dumps({"deform": rows, "frames": split, "inputs": inputs, "live": live}, indent=1))
         return 0
     _table(rows, ("face", "vertices", "control_points", "precompute_s", "load_s", "deform_ms",
                   "deform_normals_ms", "realtime_ms", "dense_ms", "ratio"))
@@ -229,7 +232,33 @@ def run_bench(frames: int = 300, as_json: bool = False, ict: bool = True) -> int
     for row in inputs:
         if "error" in row:
             print(f"{row['adapter']}: not measured ({row['error']})")
+    print()
+    _print_live(live)
     return 0
+
+
+def _bench_live(face: Face, flood_seconds: float, take_seconds: float) -> dict:
+    """The live pipeline on the default face: latency, a flood of input, a long take."""
+    from . import loadbench
+
+    runtime = Runtime(face)
+    return {"latency": loadbench.latency(runtime), "flood": loadbench.flood(runtime, flood_seconds),
+            "long_take": loadbench.long_take(take_seconds)}
+
+
+def _print_live(live: dict) -> None:
+    lat, flood, take = live["latency"], live["flood"], live["long_take"]
+    print(f"live latency (sim slider box -> default face, drawn and read back 640x480): "
+          f"sample->mesh {lat['mesh_median_ms']:.2f} ms median / {lat['mesh_p99_ms']:.2f} p99; "
+          f"sample->frame {lat['latency_median_ms']:.2f} ms median / {lat['latency_p99_ms']:.2f} p99 "
+          f"at {lat['fps']:.0f} fps")
+    print(f"flood {flood['rate']:,.0f} readings/s for {flood['seconds']:g} s, recording: {flood['fps']:.1f} fps "
+          f"(baseline {flood['baseline_fps']:.1f}, ratio {flood['fps_ratio']:.2f}), {flood['samples_s']:,.0f} "
+          f"samples/s taken, memory {flood['rss_start_mb']:.1f} -> {flood['rss_end_mb']:.1f} MiB, "
+          f"longest backlog {flood['backlog_max']}, dropped {flood['dropped']}")
+    print(f"long take {take['take_seconds'] / 3600:g} h at an accelerated clock: {take['frames']:,} frames, "
+          f"{take['samples']:,} samples in {take['wall_s']:.1f} s, memory growth {take['rss_growth_mb']:.2f} MiB, "
+          f"take {take['take_mb']:.0f} MiB on disk")
 
 
 def _table(rows: list[dict], header: tuple[str, ...]) -> None:

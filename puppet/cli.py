@@ -82,6 +82,10 @@ def main(argv: list[str] | None = None) -> int:
     bench.add_argument("--json", action="store_true", help="print the results as JSON")
     bench.add_argument("--frames", type=_positive, default=300, help="frames per measurement")
     bench.add_argument("--no-ict", action="store_true", help="skip the ICT face even when present")
+    bench.add_argument("--flood-seconds", type=_positive_float, default=60.0,
+                       help="how long the 10,000 readings/s flood runs (default 60)")
+    bench.add_argument("--take-seconds", type=_positive_float, default=3600.0,
+                       help="length of the accelerated long take (default 3600)")
 
     args = parser.parse_args(argv)
     if args.command == "demo":
@@ -122,7 +126,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "bench":
         from .bench import run_bench
 
-        return run_bench(frames=args.frames, as_json=args.json, ict=not args.no_ict)
+        return run_bench(frames=args.frames, as_json=args.json, ict=not args.no_ict,
+                         flood_seconds=args.flood_seconds, take_seconds=args.take_seconds)
     return 2
 
 

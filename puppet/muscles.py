@@ -28,20 +28,23 @@ Three ways to apply them:
 * **Classic** (``MuscleModel(..., mode="classic")``): the formulas above on every vertex, summed
   over muscles; one sparse product per frame.
 * **Improved** (``mode="improved"``, after Zhou & Liu; their equations are not reproduced here, so
-  these are our forms). (1) A *repulsive spring* near the attractor (the fixed end, or the
-  sphincter's centre): against the muscle's pull (unit stiffness, classic travel u) the vertex is
-  held at its rest place by a spring of stiffness ``k(rho) = w * (D / rho - 1)``, rho the
-  vertex's distance to the attractor after moving: zero at rest, rising hyperbolically without
-  bound as the vertex nears the bone. ``w`` fades from 1 at the attractor to 0 at ``r_e`` (q = 1
-  for a sphincter): ``w = 1 - smoothstep(D / r_e)``. The balance ``delta (1 + k) = u`` with
-  ``rho = D - delta`` is a quadratic whose root in [0, D) is::
+  these are our forms). (1) A *repulsive spring* at the attractor (the fixed end, or the
+  sphincter's centre). Along its ray a vertex at rest distance D is pulled by the muscle with
+  unit stiffness toward its classic place (travel u); once it comes within D/2 of the bone, a
+  spring pushes it back with force ``F(rho) = (D/2 - rho)^2 / rho`` (rho: its distance to the bone
+  now), whose stiffness ``-dF/drho = (D/2)^2 / rho^2 - 1`` rises as 1/rho^2 toward the bone. The
+  balance ``u - (D - rho) = F(rho)`` solves in closed form::
 
-      delta = 2 u D / (D + u + sqrt((D + u)^2 - 4 (1 - w) u D))
+      rho = D - u          for u <= D/2   (exactly the classic motion)
+      rho = D^2 / (4 u)    for u >  D/2   (C1 at u = D/2; rho > 0 for any u)
 
-  so the travel is u far from the bone (w = 0), u D / (D + u) at it (w = 1), and a vertex never
-  reaches the fixed end: the spike is gone and, along any ray from the fixed end, the order of
-  points is kept. (2) *Edge constraints*: for every triangle corner, a spring from the vertex to
-  the opposite edge keeps the corner's height above that edge (measured in the plane normal to
+  so ordinary contractions are untouched (at c = 1 no point goes half way to its bone) and no
+  vertex reaches the fixed end: the spike is gone. Along a ray, rho(D) stays increasing for any
+  contraction wherever the classic travel is concave in D (inside r_e, where Waters' sine
+  fall-off is) or decreasing (beyond r_e), so the rays cannot fold either (a triangle spanning
+  several rays still can, where the zone is squeezed hard near the bone).
+  (2) *Edge constraints*: for every triangle corner, a spring from the vertex to the opposite edge
+  keeps the corner's height above that edge (measured in the plane normal to
   the triangle's rest normal) at least ``EDGE_MIN_HEIGHT`` of its rest height. It is
   compression-only, so ordinary motion is untouched; where two muscles' fields, or the surface's
   curvature, squeeze a triangle, a few vectorised Jacobi relaxation sweeps (position-based: each
@@ -52,6 +55,10 @@ Three ways to apply them:
   active control points inside their zones, and DFFD spreads that over the skin. The points move
   by the improved law (1): a control point that crossed its muscle's fixed end would turn the
   whole region it controls inside out, and there is no mesh between control points to hold it.
+  That alone does not keep the skin from folding at large contraction (tools/muscle_experiment.py:
+  the zone squeezed toward the bone flips spread triangles on a grid at c = 5 and 10, and on the
+  default face the rig's region borders next to the moving lip corner fold from c = 3);
+  ``EdgeConstraints`` run on the spread displacement removes those folds.
 
 Adaptive placement (Zhou & Liu): a muscle end is stored as coefficients in the frame of three
 MPEG-4 feature points (``place`` / ``frame_coefficients``), so the same recipe places it on any
@@ -79,13 +86,25 @@ import numpy as np
 import scipy.sparse as sp
 
 __all__ = [
-    "LinearMuscle", "Sphincter", "Muscle", "MuscleModel", "MODES", "place", "frame_coefficients",
-    "default_muscles", "mirror_muscle", "control_point_displacements", "folded_triangles",
-    "muscles_to_json", "muscles_from_json",
+    "MODES",
+    "EdgeConstraints",
+    "LinearMuscle",
+    "Muscle",
+    "MuscleModel",
+    "Sphincter",
+    "control_point_displacements",
+    "default_muscles",
+    "folded_triangles",
+    "frame_coefficients",
+    "mirror_muscle",
+    "muscles_from_json",
+    "muscles_to_json",
+    "place",
+    "repelled_travel",
 ]
 
 MODES = ("classic", "improved")
-EDGE_MIN_HEIGHT = 0.2  # edge constraints keep a corner's height above this share of its rest height
+EDGE_MIN_HEIGHT = 0.05  # edge constraints keep a corner's height above this share of its rest height
 EDGE_ITERATIONS = 30  # most relaxation sweeps per frame (it stops as soon as nothing is violated)
 
 
@@ -117,14 +136,9 @@ Muscle = LinearMuscle | Sphincter
 
 # -- the displacement laws ----------------------------------------------------------------------
 
-def _smoothstep(s: np.ndarray) -> np.ndarray:
-    s = np.clip(s, 0.0, 1.0)
-    return s * s * (3.0 - 2.0 * s)
-
-
 def _linear_field(m: LinearMuscle, points: np.ndarray):
-    """(rows, unit direction to m_o, classic travel per unit contraction, D, repulsion weight w)
-    for the points inside the muscle's zone."""
+    """(rows, unit direction to m_o, classic travel per unit contraction, D) for the points inside
+    the muscle's zone."""
     axis = np.asarray(m.insertion, float) - np.asarray(m.fixed, float)
     rel = points - np.asarray(m.fixed, float)
     dist = np.linalg.norm(rel, axis=1)
@@ -137,11 +151,11 @@ def _linear_field(m: LinearMuscle, points: np.ndarray):
                       np.cos(0.5 * np.pi * (d - m.r_e) / (m.r_f - m.r_e)))
     travel = m.pull * np.cos(0.5 * np.pi * angle / alpha) * radial
     direction = -rel[rows] / d[:, None]
-    return rows, direction, travel, d, 1.0 - _smoothstep(d / m.r_e)
+    return rows, direction, travel, d
 
 
 def _sphincter_field(s: Sphincter, points: np.ndarray):
-    """The same five arrays for a sphincter (travel per unit contraction, toward the centre in x, y)."""
+    """The same four arrays for a sphincter (travel per unit contraction, toward the centre in x, y)."""
     rel = points - np.asarray(s.center, float)
     q = np.linalg.norm(rel / np.asarray(s.radii, float), axis=1)
     flat = rel.copy()
@@ -150,20 +164,18 @@ def _sphincter_field(s: Sphincter, points: np.ndarray):
     rows = np.flatnonzero((q < 1.0) & (dist > 0))
     d, qq = dist[rows], q[rows]
     travel = s.squeeze * np.cos(0.5 * np.pi * qq) ** 2 * d
-    return rows, -flat[rows] / d[:, None], travel, d, 1.0 - _smoothstep(qq)
+    return rows, -flat[rows] / d[:, None], travel, d
 
 
 def _field(m: Muscle, points: np.ndarray):
     return _linear_field(m, points) if isinstance(m, LinearMuscle) else _sphincter_field(m, points)
 
 
-def repelled_travel(travel: np.ndarray, dist: np.ndarray, weight: np.ndarray) -> np.ndarray:
-    """The improved law's travel toward the attractor: classic travel ``travel`` held back by the
-    repulsive spring k(rho) = weight * (dist / rho - 1) (see the module docstring); always below
-    ``dist`` where weight > 0, equal to ``travel`` where weight = 0 and travel < dist."""
-    total = dist + travel
-    root = np.sqrt(np.maximum(total * total - 4.0 * (1.0 - weight) * travel * dist, 0.0))
-    return 2.0 * travel * dist / np.maximum(total + root, 1e-300)
+def repelled_travel(travel: np.ndarray, dist: np.ndarray) -> np.ndarray:
+    """The improved law's travel toward the attractor for classic travel ``travel`` at rest distance
+    ``dist``: unchanged up to dist / 2, then dist - dist^2 / (4 travel) (the repulsive spring's
+    balance, module docstring), always below ``dist``."""
+    return np.where(travel <= 0.5 * dist, travel, dist - dist * dist / np.maximum(4.0 * travel, 1e-300))
 
 
 def control_point_displacements(muscles: Sequence[Muscle], contractions: Mapping[str, float],
@@ -174,9 +186,8 @@ def control_point_displacements(muscles: Sequence[Muscle], contractions: Mapping
     points = np.asarray(points, dtype=float)
     out = np.zeros_like(points)
     for m in _contracting(muscles, contractions):
-        rows, direction, travel, dist, weight = _field(m, points)
-        c = float(contractions[m.name])
-        out[rows] += repelled_travel(c * travel, dist, weight)[:, None] * direction
+        rows, direction, travel, dist = _field(m, points)
+        out[rows] += repelled_travel(float(contractions[m.name]) * travel, dist)[:, None] * direction
     return out
 
 
@@ -211,16 +222,16 @@ class MuscleModel:
         mask[np.arange(len(self.rest)) if movable is None else np.asarray(movable)] = True
         self._fields = {}
         for m in self.muscles:
-            rows, direction, travel, dist, weight = _field(m, self.rest)
+            rows, direction, travel, dist = _field(m, self.rest)
             keep = mask[rows]
-            self._fields[m.name] = (rows[keep], direction[keep], travel[keep], dist[keep], weight[keep])
+            self._fields[m.name] = (rows[keep], direction[keep], travel[keep], dist[keep])
         self._classic = self._classic_matrix()
-        self._edges = _EdgeConstraints(self.rest, np.asarray(triangles), mask, self._reached())
+        self._edges = EdgeConstraints(self.rest, np.asarray(triangles), mask, self._reached())
 
     def _classic_matrix(self) -> sp.csr_matrix:
         """G (3V x muscles): the classic displacement is G @ contractions, raveled (V, 3)."""
         rows, cols, vals = [], [], []
-        for j, (r, direction, travel, _, _) in enumerate(self._fields.values()):
+        for j, (r, direction, travel, _) in enumerate(self._fields.values()):
             rows.append((3 * r[:, None] + np.arange(3)).ravel())
             cols.append(np.full(3 * len(r), j))
             vals.append((travel[:, None] * direction).ravel())
@@ -244,23 +255,31 @@ class MuscleModel:
             return (self._classic @ c).reshape(-1, 3)
         out = np.zeros_like(self.rest)
         for m in active:
-            rows, direction, travel, dist, weight = self._fields[m.name]
-            out[rows] += repelled_travel(float(contractions[m.name]) * travel, dist, weight)[:, None] * direction
+            rows, direction, travel, dist = self._fields[m.name]
+            out[rows] += repelled_travel(float(contractions[m.name]) * travel, dist)[:, None] * direction
         if active:
             self._edges.relax(out)
         return out
 
 
-class _EdgeConstraints:
+class EdgeConstraints:
     """Compression-only springs from each triangle corner to its opposite edge (improved mode).
 
-    Built once per mesh for the triangles around the vertices the muscles reach; ``relax`` runs
-    Jacobi sweeps on a displacement field in place until no corner is below ``EDGE_MIN_HEIGHT`` of
-    its rest height (or ``EDGE_ITERATIONS`` sweeps).
+    Built once per mesh for the triangles that touch a ``reached`` vertex (bool mask, default all)
+    and a ``movable`` one (bool mask; others have infinite mass); ``relax`` runs Jacobi sweeps on a
+    displacement field in place until no corner is below ``EDGE_MIN_HEIGHT`` of its rest height (or
+    ``EDGE_ITERATIONS`` sweeps). The floor is low on purpose: at extreme contraction the repulsive
+    law squeezes the skin near the bone harder than a higher floor allows, and the sweeps would
+    then chase an unreachable target; any positive floor keeps triangles from flipping. Usable on
+    any displacement field, e.g. the skin after DFFD.
     """
 
-    def __init__(self, rest: np.ndarray, triangles: np.ndarray, movable: np.ndarray, reached: np.ndarray) -> None:
-        tri = triangles[reached[triangles].any(axis=1) & movable[triangles].any(axis=1)].astype(np.int64)
+    def __init__(self, rest: np.ndarray, triangles: np.ndarray, movable: np.ndarray | None = None,
+                 reached: np.ndarray | None = None) -> None:
+        triangles = np.asarray(triangles, dtype=np.int64)
+        movable = np.ones(len(rest), bool) if movable is None else movable
+        reached = np.ones(len(rest), bool) if reached is None else reached
+        tri = triangles[reached[triangles].any(axis=1) & movable[triangles].any(axis=1)]
         self.rest = rest
         self.corner = tri.ravel()  # vertex v of each corner, its opposite edge a -> b below
         self.a = np.roll(tri, -1, axis=1).ravel()
@@ -283,6 +302,7 @@ class _EdgeConstraints:
         return np.einsum("ij,ij->i", pv - pa, across), across, t
 
     def relax(self, displacement: np.ndarray) -> None:
+        """Push corners back above their floor: ``displacement`` (V, 3) is changed in place."""
         for _ in range(EDGE_ITERATIONS):
             height, across, t = self._heights(self.rest + displacement)
             bad = np.flatnonzero(height < self.floor)
@@ -348,15 +368,24 @@ def frame_coefficients(point: np.ndarray, feature_points: Mapping[str, np.ndarra
 # r_e and r_f are multiples of the muscle's length, pull a multiple of r_e.
 LINEAR_RECIPES = {
     # name: (fixed end, insertion, alpha (deg), r_e / length, r_f / length)
-    "zygomatic_major": ((("5.3", "10.7", "5.1"), (0.5, 0.35, 0.15, 0)), (("8.3", "5.1", "8.5"), (0.85, 0.15, 0, 0)), 22, 1.0, 1.4),
-    "depressor_anguli_oris": ((("2.11", "2.13", "2.1"), (0.75, 0.25, 0, 0)), (("8.3", "8.7", "2.11"), (0.9, 0, 0.1, 0)), 25, 1.0, 1.4),
-    "frontalis_inner": ((("11.1", "11.3", "4.1"), (0.75, 0.2, 0.05, 0)), (("4.1", "11.1", "4.3"), (0.9, 0.1, 0, 0)), 18, 1.0, 1.3),
-    "frontalis_major": ((("11.3", "11.1", "4.3"), (0.55, 0.45, 0, 0)), (("4.3", "11.3", "4.1"), (0.9, 0.1, 0, 0)), 18, 1.0, 1.3),
-    "frontalis_outer": ((("11.3", "4.5", "11.1"), (0.9, 0.1, 0, 0)), (("4.5", "11.3", "3.7"), (0.9, 0.1, 0, 0)), 18, 1.0, 1.3),
-    "levator_labii_superioris": ((("3.9", "5.3", "9.13"), (0.3, 0.4, 0.3, 0)), (("8.5", "9.1", "8.3"), (0.8, 0.2, 0, 0)), 20, 1.0, 1.3),
-    "levator_labii_alaeque_nasi": ((("9.7", "3.11", "9.13"), (0.4, 0.4, 0.2, 0)), (("9.1", "8.5", "9.5"), (0.6, 0.4, 0, 0)), 18, 1.0, 1.3),
-    "corrugator_supercilii": ((("4.1", "9.7", "3.11"), (0.3, 0.6, 0.1, 0)), (("4.3", "4.1", "3.13"), (0.7, 0.3, 0, 0)), 20, 1.0, 1.4),
-    "risorius": ((("2.13", "5.1", "10.7"), (0.5, 0.4, 0.1, 0)), (("8.3", "5.1", "8.7"), (0.95, 0.05, 0, 0)), 20, 1.0, 1.3),
+    "zygomatic_major": ((("5.3", "10.7", "5.1"), (0.5, 0.35, 0.15, 0)),
+                        (("8.3", "5.1", "8.5"), (0.85, 0.15, 0, 0)), 22, 1.0, 1.4),
+    "depressor_anguli_oris": ((("2.11", "2.13", "2.1"), (0.75, 0.25, 0, 0)),
+                              (("8.3", "8.7", "2.11"), (0.9, 0, 0.1, 0)), 25, 1.0, 1.4),
+    "frontalis_inner": ((("11.1", "11.3", "4.1"), (0.75, 0.2, 0.05, 0)),
+                        (("4.1", "11.1", "4.3"), (0.9, 0.1, 0, 0)), 18, 1.0, 1.3),
+    "frontalis_major": ((("11.3", "11.1", "4.3"), (0.55, 0.45, 0, 0)),
+                        (("4.3", "11.3", "4.1"), (0.9, 0.1, 0, 0)), 18, 1.0, 1.3),
+    "frontalis_outer": ((("11.3", "4.5", "11.1"), (0.9, 0.1, 0, 0)),
+                        (("4.5", "11.3", "3.7"), (0.9, 0.1, 0, 0)), 18, 1.0, 1.3),
+    "levator_labii_superioris": ((("3.9", "5.3", "9.13"), (0.3, 0.4, 0.3, 0)),
+                                 (("8.5", "9.1", "8.3"), (0.8, 0.2, 0, 0)), 20, 1.0, 1.3),
+    "levator_labii_alaeque_nasi": ((("9.7", "3.11", "9.13"), (0.4, 0.4, 0.2, 0)),
+                                   (("9.1", "8.5", "9.5"), (0.6, 0.4, 0, 0)), 18, 1.0, 1.3),
+    "corrugator_supercilii": ((("4.1", "9.7", "3.11"), (0.3, 0.6, 0.1, 0)),
+                              (("4.3", "4.1", "3.13"), (0.7, 0.3, 0, 0)), 20, 1.0, 1.4),
+    "risorius": ((("2.13", "5.1", "10.7"), (0.5, 0.4, 0.1, 0)),
+                 (("8.3", "5.1", "8.7"), (0.95, 0.05, 0, 0)), 20, 1.0, 1.3),
 }
 PULL = 0.15  # a linear muscle's pull at contraction 1, as a share of its r_e
 SPHINCTER_RECIPES = {
@@ -451,8 +480,8 @@ def muscles_from_json(obj: Sequence[Mapping]) -> list[Muscle]:
         try:
             muscles.append(_muscle_from_dict(entry))
         except (KeyError, TypeError, ValueError) as exc:
-            raise ValueError(f"muscle #{i} ({entry.get('name', '?') if isinstance(entry, Mapping) else entry!r}): "
-                             f"{type(exc).__name__}: {exc}") from exc
+            name = entry.get("name", "?") if isinstance(entry, Mapping) else "?"
+            raise ValueError(f"muscle #{i} ({name}): {type(exc).__name__}: {exc}") from exc
     return muscles
 
 

@@ -107,15 +107,11 @@ class LiveSession:
         self.urls: dict[str, str] = {}
         try:
             for name, url in self.mapping.devices.items():
-                if name in overrides:
-                    self.devices[name] = overrides.pop(name)
-                    self.urls[name] = f"override:{type(self.devices[name]).__name__}"
-                else:
-                    self.devices[name] = open_device(url, name)
-                    self.urls[name] = url
+                self.devices[name] = overrides.pop(name) if name in overrides else open_device(url, name)
             for name, device in overrides.items():  # extra devices: read (and logged), not mapped
                 self.devices[name] = device
-                self.urls[name] = f"override:{type(device).__name__}"
+            for name, device in self.devices.items():
+                self.urls[name] = device.url or f"override:{type(device).__name__}"
             for device in self.devices.values():
                 device.start()
         except BaseException:

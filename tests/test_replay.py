@@ -203,3 +203,9 @@ def test_an_imported_arkit_take_can_be_re_mapped(tmp_path):
     stronger.write_text(DEFAULT_MAPPING.read_text())
     remapped = retake(folder, tmp_path / "remap.fap", mapping=stronger)
     np.testing.assert_array_equal(read_fap(remapped.path).values, open_take(folder).stream().values)
+
+
+def test_a_live_take_replays_through_the_real_serial_adapter_to_the_identical_fap(live_take, tmp_path):
+    assert live_take.meta["devices"]["box"] == JOYSTICK
+    result = retake(live_take, tmp_path / "wire.fap", through_devices=True)
+    assert result.identical, "the .fap replayed through the pty and the serial adapter differs"

@@ -1,0 +1,152 @@
+"""The live pipeline under load, for ``puppet bench``: latency, a flood of input, a long take.
+
+* ``latency``: the live session on the default face with the simulated slider box (a real
+  pseudo-terminal read by pyserial, 200 readings/s), every frame drawn and read back by the
+  headless renderer (``session.measure_latency``): Sample timestamp -> mesh ready, and -> frame
+  drawn; medians and p99.
+* ``flood``: the same loop, recording a take, while the box sends ``rate`` readings a second
+  (COBS frames) for ``seconds``: frames per second against a baseline run in the same call at
+  200 readings/s, the samples taken in, the process's resident memory over time (flat: nothing
+  grows), and the device queue's longest backlog (bounded by ``Device.QUEUE``).
+* ``long_take``: a take of ``take_seconds`` made at an accelerated clock -- the recorder and
+  take clock, the parts that grow with a take's length, fed ``rate`` readings a second through
+  the shipped mapping as fast as they go -- with the resident memory at checkpoints.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from devices import open_device
+from devices.base import Sample, State
+from devices.samplelog import LogEvent
+
+from .mapping import load_mapping
+from .render import Renderer
+from .runtime import Runtime
+from .session import LiveSession, measure_latency
+from .takeclock import TakeClock
+from .takes import TakeRecorder
+
+MAPPING = Path(__file__).resolve().parents[1] / "mappings" / "arduino_sliders.yaml"
+PAGE = os.sysconf("SC_PAGE_SIZE")
+
+
+def rss_mb() -> float:
+    """This process's resident memory, in MiB (Linux ``/proc``)."""
+    with open("/proc/self/statm") as statm:
+        return int(statm.read().split()[1]) * PAGE / 2**20
+
+
+def _session(runtime: Runtime, url: str, root: str) -> LiveSession:
+    session = LiveSession(MAPPING, face=runtime, devices={"box": open_device(url, "box")}, record_root=root)
+    deadline = time.monotonic() + 5
+    while not (session.frame().states["box"] is State.OPEN and session.samples_fed):
+        if time.monotonic() > deadline:
+            session.close()
+            raise RuntimeError(f"the simulated box ({url}) did not start sending")
+        time.sleep(0.01)
+    return session
+
+
+def _renderer(runtime: Runtime, size: tuple[int, int]) -> Renderer:
+    from .playback import frame_head
+
+    face = runtime.face
+    renderer = Renderer(face.triangles, len(face.vertices), face.colors, width=size[0], height=size[1])
+    frame_head(renderer, face, "front")
+    return renderer
+
+
+def latency(runtime: Runtime, seconds: float = 3.0, size: tuple[int, int] = (640, 480)) -> dict:
+    """Input-to-frame latency of the live loop (see the module docstring)."""
+    with tempfile.TemporaryDirectory() as root:
+        session = _session(runtime, "sim://joystick?protocol=ascii&rate=200&channels=6", root)
+        renderer = _renderer(runtime, size)
+        try:
+            return measure_latency(session, renderer, seconds)
+        finally:
+            renderer.release()
+            session.close()
+
+
+def _loop(session: LiveSession, renderer: Renderer, seconds: float) -> dict:
+    """Run frames (drawn and read back) for ``seconds``; fps, samples/s, memory and backlog."""
+    device = session.devices["box"]
+    frames, fed, backlog, rss = 0, session.samples_fed, 0, [rss_mb()]
+    start = last = time.perf_counter()
+    while (now := time.perf_counter()) - start < seconds:
+        backlog = max(backlog, len(device._queue))
+        f = session.frame()
+        renderer.render(f.vertices, f.normals)
+        frames += 1
+        if now - last >= 1.0:
+            rss.append(rss_mb())
+            last = now
+    elapsed = time.perf_counter() - start
+    rss.append(rss_mb())
+    return {"fps": frames / elapsed, "samples_s": (session.samples_fed - fed) / elapsed, "rss_mb": rss,
+            "backlog_max": backlog, "dropped": device.counters.dropped}
+
+
+def flood(runtime: Runtime, seconds: float = 60.0, rate: float = 10_000.0,
+          size: tuple[int, int] = (320, 240)) -> dict:
+    """The live loop, recording, under ``rate`` readings a second (see the module docstring)."""
+    renderer = _renderer(runtime, size)
+    try:
+        with tempfile.TemporaryDirectory() as root:
+            calm = _session(runtime, "sim://joystick?protocol=cobs&rate=200&channels=6", root)
+            try:
+                baseline = _loop(calm, renderer, min(5.0, seconds))
+            finally:
+                calm.close()
+            session = _session(runtime, f"sim://joystick?protocol=cobs&rate={rate:g}&channels=6", root)
+            try:
+                session.start_recording()
+                loaded = _loop(session, renderer, seconds)
+                take = session.stop_recording()
+                take_mb = sum(p.stat().st_size for p in take.iterdir()) / 2**20
+            finally:
+                session.close()
+    finally:
+        renderer.release()
+    rss = loaded["rss_mb"]
+    settled = rss[min(len(rss) - 1, 2):] or rss
+    return {"seconds": seconds, "rate": rate, "baseline_fps": baseline["fps"], "fps": loaded["fps"],
+            "fps_ratio": loaded["fps"] / baseline["fps"], "samples_s": loaded["samples_s"],
+            "rss_start_mb": settled[0], "rss_end_mb": rss[-1], "rss_growth_mb": rss[-1] - settled[0],
+            "backlog_max": loaded["backlog_max"], "dropped": loaded["dropped"], "take_mb": take_mb}
+
+
+def long_take(take_seconds: float = 3600.0, rate: float = 100.0, fps: int = 30, checkpoints: int = 6) -> dict:
+    """A take of ``take_seconds`` at an accelerated clock; resident memory at each checkpoint."""
+    mapping = load_mapping(MAPPING)
+    rng = np.random.default_rng(7)
+    step = int(1e9 / rate)
+    total = int(take_seconds * rate)
+    resident = []
+    start = time.perf_counter()
+    with tempfile.TemporaryDirectory() as root:
+        recorder = TakeRecorder(root, "long", fps, mapping_path=MAPPING, devices=mapping.devices)
+        clock = TakeClock(mapping, recorder.frame, 0, fps)
+        values = rng.uniform(0, 1023, size=6)
+        for i in range(total):
+            values = np.clip(values + rng.normal(0, 8, size=6), 0, 1023)
+            sample = Sample(i * step, "box", {f"ch{c}": float(v) for c, v in enumerate(values)})
+            recorder.sample(sample)
+            clock.apply(sample)
+            if (i + 1) % (total // checkpoints) == 0:
+                resident.append(rss_mb())
+        end = LogEvent(total * step, "frame")
+        recorder.event(end)
+        clock.apply(end)
+        folder = recorder.close()
+        take_mb = sum(p.stat().st_size for p in folder.iterdir()) / 2**20
+    return {"take_seconds": take_seconds, "frames": clock.frames, "samples": total,
+            "wall_s": time.perf_counter() - start, "rss_mb": resident,
+            "rss_growth_mb": resident[-1] - resident[0], "take_mb": take_mb}

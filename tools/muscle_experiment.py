@@ -1,0 +1,257 @@
+"""Zhou & Liu's experiment, reproduced: classic vs improved vs control-point muscles at large contraction.
+
+Two meshes, one muscle each, contraction coefficients 0, 3, 5 and 10 (1 is the normal maximum):
+
+* **grid**: a flat 41 x 41 vertex grid over the unit square, triangulated, with one linear muscle
+  along x (fixed end at (-0.25, 0), insertion at (0.25, 0), both control points, alpha 30 deg, r_e 0.5, r_f 0.75, pull
+  0.15 r_e as in the default muscles). Its control-point mode uses every 5th grid vertex in each
+  direction (9 x 9 points) as control points and spreads their displacements over the grid by
+  piecewise-linear interpolation on their Delaunay triangulation (``scipy LinearNDInterpolator``):
+  a stand-in for DFFD on a flat sheet, where 3D Sibson coordinates are degenerate.
+* **face**: the default face's left zygomatic major. Control-point mode moves the default rig's
+  active control points (``control_point_displacements``) and lets the runtime's DFFD spread them;
+  "control-point + edges" then runs the improved mode's edge constraints on the DFFD result.
+
+Measured per case, over the skin triangles:
+
+* **folded**: triangles whose normal turned against its rest normal (dot < 0);
+* **overshoot**: the largest |displacement| / (rest distance to the fixed end) of the vertices
+  within r_e / 4 of the fixed end; above 1 a vertex was dragged past the bone: the spike;
+* **stretch**: the largest deformed / rest length of the edges with both ends in that ball.
+
+Writes docs/muscle_experiment.png (rows: modes; columns: contractions; grids left, face crops right,
+folded triangles red) and docs/muscle_experiment.md (the table and per-frame timings on the default
+face), and prints the table. Run: ``PYTHONPATH=. .venv/bin/python tools/muscle_experiment.py``.
+"""
+
+from __future__ import annotations
+
+import statistics
+import time
+from pathlib import Path
+
+import numpy as np
+from PIL import Image, ImageDraw
+from scipy.interpolate import LinearNDInterpolator
+
+from puppet.face import load_face
+from puppet.muscles import (
+    EdgeConstraints,
+    LinearMuscle,
+    MuscleModel,
+    control_point_displacements,
+    default_muscles,
+    folded_triangles,
+)
+from puppet.runtime import Runtime
+
+CONTRACTIONS = (0, 3, 5, 10)
+MODES = ("classic", "improved", "control-point", "control-point + edges")
+DOCS = Path(__file__).resolve().parent.parent / "docs"
+PANEL = 220
+FACE_MUSCLE = "zygomatic_major_l"
+
+
+def grid(n: int = 41) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (n*n, 3) on [-0.5, 0.5]^2 at z = 0 and triangles (2 (n-1)^2, 3), counter-clockwise."""
+    x = np.linspace(-0.5, 0.5, n)
+    gx, gy = np.meshgrid(x, x)
+    vertices = np.c_[gx.ravel(), gy.ravel(), np.zeros(n * n)]
+    i, j = np.meshgrid(np.arange(n - 1), np.arange(n - 1))
+    a = (j * n + i).ravel()
+    triangles = np.r_[np.c_[a, a + 1, a + n + 1], np.c_[a, a + n + 1, a + n]]
+    return vertices, triangles
+
+
+GRID_MUSCLE = LinearMuscle("grid", np.array([-0.25, 0.0, 0.0]), np.array([0.25, 0.0, 0.0]), 30.0, 0.5, 0.75, 0.075)
+
+
+def grid_cases() -> dict[str, dict[int, np.ndarray]]:
+    """Deformed grid vertices per mode and contraction."""
+    vertices, triangles = grid()
+    coarse = np.arange(41) % 5 == 0
+    control = np.flatnonzero(np.logical_and.outer(coarse, coarse).ravel())
+    edges = EdgeConstraints(vertices, triangles)
+    out: dict[str, dict[int, np.ndarray]] = {m: {} for m in MODES}
+    models = {m: MuscleModel(vertices, triangles, [GRID_MUSCLE], m) for m in ("classic", "improved")}
+    for c in CONTRACTIONS:
+        for mode, model in models.items():
+            out[mode][c] = vertices + model.displace({"grid": c})
+        d = control_point_displacements([GRID_MUSCLE], {"grid": c}, vertices[control])
+        spread = LinearNDInterpolator(vertices[control, :2], d)(vertices[:, :2])
+        out["control-point"][c] = vertices + spread
+        edges.relax(spread)
+        out["control-point + edges"][c] = vertices + spread
+    return out
+
+
+def face_cases(face, muscles, runtime: Runtime) -> dict[str, dict[int, np.ndarray]]:
+    """Deformed face vertices per mode and contraction of the left zygomatic major."""
+    skin = face.parts["skin"]
+    movable = np.zeros(len(face.vertices), bool)
+    movable[skin] = True
+    models = {m: MuscleModel(face.vertices, face.triangles, muscles, m, movable=skin) for m in ("classic", "improved")}
+    points = np.array([runtime.rig.point(n).position for n in runtime.control_points])
+    edges = EdgeConstraints(face.vertices, skin_triangles(face), movable)
+    out: dict[str, dict[int, np.ndarray]] = {m: {} for m in MODES}
+    for c in CONTRACTIONS:
+        for mode, model in models.items():
+            out[mode][c] = face.vertices + model.displace({FACE_MUSCLE: c})
+        moved = runtime.deform(control_point_displacements(muscles, {FACE_MUSCLE: c}, points))
+        out["control-point"][c] = moved.copy()
+        d = moved - face.vertices
+        edges.relax(d)
+        out["control-point + edges"][c] = face.vertices + d
+    return out
+
+
+def skin_triangles(face) -> np.ndarray:
+    mask = np.zeros(len(face.vertices), bool)
+    mask[face.parts["skin"]] = True
+    return face.triangles[mask[face.triangles].all(axis=1)]
+
+
+def spike(rest: np.ndarray, deformed: np.ndarray, triangles: np.ndarray, muscle: LinearMuscle) -> tuple[float, float]:
+    """(overshoot, stretch) in the ball of radius r_e / 4 about the fixed end (module docstring)."""
+    dist = np.linalg.norm(rest - muscle.fixed, axis=1)
+    near = (dist < 0.25 * muscle.r_e) & (dist > 0)
+    overshoot = float(np.max(np.linalg.norm(deformed - rest, axis=1)[near] / dist[near], initial=0.0))
+    edges = np.unique(np.sort(np.r_[triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]], axis=1), axis=0)
+    edges = edges[near[edges].all(axis=1)]
+    ratio = (np.linalg.norm(deformed[edges[:, 0]] - deformed[edges[:, 1]], axis=1)
+             / np.linalg.norm(rest[edges[:, 0]] - rest[edges[:, 1]], axis=1))
+    return overshoot, float(ratio.max(initial=0.0))
+
+
+def table_rows(name: str, rest, triangles, muscle, cases) -> list[tuple]:
+    rows = []
+    for mode, by_c in cases.items():
+        for c, deformed in by_c.items():
+            folded = int(folded_triangles(rest, deformed, triangles).sum())
+            rows.append((name, mode, c, folded, *spike(rest, deformed, triangles, muscle)))
+    return rows
+
+
+def markdown_table(rows: list[tuple]) -> str:
+    lines = ["| mesh | mode | contraction | folded triangles | overshoot | stretch |", "|---|---|---:|---:|---:|---:|"]
+    lines += [f"| {m} | {mode} | {c} | {f} | {o:.2f} | {s:.2f} |" for m, mode, c, f, o, s in rows]
+    return "\n".join(lines)
+
+
+# -- per-frame cost ------------------------------------------------------------------------------
+
+def timings(face, muscles, runtime: Runtime, runs: int = 50) -> list[tuple[str, str, float]]:
+    """Median per-frame milliseconds on the default face: every muscle at 0.5, and the left
+    zygomatic major alone at 10, for each mode (control-point: displacements plus DFFD)."""
+    skin = face.parts["skin"]
+    models = {m: MuscleModel(face.vertices, face.triangles, muscles, m, movable=skin) for m in ("classic", "improved")}
+    points = np.array([runtime.rig.point(n).position for n in runtime.control_points])
+    poses = {"all muscles at 0.5": {m.name: 0.5 for m in muscles}, "zygomatic_major_l at 10": {FACE_MUSCLE: 10.0}}
+    frames = {
+        "classic": lambda pose: models["classic"].displace(pose),
+        "improved": lambda pose: models["improved"].displace(pose),
+        "control-point": lambda pose: runtime.deform(control_point_displacements(muscles, pose, points)),
+    }
+    out = []
+    for pose_name, pose in poses.items():
+        for mode, frame in frames.items():
+            out.append((pose_name, mode, _median_ms(frame, pose, runs)))
+    return out
+
+
+def _median_ms(frame, pose: dict[str, float], runs: int) -> float:
+    frame(pose)
+    samples = []
+    for _ in range(runs):
+        t = time.perf_counter()
+        frame(pose)
+        samples.append(time.perf_counter() - t)
+    return 1e3 * statistics.median(samples)
+
+
+# -- the figure -----------------------------------------------------------------------------------
+
+def draw_panel(rest: np.ndarray, deformed: np.ndarray, triangles: np.ndarray, view: np.ndarray,
+               box: tuple[float, float, float, float], wire: bool) -> Image.Image:
+    """One panel: triangles seen along ``view`` (3x3 rows: screen x, screen y, toward the viewer),
+    drawn back to front, Lambert-shaded, folded ones red, cropped to ``box`` (x0, y0, x1, y1)."""
+    img = Image.new("RGB", (PANEL, PANEL), "white")
+    draw = ImageDraw.Draw(img)
+    p = deformed @ view.T
+    x0, y0, x1, y1 = box
+    scale = PANEL / max(x1 - x0, y1 - y0)
+    screen = np.c_[(p[:, 0] - x0) * scale, PANEL - (p[:, 1] - y0) * scale]
+    folded = folded_triangles(rest, deformed, triangles)
+    n = np.cross(p[triangles[:, 1]] - p[triangles[:, 0]], p[triangles[:, 2]] - p[triangles[:, 0]])
+    shade = np.abs(n @ np.array([0.3, 0.4, 0.87])) / np.maximum(np.linalg.norm(n, axis=1), 1e-12)
+    for t in np.argsort(p[triangles, 2].mean(axis=1)):
+        corners = [tuple(screen[i]) for i in triangles[t]]
+        if folded[t]:
+            draw.polygon(corners, fill=(220, 30, 30), outline=(120, 0, 0))
+        elif wire:
+            draw.polygon(corners, fill=(235, 235, 235), outline=(120, 120, 120))
+        else:
+            g = int(70 + 170 * shade[t])
+            draw.polygon(corners, fill=(g, int(g * 0.85), int(g * 0.75)))
+    return img
+
+
+def figure(grid_mesh, grid_out, face, muscle: LinearMuscle, face_out) -> Image.Image:
+    """Rows: modes; columns: the grid at each contraction, then the face crop at each contraction."""
+    label_h, label_w = 24, 150
+    cols = 2 * len(CONTRACTIONS)
+    img = Image.new("RGB", (label_w + cols * PANEL, label_h + len(MODES) * PANEL), "white")
+    draw = ImageDraw.Draw(img)
+    front = np.eye(3)
+    turn = np.radians(35.0)
+    three_quarter = np.array([[np.cos(turn), 0, -np.sin(turn)], [0, 1, 0], [np.sin(turn), 0, np.cos(turn)]])
+    face_box = _face_box(muscle, three_quarter)
+    tri = skin_triangles(face)
+    for j, c in enumerate(CONTRACTIONS):
+        draw.text((label_w + j * PANEL + 8, 6), f"grid, c = {c}", fill="black")
+        draw.text((label_w + (len(CONTRACTIONS) + j) * PANEL + 8, 6), f"face, c = {c}", fill="black")
+    for i, mode in enumerate(MODES):
+        draw.text((6, label_h + i * PANEL + PANEL // 2), mode, fill="black")
+        for j, c in enumerate(CONTRACTIONS):
+            g = draw_panel(grid_mesh[0], grid_out[mode][c], grid_mesh[1], front, (-0.55, -0.55, 0.55, 0.55), True)
+            f = draw_panel(face.vertices, face_out[mode][c], tri, three_quarter, face_box, False)
+            img.paste(g, (label_w + j * PANEL, label_h + i * PANEL))
+            img.paste(f, (label_w + (len(CONTRACTIONS) + j) * PANEL, label_h + i * PANEL))
+    return img
+
+
+def _face_box(muscle: LinearMuscle, view: np.ndarray) -> tuple[float, float, float, float]:
+    """A square around the muscle, in the view's screen coordinates."""
+    centre = (muscle.fixed + muscle.insertion) / 2 @ view.T
+    half = 0.4
+    return centre[0] - half, centre[1] - half, centre[0] + half, centre[1] + half
+
+
+def main() -> None:
+    face = load_face()
+    muscles = default_muscles(face)
+    zygomatic = next(m for m in muscles if m.name == FACE_MUSCLE)
+    runtime = Runtime(face, dtype=np.float64)
+    grid_mesh = grid()
+    grid_out = grid_cases()
+    face_out = face_cases(face, muscles, runtime)
+    rows = (table_rows("grid", grid_mesh[0], grid_mesh[1], GRID_MUSCLE, grid_out)
+            + table_rows("face", face.vertices, skin_triangles(face), zygomatic, face_out))
+    table = markdown_table(rows)
+    times = timings(face, muscles, runtime)
+    time_table = "\n".join(["| pose | mode | median ms / frame |", "|---|---|---:|"]
+                           + [f"| {p} | {m} | {t:.3f} |" for p, m, t in times])
+    print(table, "\n", time_table, sep="\n")
+    DOCS.mkdir(exist_ok=True)
+    figure(grid_mesh, grid_out, face, zygomatic, face_out).save(DOCS / "muscle_experiment.png")
+    (DOCS / "muscle_experiment.md").write_text(_report(table, time_table), encoding="utf-8")
+
+
+def _report(table: str, time_table: str) -> str:
+    doc = __doc__.split("\n\n", 1)[1].rsplit("\n\nWrites", 1)[0]
+    return (f"# Muscle experiment (tools/muscle_experiment.py)\n\n{doc}\n\n![deformed grids and face crops]"
+            f"(muscle_experiment.png)\n\n{table}\n\n## Per-frame cost on the default face\n\n{time_table}\n")
+
+
+if __name__ == "__main__":
+    main()
