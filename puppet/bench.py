@@ -249,6 +249,7 @@ def _bench_live(face: Face, flood_seconds: float, take_seconds: float) -> dict:
 def _print_live(live: dict) -> None:
     lat, flood, take = live["latency"], live["flood"], live["long_take"]
     print(f"live latency (sim slider box -> default face, drawn and read back 640x480): "
+          f"frame work (samples in -> mesh) {lat['process_median_ms']:.2f} ms median / {lat['process_p99_ms']:.2f} p99; "
           f"sample->mesh {lat['mesh_median_ms']:.2f} ms median / {lat['mesh_p99_ms']:.2f} p99; "
           f"sample->frame {lat['latency_median_ms']:.2f} ms median / {lat['latency_p99_ms']:.2f} p99 "
           f"at {lat['fps']:.0f} fps")

@@ -297,13 +297,15 @@ def measure_latency(session: LiveSession, renderer, seconds: float = 3.0) -> dic
     Only frames that took in at least one new Sample are measured (a frame with none would time
     how long the input has been still, not latency). ``latency``: newest Sample's timestamp ->
     frame drawn and read back (``renderer.render``); ``mesh``: newest Sample -> vertices and
-    normals ready, before drawing. The device's own transport (USB, the pty) comes before the
+    normals ready, before drawing; ``process``: the frame's own work from taking the Samples in
+    to the mesh ready (``mesh`` minus the time the Sample waited for the loop, which is bounded
+    by the previous frame's drawing). The device's own transport (USB, the pty) comes before the
     Sample's timestamp and is not included.
     """
     if renderer.camera is None:
         renderer.frame(session.runtime.rest)
     renderer.render(session.runtime.rest, session.runtime.rest_normals)  # warm-up (shaders, buffers)
-    latency, mesh = [], []
+    latency, mesh, process = [], [], []
     frames = 0
     start = time.monotonic_ns()
     end = start + int(seconds * 1e9)
@@ -316,6 +318,7 @@ def measure_latency(session: LiveSession, renderer, seconds: float = 3.0) -> dic
         if f.n_samples and f.newest_sample_ns is not None:
             mesh.append(ready - f.newest_sample_ns)
             latency.append(done - f.newest_sample_ns)
+            process.append(ready - f.t_ns)
     elapsed = (time.monotonic_ns() - start) / 1e9
     return {"frames": frames, "measured": len(latency), "fps": frames / elapsed if elapsed else 0.0,
-            **_ms_stats(latency, "latency"), **_ms_stats(mesh, "mesh")}
+            **_ms_stats(latency, "latency"), **_ms_stats(mesh, "mesh"), **_ms_stats(process, "process")}

@@ -42,8 +42,8 @@ def _frames_for(session, seconds):
 
 def _open(session):
     deadline = time.monotonic() + 5
-    while not (session.frame().states["box"] is State.OPEN and session.samples_fed):
-        assert time.monotonic() < deadline, "the simulated box never opened"
+    while not (all(s is State.OPEN for s in session.frame().states.values()) and session.samples_fed):
+        assert time.monotonic() < deadline, "the simulated device never opened"
         time.sleep(0.01)
 
 
@@ -183,7 +183,7 @@ def test_puppet_replay_writes_and_checks_a_new_fap(live_take, tmp_path, capsys):
     from puppet import cli
 
     out = tmp_path / "cli.fap"
-    assert cli.main(["replay", str(live_take.folder), "-o", str(out), "--no-window"]) == 0
+    assert cli.main(["replay", str(live_take.folder), "--through-devices", "-o", str(out), "--no-window"]) == 0
     assert capsys.readouterr().out.strip() == f"{out}: {live_take.meta['frames']} frames, identical to the recorded take.fap"
     assert cli.main(["replay", str(tmp_path / "nope"), "-o", str(out), "--no-window"]) == 2
     assert "nope: not a take (no take.json)" in capsys.readouterr().err
@@ -209,3 +209,50 @@ def test_a_live_take_replays_through_the_real_serial_adapter_to_the_identical_fa
     assert live_take.meta["devices"]["box"] == JOYSTICK
     result = retake(live_take, tmp_path / "wire.fap", through_devices=True)
     assert result.identical, "the .fap replayed through the pty and the serial adapter differs"
+
+
+# -- record, replay through the devices' wires: HID and CAN ------------------------------------------
+
+def _record(session, seconds=0.6):
+    _open(session)
+    session.start_recording()
+    _frames_for(session, seconds)
+    return open_take(session.stop_recording())
+
+
+def test_a_hid_gamepad_take_replays_through_hid_reports_to_the_identical_fap(shared_runtime, tmp_path):
+    from devices.base import Url
+    from devices.hid_device import HidDevice
+    from devices.simulated_hid import FakeHidModule, gamepad, gamepad_motion
+
+    url = "hid://046d:c21d"
+    pad = HidDevice.from_url(Url.parse(url), "pad", hid_module=FakeHidModule(gamepad(gamepad_motion(), rate=250)))
+    pad.url = url  # as open_device names it
+    session = LiveSession(ROOT / "mappings" / "gamepad_hid.yaml", face=shared_runtime, devices={"pad": pad},
+                          record_root=tmp_path, fps=30)
+    try:
+        take = _record(session)
+    finally:
+        session.close()
+    assert take.meta["wire"]["pad"]["report_descriptor"]
+    assert retake(take, tmp_path / "wire.fap", through_devices=True).identical
+
+
+def test_a_can_joystick_take_replays_through_can_frames_to_the_identical_fap(shared_runtime, tmp_path):
+    import uuid
+
+    from devices.simulated_can import CanJoystick
+    from puppet.mapping import load_mapping
+
+    channel = f"replay-{uuid.uuid4().hex[:8]}"
+    mapping_url = load_mapping(ROOT / "mappings" / "can_joystick.yaml").devices["stick"]
+    url = mapping_url.replace("virtual/vcan0", f"virtual/{channel}")
+    with CanJoystick(channel, rate=200):
+        session = LiveSession(ROOT / "mappings" / "can_joystick.yaml", face=shared_runtime,
+                              devices={"stick": open_device(url, "stick")}, record_root=tmp_path, fps=30)
+        try:
+            take = _record(session)
+        finally:
+            session.close()
+    assert take.meta["samples"] > 50
+    assert retake(take, tmp_path / "wire.fap", through_devices=True).identical
