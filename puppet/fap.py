@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import functools
 import importlib.resources
+import math
 from collections.abc import Mapping
 
 import numpy as np
@@ -249,14 +250,14 @@ def _own_displacement(point, delta: np.ndarray, motion: np.ndarray | None) -> np
 def _angle_for_drop(offset: np.ndarray, axis: np.ndarray, drop: float) -> float:
     """The turn about ``axis`` that lowers a point at ``offset`` from the pivot by ``drop`` in y."""
     a = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
-    r_perp = offset - (offset @ a) * a
-    A, C = r_perp[1], np.cross(a, r_perp)[1]
-    radius = np.hypot(A, C)
+    r = offset - (offset @ a) * a
+    A, C = float(r[1]), float(a[2] * r[0] - a[0] * r[2])  # C: (a x r)_y, in scalars (per frame, per lid)
+    radius = math.hypot(A, C)
     if radius < 1e-12 or drop == 0:
         return 0.0
-    psi = np.arctan2(C, A)
-    target = np.clip((A - drop) / radius, -1.0, 1.0)
-    return float(psi - np.sign(psi) * np.arccos(target)) if psi else float(np.arccos(target))
+    psi = math.atan2(C, A)
+    target = min(1.0, max(-1.0, (A - drop) / radius))
+    return psi - math.copysign(math.acos(target), psi) if psi else math.acos(target)
 
 
 def _yaw_pitch_roll(R: np.ndarray) -> np.ndarray:

@@ -2,13 +2,17 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 
 def rotation(axis: np.ndarray, angle: float) -> np.ndarray:
     """3x3 rotation by ``angle`` radians about the unit vector ``axis`` (right-hand rule)."""
-    x, y, z = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
-    c, s = np.cos(angle), np.sin(angle)
+    x, y, z = (float(v) for v in axis)   # scalar math: this runs a dozen times a frame
+    n = math.sqrt(x * x + y * y + z * z)
+    x, y, z = x / n, y / n, z / n
+    c, s = math.cos(angle), math.sin(angle)
     C = 1.0 - c
     return np.array([
         [c + x * x * C, x * y * C - z * s, x * z * C + y * s],
