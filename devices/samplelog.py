@@ -10,7 +10,8 @@ records, so that replaying the log reproduces its .fap exactly:
 ``{"t_ns": ..., "event": "frame"}`` (the recorder wrote its frames up to here),
 ``{"t_ns": ..., "event": "hold", "states": {"box": "lost"}}`` (a device went away: the pose is
 held from ``t_ns``; the gap in the take), ``{"t_ns": ..., "event": "resume"}`` (every device is
-back) and ``{"t_ns": ..., "event": "reset"}`` (the performer asked for the neutral pose).
+back), ``{"t_ns": ..., "event": "reset"}`` (the performer asked for the neutral pose) and
+``{"t_ns": ..., "event": "recentre", "centres": {"pad.X": 131.0}}`` (sticks re-centred).
 ``read_take_log`` yields both, in order; ``read_sample_log`` only the Samples.
 
 ``ReplayDevice`` (``replay:///path/to/take.samples.jsonl?speed=1``) plays a log back as a device:
@@ -35,7 +36,7 @@ from .base import Device, DeviceError, Sample, Url
 HEADER = {"facepuppet_samples": 1}
 
 
-EVENTS = ("frame", "hold", "resume", "reset")
+EVENTS = ("frame", "hold", "resume", "reset", "recentre")
 
 
 @dataclass(frozen=True)

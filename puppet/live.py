@@ -13,7 +13,9 @@ stops it; N neutral pose (``session.neutral()``: every channel back to rest, in 
 channel monitor printed to the terminal (channel, raw, shaped, targets; a few times a second);
 Q or Escape quits, finishing any take first so it is complete.
 
-Calibrating a channel has no key here: run ``puppet calibrate --mapping M.yaml``.
+C re-centres the bipolar channels (sticks) where they rest now, undoing drift
+(``session.recentre()``, logged in the take); a full calibration of a channel's range is
+``puppet calibrate --mapping M.yaml``.
 
 No display: a one-line message on stderr and ``SystemExit(2)``, as ``puppet play``.
 """
@@ -169,6 +171,9 @@ class LiveView:
                     print(f"recording {self.take}", file=sys.stderr)
         elif key == keys.N:
             self.session.neutral()
+        elif key == keys.C:
+            self.session.recentre()
+            print("sticks re-centred where they rest", file=sys.stderr)
         elif key == keys.M:
             self.monitor = not self.monitor
             self._monitor_at = -1.0
@@ -247,8 +252,8 @@ def run_live(mapping_path: str | os.PathLike, *, record: str | None = None, fps:
         window.close()
         window.destroy()
         raise
-    print("keys: R record/stop, N neutral, M channel monitor, Q/Esc quit "
-          "(calibrate a channel with 'puppet calibrate')", file=sys.stderr)
+    print("keys: R record/stop, N neutral, C re-centre sticks, M channel monitor, Q/Esc quit "
+          "(calibrate ranges with 'puppet calibrate')", file=sys.stderr)
     live = LiveView(session, window, view)
     try:
         live.run()

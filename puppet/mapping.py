@@ -841,7 +841,17 @@ class _Channel:
         self.t_ns = t_ns
         self.seq = seq
 
-    _STATE = ("raw", "pre", "value", "out", "t_ns", "seq", "pressed", "latched")
+    _STATE = ("raw", "pre", "value", "out", "t_ns", "seq", "pressed", "latched", "centre", "k_low", "k_high")
+
+    def recentre(self, centre: float) -> bool:
+        """Make ``centre`` the rest point of a bipolar channel (a stick that drifted); False when
+        it is not strictly inside the channel's range (nothing changes)."""
+        high = self.low + 1.0 / self.k
+        if not (self.bipolar and self.low < centre < high):
+            return False
+        self.centre = centre
+        self.k_low, self.k_high = 1.0 / (centre - self.low), 1.0 / (high - centre)
+        return True
 
     def snapshot(self) -> dict:
         """Everything ``update`` has built up, as JSON-able data (see ``Mapping.snapshot``)."""
@@ -1069,6 +1079,17 @@ class Mapping:
                 if t.kind in ("viseme", "expression", "muscle"):
                     kinds.add(t.kind)
         return slots, kinds
+
+    def resting(self) -> dict[str, float]:
+        """The last raw value of every bipolar channel that has one: where its stick rests when
+        the performer lets go (what ``recentre`` takes to undo drift)."""
+        return {name: c.raw for name, c in self._channels.items() if c.bipolar and c.raw is not None}
+
+    def recentre(self, centres: dict[str, float]) -> dict[str, float]:
+        """Make ``centres`` {channel: raw} the rest points of those bipolar channels; returns the
+        ones taken (a centre outside its channel's range is not)."""
+        return {name: raw for name, raw in centres.items()
+                if name in self._channels and self._channels[name].recentre(raw)}
 
     def reset(self) -> None:
         """Every channel back to rest (no sample seen, filters empty, buttons released)."""

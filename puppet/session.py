@@ -125,6 +125,7 @@ class LiveSession:
         self._last_pose_ns: int | None = None
         self._have_mesh = False
         self._reset_at: int | None = None   # the neutral key, applied at the next frame
+        self._recentre_at: int | None = None  # the recalibrate key, likewise
         self.newest_sample_ns: int | None = None
         self.samples_fed = 0
         self.frames = 0
@@ -154,6 +155,9 @@ class LiveSession:
         if self._reset_at is not None:
             self._apply(LogEvent(self._reset_at, "reset"))
             self._reset_at = None
+        if self._recentre_at is not None:
+            self._apply(LogEvent(self._recentre_at, "recentre", {"centres": self.mapping.resting()}))
+            self._recentre_at = None
 
         if len(batches) == 1:
             samples = batches[0]
@@ -184,6 +188,11 @@ class LiveSession:
         """Every channel back to rest (the neutral key), at the next frame (and so in the take)."""
         self._reset_at = time.monotonic_ns() if now_ns is None else int(now_ns)
 
+    def recentre(self, now_ns: int | None = None) -> None:
+        """Re-centre the bipolar channels where they are now (the recalibrate key: sticks let go
+        of), at the next frame; the take logs the new centres."""
+        self._recentre_at = time.monotonic_ns() if now_ns is None else int(now_ns)
+
     def _apply(self, entry: Sample | LogEvent) -> None:
         """One Sample or event: into the take (its log and its clock) while recording. A write
         that fails (disk full, the folder gone) ends the take, marked incomplete, and the live
@@ -205,6 +214,8 @@ class LiveSession:
             self.mapping.feed(entry)
         elif entry.kind == "reset":
             self.mapping.reset()
+        elif entry.kind == "recentre":
+            self.mapping.recentre(entry.data["centres"])
 
     def _layered(self, now: int, pose: Pose):
         """The layered pass as shown: the base take where the take is now (its start before)."""

@@ -11,7 +11,8 @@ writes exactly the frames the live session wrote:
 * ``hold`` at t: a device is away; ticks are evaluated at ``min(tick, t)``, so the take holds
   the pose of the moment it went (other devices' new Samples still come through);
 * ``resume``: every device is back; ticks run at their own time again;
-* ``reset``: ticks before t are written, then every channel goes back to rest (neutral).
+* ``reset``: ticks before t are written, then every channel goes back to rest (neutral);
+* ``recentre``: ticks before t are written, then the bipolar channels take the logged centres.
 
 Layered passes: with a ``Layer``, each frame is the base take's frame with the armed FAPs
 replaced by the pose, as animators layer one pass over another.
@@ -139,6 +140,9 @@ class TakeClock:
         elif entry.kind == "reset":
             self._until(entry.t_ns)
             self.mapping.reset()
+        elif entry.kind == "recentre":
+            self._until(entry.t_ns)
+            self.mapping.recentre(entry.data["centres"])
         else:
             raise ValueError(f"unknown log event {entry.kind!r}")
 

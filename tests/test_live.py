@@ -63,7 +63,7 @@ def test_title_and_monitor():
 
 class _Keys:
     ACTION_PRESS, ACTION_RELEASE = "press", "release"
-    R, N, M, Q, ESCAPE = "r", "n", "m", "q", "escape"
+    R, N, C, M, Q, ESCAPE = "r", "n", "c", "m", "q", "escape"
 
 
 
@@ -110,10 +110,14 @@ def test_the_live_loop_draws_records_and_obeys_the_keys(tmp_path, headless_windo
         press(_Keys.R)  # Q finishes a take that is running
         press(_Keys.N)  # neutral: channels back to rest, noted in the take
         frames(2)
+        press(_Keys.C)  # re-centre the bipolar sliders (brows) where they are
+        frames(1)
         press(_Keys.Q)
         assert live._quit and not session.recording
         assert live.takes[-1] == tmp_path / "run_002"
-        assert any(getattr(e, "kind", None) == "reset" for e in open_take(live.takes[-1]).entries())
+        events = [e for e in open_take(live.takes[-1]).entries() if hasattr(e, "kind")]
+        assert any(e.kind == "reset" for e in events)
+        assert any(e.kind == "recentre" and set(e.data["centres"]) == {"box.ch3", "box.ch4"} for e in events)
         live.run()  # returns at once, releasing the renderer and the window
         assert live.renderer is None
     finally:

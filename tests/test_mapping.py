@@ -766,3 +766,14 @@ def test_a_snapshot_restored_into_a_differently_shaped_channel_starts_from_its_r
     other.restore(live.snapshot(), live)
     channel = other.channels()[0]
     assert channel.raw == 900 and channel.value == 1.0  # settled on the last input, shaped anew
+
+
+def test_recentring_moves_a_sticks_rest_point_and_refuses_one_outside_its_range():
+    doc = base(range="bipolar", min=0, centre=512, max=1023)
+    m = Mapping.from_data(doc)
+    m.feed(Sample(1_000 * MS, "box", {"ch0": 540.0}))     # a stick resting off centre: drift
+    assert m.channels()[0].value > 0
+    assert m.recentre(m.resting()) == {"box.ch0": 540.0}
+    m.feed(Sample(1_010 * MS, "box", {"ch0": 540.0}))
+    assert m.channels()[0].value == 0.0
+    assert m.recentre({"box.ch0": 1023.0}) == {}           # the end of its travel cannot be rest

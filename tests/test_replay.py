@@ -50,7 +50,7 @@ def _open(session):
 @pytest.fixture(scope="module")
 def live_take(shared_runtime, tmp_path_factory):
     """A take of the simulated slider box with everything that can happen live: a start mid-motion,
-    the plug pulled and put back, the neutral key."""
+    the plug pulled and put back, the neutral key, the brows re-centred."""
     session = _session(shared_runtime, tmp_path_factory.mktemp("takes"))
     try:
         _open(session)
@@ -64,7 +64,9 @@ def live_take(shared_runtime, tmp_path_factory):
         assert box.wait_state(State.OPEN, 5.0)
         _frames_for(session, 0.3)
         session.neutral()
-        _frames_for(session, 0.3)
+        _frames_for(session, 0.15)
+        session.recentre()
+        _frames_for(session, 0.15)
         return open_take(session.stop_recording())
     finally:
         session.close()
@@ -73,7 +75,7 @@ def live_take(shared_runtime, tmp_path_factory):
 def test_the_log_notes_the_gap_and_the_neutral_key(live_take):
     kinds = [getattr(e, "kind", "sample") for e in live_take.entries()]
     assert "hold" in kinds and "resume" in kinds and "reset" in kinds
-    assert kinds.index("hold") < kinds.index("resume") < kinds.index("reset")
+    assert kinds.index("hold") < kinds.index("resume") < kinds.index("reset") < kinds.index("recentre")
     assert live_take.meta["frames"] >= 30 and live_take.meta["t0_ns"] > 0 and live_take.meta["complete"]
 
 
