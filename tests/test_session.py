@@ -112,3 +112,36 @@ def test_measure_latency_offscreen(session, face):
     assert 0 < result["latency_median_ms"] <= result["latency_p99_ms"]
     assert 0 < result["mesh_median_ms"] <= result["mesh_p99_ms"]
     assert result["mesh_median_ms"] <= result["latency_median_ms"]
+
+
+# -- faults ------------------------------------------------------------------------------------
+
+def test_a_device_that_never_answers_leaves_the_face_at_rest_and_the_take_valid(shared_runtime, tmp_path):
+    from devices.simulated_serial import PtyJoystick
+
+    with PtyJoystick(rate=None) as silent:  # a port that opens and then says nothing
+        box = open_device(f"serial://{silent.path}?protocol=ascii", "box")
+        with LiveSession(MAPPING, face=shared_runtime, devices={"box": box}, record_root=tmp_path) as s:
+            assert box.wait_state(State.OPEN, 5.0)
+            s.start_recording()
+            for _ in range(5):
+                f = s.frame()
+                time.sleep(0.02)
+            np.testing.assert_allclose(f.vertices, shared_runtime.rest, atol=1e-6)
+            assert f.newest_sample_ns is None and f.states["box"] is State.OPEN
+            take = open_take(s.stop_recording())
+    assert len(take.stream()) >= 2 and not take.stream().values[:, 2:].any()
+
+
+def test_a_mapping_that_names_a_missing_device_fails_before_anything_opens(shared_runtime, tmp_path):
+    import threading
+
+    from puppet import MappingError
+
+    broken = tmp_path / "broken.yaml"
+    broken.write_text(MAPPING.read_text().replace("source: box.ch0", "source: boxx.ch0"))
+    threads = threading.active_count()
+    with pytest.raises(MappingError, match="device 'boxx', which is not defined"):
+        LiveSession(broken, face=shared_runtime, record_root=tmp_path)
+    assert threading.active_count() == threads     # no device thread was started
+    assert list(tmp_path.iterdir()) == [broken]     # and no take folder made
