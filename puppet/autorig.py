@@ -16,6 +16,9 @@ Regions (Zhang & Chen's functional regions), decided per skin vertex, first rule
 * ``forehead``: above the lower eyelids: brows, lids, glabella, forehead.
 * ``cheek_l`` / ``cheek_r``: the rest of the front, split at the mid-line; it reaches down over the
   jaw line to the neck so that the jaw drags it smoothly.
+* Parts other than the skin: an ``attached`` part (lashes, tear lines) takes the region of the
+  skin vertex nearest to each of its vertices; a ``mouth`` part (socket, gums) splits at the lip
+  line like the mouth bag.
 * Parts: eyeballs rigid about their centres, lower teeth rigid with the jaw, the tongue rigid
   on the jaw (its own motion in the jaw's frame), upper teeth still. The four lids are rigid parts too, but of control points only: their margin points
   turn about the eyeball centre and the lid skin follows by DFFD (the paper's hybrid eyelids).
@@ -44,7 +47,9 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
 
+from .muscles import default_muscles
 from .rig import ControlPoint, LipLine, Region, Rig, RigidPart, RigError
 
 INDIRECT_WEIGHT = 0.5
@@ -76,13 +81,16 @@ REQUIRED = sorted(set(FOREHEAD_ACTIVE + FOREHEAD_FIXED + NOSE_ACTIVE + NOSE_FIXE
 
 
 def rig_for_face(face) -> Rig:
-    """The shipped rig when ``face`` is the default face (same mesh hash), else a rig generated
+    """The shipped rig when ``face`` is the default face (same mesh hash), the rig saved beside a
+    face folder's mesh (``face.rig_file``) when it was made for this mesh, else a rig generated
     from the face's feature points."""
     from .face import load_default_rig
+    from .rig import load_rig
 
-    shipped = load_default_rig()
-    if shipped.face_hash == face.content_hash:
-        return shipped
+    saved = getattr(face, "rig_file", None)
+    for rig in (load_default_rig(), load_rig(saved) if saved is not None else None):
+        if rig is not None and rig.face_hash == face.content_hash:
+            return rig
     return build_rig(face)
 
 
@@ -91,8 +99,10 @@ def build_rig(face) -> Rig:
     missing = [f for f in REQUIRED if f not in face.feature_points]
     if missing:
         raise RigError(f"face {face.name!r}: cannot rig without feature points {missing}")
-    builder = _Builder(face)
-    return builder.build()
+    rig = _Builder(face).build()
+    rig.muscles = default_muscles(face)  # Waters' muscles, placed by the feature points (puppet.muscles)
+    rig.face_hash = face.content_hash    # the mesh it was made for: a saved rig is only reused on it
+    return rig
 
 
 class _Builder:
@@ -160,6 +170,10 @@ class _Builder:
         if "mouth" in self.face.parts:
             m = self.face.parts["mouth"]
             self.region_of[m] = np.where(v[m, 1] >= lip_y, "upper_mouth", "lower_mouth")
+        if "attached" in self.face.parts:  # lashes, tear lines...: they follow the skin under them
+            a = self.face.parts["attached"]
+            nearest = cKDTree(v[skin]).query(v[a])[1]
+            self.region_of[a] = label[nearest]
 
     def _mouth_bag(self, skin: np.ndarray) -> np.ndarray:
         """Skin vertices reachable from inside the mouth without crossing the lips' meeting line."""
@@ -365,8 +379,10 @@ class _Builder:
         pivots = self.face.pivots
         skin = self.v[self.face.parts["skin"]]
         cut = self.face.contours.get("neck_cut")
-        neck_lo = self.v[cut, 1].max() if cut is not None else skin[:, 1].min()
-        neck = (float(neck_lo), float(self.fp["2.1"][1]))
+        chin = self.fp["2.1"][1]
+        below_chin = min(skin[:, 1].min(), chin - 0.5 * (self.fp["9.15"][1] - chin))  # a mask ends at the chin
+        neck_lo = self.v[cut, 1].max() if cut is not None else below_chin
+        neck = (float(neck_lo), float(chin))
         return {
             "head": RigidPart("head", self.fp["7.1"], neck=neck),
             "jaw": RigidPart("jaw", self._jaw_hinge(), axis=np.asarray(pivots.get("jaw_axis", (1.0, 0.0, 0.0)), float)),
@@ -399,11 +415,15 @@ def _loop_path(loop: list[int], i: int, j: int) -> list[int]:
 
 
 def _spread_out(v: np.ndarray, candidates: np.ndarray, taken: list[np.ndarray], spacing: float) -> list[int]:
-    """Greedily pick candidate vertices at least ``spacing`` from each other and from ``taken``."""
+    """Greedily pick candidate vertices, in order, at least ``spacing`` from each other and from
+    ``taken``: each pick rules out the candidates after it that lie closer (vectorised per pick)."""
+    p = v[np.asarray(candidates, dtype=np.int64)]
+    free = np.ones(len(p), dtype=bool)
+    if len(taken):
+        free &= (np.linalg.norm(p[:, None] - np.asarray(taken)[None], axis=2) >= spacing).all(axis=1)
     chosen: list[int] = []
-    placed = list(taken)
-    for vertex in candidates:
-        if all(np.linalg.norm(v[vertex] - p) >= spacing for p in placed):
-            chosen.append(int(vertex))
-            placed.append(v[vertex])
+    for i in range(len(p)):
+        if free[i]:
+            chosen.append(int(candidates[i]))
+            free[i + 1:] &= np.linalg.norm(p[i + 1:] - p[i], axis=1) >= spacing
     return chosen

@@ -21,6 +21,11 @@ normals -> draw -> read-back of a 640x480 offscreen image, with the frames per s
 share of the frame spent deforming (controls + DFFD + normals). A third table
 (``puppet.inputbench``) pushes samples through each device adapter and its shipped mapping.
 
+A muscle table (``bench_muscles``, default face): median ms of one frame (``Runtime.pose``:
+FAPs + muscles, positions) for the same contractions in each muscle mode -- ``control``
+(control points + DFFD + fold guard), ``classic`` and ``improved`` (vertex modes) -- with the same
+FAP frame without muscles as the baseline, in the same run.
+
 The DFFD path is single-threaded scipy; the baseline's BLAS may use threads, so for one-core
 figures run it pinned: ``OPENBLAS_NUM_THREADS=1 taskset -c 1 puppet bench``.
 """
@@ -28,6 +33,7 @@ figures run it pinned: ``OPENBLAS_NUM_THREADS=1 taskset -c 1 puppet bench``.
 from __future__ import annotations
 
 import contextlib
+import functools
 import json
 import os
 import statistics
@@ -42,8 +48,13 @@ from . import rigid
 from .autorig import rig_for_face
 from .face import Face, load_face
 from .inputbench import bench_inputs
-from .runtime import Runtime
+from .runtime import MUSCLE_MODES, Runtime
 from .subdivide import subdivide
+
+MUSCLE_POSES = {  # name -> contractions (None: every muscle) at that value
+    "every muscle at 0.5": (None, 0.5),
+    "zygomatic major l+r at 3": (("zygomatic_major_l", "zygomatic_major_r"), 3.0),
+}
 
 
 def median_time(fn: Callable[[], object], repeat: int, warm_up: bool = True) -> float:
@@ -147,7 +158,7 @@ def bench_frame_split(face: Face, frames: int, rig=None, size: tuple[int, int] =
     inputs, kind = _frame_inputs(runtime, frames)
     steps = {"controls": [], "dffd": [], "normals": [], "draw": [], "read": []}
     out, normals = np.empty_like(runtime.rest), np.empty_like(runtime.rest)
-    with Renderer(face.triangles, len(face.vertices), face.colors, width=size[0], height=size[1]) as renderer:
+    with Renderer.for_face(face, width=size[0], height=size[1]) as renderer:
         renderer.frame(face.vertices)
         for i in range(frames + 1):
             t = [time.perf_counter()]
@@ -170,6 +181,26 @@ def bench_frame_split(face: Face, frames: int, rig=None, size: tuple[int, int] =
     return {"face": face.name, "vertices": len(face.vertices), "input": kind, "size": f"{size[0]}x{size[1]}",
             **ms, "fps": 1e3 / frame,
             "deform_share": (ms["controls_ms"] + ms["dffd_ms"] + ms["normals_ms"]) / frame}
+
+
+def bench_muscles(face: Face, frames: int, rig=None) -> list[dict]:
+    """Per muscle pose, median ms per frame of the FAP-only baseline and each muscle mode (module
+    docstring); the FAP frame opens the jaw and raises the lip corners a little."""
+    runtime = Runtime(face, rig)
+    fap = np.zeros(68)
+    fap[[2, 11, 12]] = 200.0, 60.0, 60.0
+    out = np.empty_like(runtime.rest)
+    repeat = max(1, min(frames, 60))
+    rows = []
+    for pose_name, (names, value) in MUSCLE_POSES.items():
+        muscles = {n: value for n in (runtime.muscle_names if names is None else names)}
+        row = {"face": face.name, "pose": pose_name,
+               "fap_only_ms": 1e3 * median_time(lambda: runtime.pose(fap, out=out), repeat)}
+        for mode in MUSCLE_MODES:
+            frame = functools.partial(runtime.pose, fap, muscles=muscles, mode=mode, out=out)
+            row[f"{mode}_ms"] = 1e3 * median_time(frame, repeat)
+        rows.append(row)
+    return rows
 
 
 def _frame_inputs(runtime: Runtime, frames: int):
@@ -216,16 +247,20 @@ def run_bench(frames: int = 300, as_json: bool = False, ict: bool = True, flood_
     rows = [bench_face(face, frames, rig) for face, rig in faces]
     split = [bench_frame_split(face, min(frames, 120), rig) for face, rig in faces
              if face.name in ("default", "ict")]
+    muscles = bench_muscles(faces[0][0], frames)
     inputs = bench_inputs()
     live = _bench_live(faces[0][0], flood_seconds, take_seconds)
     if as_json:
-        print(json.dumps({"deform": rows, "frames": split, "inputs": inputs, "live": live}, indent=1))
+        print(json.dumps({"deform": rows, "frames": split, "muscles": muscles, "inputs": inputs, "live": live},
+                         indent=1))
         return 0
     _table(rows, ("face", "vertices", "control_points", "precompute_s", "load_s", "deform_ms",
                   "deform_normals_ms", "realtime_ms", "dense_ms", "ratio"))
     print()
     _table(split, ("face", "input", "size", "controls_ms", "dffd_ms", "normals_ms", "draw_ms", "read_ms",
                    "fps", "deform_share"))
+    print()
+    _table(muscles, ("face", "pose", "fap_only_ms", *(f"{mode}_ms" for mode in MUSCLE_MODES)))
     print()
     _table([r for r in inputs if "error" not in r],
            ("adapter", "samples_s", "paced_samples_s", "latency_median_ms", "latency_p99_ms", "bad_frames"))

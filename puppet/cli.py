@@ -9,6 +9,7 @@ from pathlib import Path
 from .render import VIEW_DIRECTIONS
 
 VIEWS = tuple(VIEW_DIRECTIONS)
+FACE_HELP = "a face folder (puppet face-from-photo) or a mesh with feature points (default: the embedded face)"
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -25,7 +26,7 @@ def main(argv: list[str] | None = None) -> int:
     render.add_argument("--size", type=_size, default=(640, 480), help="video size WxH (default 640x480)")
     render.add_argument("--view", choices=VIEWS, default="front", help="camera (default front)")
     render.add_argument("--fps", type=_positive_float, default=None, help="video fps (default: the take's)")
-    render.add_argument("--face", default=None, help="a face mesh with feature points (default: the embedded face)")
+    render.add_argument("--face", default=None, help=FACE_HELP)
 
     for command, help_text in (("play", "play a take (a .fap or a take folder) in a window, in real time"),
                                ("replay", "play a take in a window; or replay its raw log through its devices' "
@@ -34,6 +35,7 @@ def main(argv: list[str] | None = None) -> int:
         play.add_argument("take", help="the .fap file or take folder")
         play.add_argument("--size", type=_size, default=(960, 720), help="window size WxH (default 960x720)")
         play.add_argument("--view", choices=VIEWS, default="front", help="camera (default front)")
+        play.add_argument("--face", default=None, help=FACE_HELP)
     play.add_argument("--through-devices", action="store_true",
                       help="re-encode the raw log into each device's wire format and read it back with the "
                            "real adapters; the new .fap must equal the recorded one")
@@ -66,6 +68,7 @@ def main(argv: list[str] | None = None) -> int:
     live.add_argument("--view", choices=VIEWS, default="front", help="camera (default front)")
     live.add_argument("--device", action="append", type=_device_override, default=[], metavar="NAME=URL",
                       help="open the mapping's device NAME at URL instead (e.g. box=sim://joystick); repeatable")
+    live.add_argument("--face", default=None, help=FACE_HELP)
     live.add_argument("--layer-over", default=None, metavar="TAKE",
                       help="record passes over this take: it plays under you, and only --arm is replaced")
     live.add_argument("--arm", default="", metavar="A,B",
@@ -87,7 +90,32 @@ def main(argv: list[str] | None = None) -> int:
     bench.add_argument("--take-seconds", type=_positive_float, default=3600.0,
                        help="length of the accelerated long take (default 3600)")
 
+    rig = commands.add_parser("rig", help="rig a face mesh from its landmarks and write the rig file")
+    rig.add_argument("mesh", help="the face mesh (.obj or any format trimesh reads)")
+    rig.add_argument("--landmarks", required=True,
+                     help="JSON: {FDP id: vertex index} or a list of the 68 iBUG landmark vertex indices")
+    rig.add_argument("-o", "--output", required=True, help="the rig file to write (JSON)")
+
+    from_photo = commands.add_parser("face-from-photo", help="build a rigged, textured face from one frontal photo")
+    from_photo.add_argument("photo", help="the frontal photo")
+    from_photo.add_argument("--landmarks", required=True,
+                            help="landmark JSON: fdp11, iBUG 68 or MediaPipe 468/478 points (puppet pick-landmarks)")
+    from_photo.add_argument("-o", "--output", required=True, help="the face folder to write")
+
+    pick = commands.add_parser("pick-landmarks", help="click a photo's landmarks in a web page on 127.0.0.1")
+    pick.add_argument("photo", help="the photo")
+    pick.add_argument("--layout", choices=("fdp11", "ibug68"), default="fdp11", help="points to click (default fdp11)")
+    pick.add_argument("-o", "--output", required=True, help="the landmark JSON to write")
+    pick.add_argument("--port", type=int, default=0, help="port (default: a free one)")
+    pick.add_argument("--no-browser", action="store_true", help="print the address only")
+
     args = parser.parse_args(argv)
+    if args.command == "face-from-photo":
+        return _face_from_photo(args)
+    if args.command == "pick-landmarks":
+        return _pick_landmarks(args)
+    if args.command == "rig":
+        return _rig(args)
     if args.command == "demo":
         from .demo import run_demo
 
@@ -99,7 +127,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "play":
         from .window import play_take
 
-        play_take(args.take, size=args.size, view=args.view)
+        play_take(args.take, size=args.size, view=args.view, face=_face(args.face))
         return 0
     if args.command == "replay":
         return _replay(args)
@@ -113,7 +141,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.layer_over and not args.arm:
             parser.error("--layer-over needs --arm: what the pass replaces")
         run_live(args.mapping, record=args.record, fps=args.fps, size=args.size, view=args.view,
-                 devices=dict(args.device) or None, layer_over=args.layer_over,
+                 devices=dict(args.device) or None, face=_face(args.face), layer_over=args.layer_over,
                  arm=[a for a in args.arm.split(",") if a])
         return 0
     if args.command == "calibrate":
@@ -131,16 +159,44 @@ def main(argv: list[str] | None = None) -> int:
     return 2
 
 
+def _rig(args: argparse.Namespace) -> int:
+    """``puppet rig``: landmarks -> feature points -> rig file, with the time and a summary; load
+    it with ``Runtime(load_face(mesh, landmarks=...), rig.load_rig(path))``. Bad input is one line
+    on stderr and exit code 2."""
+    import time
+
+    from .autorig import build_rig
+    from .face import FaceFileError, load_face
+    from .landmarks import LandmarkError
+    from .rig import RigError, save_rig
+
+    start = time.perf_counter()
+    try:
+        face = load_face(args.mesh, landmarks=args.landmarks)
+        rig = build_rig(face)
+    except (OSError, FaceFileError, LandmarkError, RigError) as exc:
+        print(f"puppet rig: {exc}", file=sys.stderr)
+        return 2
+    seconds = time.perf_counter() - start
+    save_rig(rig, args.output)
+    counts = {role: sum(p.role == role for p in rig.control_points) for role in ("active", "fixed", "passive", "interpolated")}
+    print(f"rigged {args.mesh} ({len(face.vertices)} vertices) in {seconds:.2f} s -> {args.output}")
+    print(f"  regions: {', '.join(f'{r.name} ({len(r.vertices)})' for r in rig.regions)}")
+    print(f"  control points: {len(rig.control_points)} ({', '.join(f'{n} {k}' for k, n in counts.items())})")
+    print(f"  muscles: {len(getattr(rig, 'muscles', []))}")
+    return 0
+
+
 def _render(args: argparse.Namespace) -> int:
     """``puppet render``: a bad take, face or path is one line on stderr and exit code 2."""
-    from .face import FaceFileError, MissingFeaturePointsError, load_face
+    from .face import FaceFileError, MissingFeaturePointsError
     from .fapfile import FapError
     from .playback import render_take
     from .takes import TakeError
     from .rig import RigError
 
     try:
-        face = load_face(args.face) if args.face else None
+        face = _face(args.face)
         count = render_take(args.take, args.output, face=face, size=args.size, view=args.view, fps=args.fps,
                             progress=sys.stderr.isatty())
     except (FapError, TakeError, FaceFileError, MissingFeaturePointsError, RigError) as exc:
@@ -180,8 +236,17 @@ def _replay(args: argparse.Namespace) -> int:
             return 1
         path = result.path
     if not args.no_window:
-        play_take(path, size=args.size, view=args.view)
+        play_take(path, size=args.size, view=args.view, face=_face(args.face))
     return 0
+
+
+def _face(path: str | None):
+    """``--face``: the face at ``path`` (a face folder or a mesh), or None for the embedded one."""
+    if path is None:
+        return None
+    from .face import load_face
+
+    return load_face(path)
 
 
 def _export(args: argparse.Namespace) -> int:
@@ -226,6 +291,46 @@ def _calibrate(args: argparse.Namespace) -> int:
         calibrate(args.mapping, rest_seconds=args.rest, sweep_seconds=args.sweep)
     except (MappingError, DeviceError, CalibrationError) as exc:
         print(f"puppet calibrate: {exc}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _face_from_photo(args: argparse.Namespace) -> int:
+    """``puppet face-from-photo``: bad landmarks or photo are one line on stderr, exit code 2."""
+    from .photoface import PhotoFaceError, build_face_folder
+    from .rig import RigError
+
+    try:
+        folder = build_face_folder(args.photo, args.landmarks, args.output)
+    except (PhotoFaceError, RigError) as exc:
+        print(f"puppet face-from-photo: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        print(f"puppet face-from-photo: {exc.filename or args.output}: {exc.strerror or exc}", file=sys.stderr)
+        return 2
+    print(folder)
+    return 0
+
+
+def _pick_landmarks(args: argparse.Namespace) -> int:
+    """``puppet pick-landmarks``: serve the picker until the points are saved."""
+    import webbrowser
+
+    from .photoface import PhotoFaceError
+    from .picker import PickerServer
+
+    try:
+        picker = PickerServer(args.photo, args.layout, args.output, port=args.port)
+    except (PhotoFaceError, OSError) as exc:
+        print(f"puppet pick-landmarks: {exc}", file=sys.stderr)
+        return 2
+    print(f"click the points at {picker.url} (Ctrl-C to give up)")
+    if not args.no_browser:
+        webbrowser.open(picker.url)
+    try:
+        print(picker.wait())
+    except KeyboardInterrupt:
+        picker.close()
         return 1
     return 0
 

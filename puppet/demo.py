@@ -28,7 +28,7 @@ def run_demo(out: Path, size: tuple[int, int] = (640, 480), view: str = "three_q
     playback = FapPlayback(demo_take())
     face = playback.face
     neutral = face.vertices
-    with Renderer(face.triangles, len(face.vertices), face.colors, width=size[0], height=size[1]) as renderer:
+    with Renderer.for_face(face, width=size[0], height=size[1]) as renderer:
         frame_head(renderer, face, view)
         still = _Still(face.feature_vertices["2.2"], face.feature_vertices["2.3"])
         frames = (still.keep(renderer.render(v, n), v) for v, n in playback)

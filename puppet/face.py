@@ -12,7 +12,8 @@ file (landmark tables and vertex groups index into it), so every loader here kee
 * ``load_face(path)`` reads any mesh trimesh reads. OBJ files are parsed here, in file order (a
   loader that splits vertices at UV seams would renumber them); polygons are fan-triangulated.
   Other formats go through trimesh with ``process=False``; the geometries of a scene are merged
-  in order. Such a face has one part, ``skin``, and no feature points.
+  in order. Such a face has one part, ``skin``, and no feature points; ``load_face(path,
+  landmarks=...)`` gives it all of them (``puppet.landmarks``), so ``autorig.build_rig`` rigs it.
 * ``load_default_rig()`` returns the default face's rig: the shipped ``default_rig.json`` when
   there is one, else the one ``puppet.autorig`` generates from the feature points.
 
@@ -81,6 +82,7 @@ class Face:
     uv: np.ndarray | None = None  # (T, 2) float32
     triangle_uv: np.ndarray | None = None  # (F, 3) int32 rows of uv per triangle corner
     source_index: np.ndarray | None = None  # (N,) int32 vertex index in the source mesh, -1 generated
+    frame: np.ndarray | None = None  # 3x4 [R | t] that took the file's coordinates into the face frame
 
     @property
     def fapu(self) -> dict[str, float]:
@@ -106,10 +108,29 @@ class Face:
         return h.hexdigest()
 
 
-def load_face(path: str | os.PathLike | None = None) -> Face:
-    """The embedded default face (``path`` None), or the mesh at ``path`` in file vertex order."""
+def load_face(path: str | os.PathLike | None = None, landmarks=None) -> Face:
+    """The embedded default face (``path`` None), or the mesh at ``path`` in file vertex order.
+
+    ``landmarks`` (a JSON path, a dict {FDP id: vertex} or a list of 68 iBUG vertices) makes the
+    mesh rig-ready: face frame, parts, contours, pivots and feature points (``puppet.landmarks``).
+    A folder is a face folder (``puppet.facefolder``: a face built from a photo, textured).
+    """
     if path is None:
         return _load_default()
+    if Path(path).is_dir():
+        from .facefolder import load_face_folder
+
+        return load_face_folder(path)
+    face = _load_mesh(path)
+    if landmarks is None:
+        return face
+    from .landmarks import apply_landmarks
+
+    return apply_landmarks(face, landmarks)
+
+
+def _load_mesh(path: str | os.PathLike) -> Face:
+    """The mesh at ``path`` as a one-part face without feature points."""
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"face mesh {str(path)!r} does not exist")

@@ -191,8 +191,7 @@ class LiveView:
         if self.renderer is not None:
             self.renderer.release()
         face = self.session.runtime.face
-        self.renderer = Renderer(face.triangles, len(face.vertices), face.colors, width=size[0],
-                                 height=size[1], samples=0, ctx=self.window.ctx)
+        self.renderer = Renderer.for_face(face, width=size[0], height=size[1], samples=0, ctx=self.window.ctx)
         frame_head(self.renderer, face, self.view)
         self.window.fbo.viewport = (0, 0, *size)
 
@@ -226,12 +225,13 @@ def open_session(mapping_path: str | os.PathLike, *, record: str | None = None, 
 def run_live(mapping_path: str | os.PathLike, *, record: str | None = None, fps: int = 30,
              size: tuple[int, int] = (960, 720), view: str = "front",
              devices: dict[str, str] | None = None,
-             record_root: str | os.PathLike | None = None, layer_over: str | os.PathLike | None = None,
-             arm: list[str] = ()) -> None:
+             record_root: str | os.PathLike | None = None, face: Any = None,
+             layer_over: str | os.PathLike | None = None, arm: list[str] = ()) -> None:
     """Run the mapping's devices onto the face in a window until Q / Escape or closing it.
 
     ``devices`` overrides device URLs by name (e.g. ``{"box": "sim://joystick?..."}``); takes go
-    under ``record_root`` (default ``takes/``); ``layer_over`` and ``arm`` record layered passes
+    under ``record_root`` (default ``takes/``); ``face`` is the face to perform (default the
+    embedded one; ``load_face`` of a face folder or mesh); ``layer_over`` and ``arm`` record layered passes
     over an earlier take (``puppet.takeclock.Layer``). Without a usable display this prints
     ``puppet live: <why>`` on stderr and raises ``SystemExit(2)``.
     """
@@ -247,7 +247,7 @@ def run_live(mapping_path: str | os.PathLike, *, record: str | None = None, fps:
         _exit(str(error))
     try:
         session = open_session(mapping_path, record=record, fps=fps, devices=devices,
-                               record_root=record_root, layer_over=layer_over, arm=arm)
+                               record_root=record_root, face=face, layer_over=layer_over, arm=arm)
     except BaseException:
         window.close()
         window.destroy()

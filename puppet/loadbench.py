@@ -58,7 +58,7 @@ def _renderer(runtime: Runtime, size: tuple[int, int]) -> Renderer:
     from .playback import frame_head
 
     face = runtime.face
-    renderer = Renderer(face.triangles, len(face.vertices), face.colors, width=size[0], height=size[1])
+    renderer = Renderer.for_face(face, width=size[0], height=size[1])
     frame_head(renderer, face, "front")
     return renderer
 

@@ -46,9 +46,9 @@ magnitude, sign kept -- or ``last``, the source fed most recently), multiplies b
 ``[-200, 200]``, for a face at rest when the control is). ``range`` is required for ``fap``,
 ``head``, ``eyes``, ``eye_l`` and ``eye_r``: degrees for the rotations, written as FAPs 48-50 /
 23-26 in AU with each FAP's own positive direction (pitch down, yaw toward the face's left, roll
-toward its right). Muscles default to [0, 1] (any ``[a-z_0-9]+`` name, passed through as a
-contraction), visemes (blend) and expressions (intensity) to [0, 63]. Targets that write the same
-FAP or muscle add up. One source may feed any number of targets.
+toward its right). Muscles (the default face's, ``puppet.muscles.MUSCLE_NAMES``; an unknown
+name names the closest) default to [0, 1], a contraction; visemes (blend) and expressions
+(intensity) to [0, 63]. Targets that write the same FAP or muscle add up. One source may feed any number of targets.
 
 Per-device ``options`` are folded into the device URL's query, so ``Mapping.devices`` is just
 {name: URL}. Before its first sample a channel reads 0 (the face at rest). ``pose(t_ns)`` carries
@@ -90,6 +90,7 @@ from devices.base import Sample
 from .face import AU
 from .faptable import N_FAPS, faps
 from .filters import Exponential, OneEuro, RateLimit
+from .muscles import MUSCLE_NAMES
 
 # -- the format -------------------------------------------------------------------------------
 
@@ -117,7 +118,6 @@ NEEDS_RANGE = ("fap", "head", "eyes", "eye_l", "eye_r")
 
 DEVICE_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_-]*\Z")
 SOURCE = re.compile(r"([A-Za-z_][A-Za-z0-9_-]*)\.(\S+)\Z")
-MUSCLE = re.compile(r"[a-z_0-9]+\Z")
 URL = re.compile(r"[A-Za-z][A-Za-z0-9+.-]*://")
 DEG_TO_AU = math.pi / 180.0 / AU
 
@@ -660,9 +660,10 @@ class _Checker:
             self.expect(where, "a FAP name or number 3-68", value, _closest(value, names))
             return None
         if kind == "muscle":
-            if isinstance(value, str) and MUSCLE.match(value):
+            if value in MUSCLE_NAMES:
                 return value
-            self.expect(where, "a muscle name of lower-case letters, digits and '_'", value)
+            self.expect(where, "a muscle of the default face (puppet.muscles.MUSCLE_NAMES)", value,
+                        _closest(value, MUSCLE_NAMES))
             return None
         if kind == "viseme":
             if isinstance(value, int) and not isinstance(value, bool) and value in VISEMES:
@@ -974,7 +975,7 @@ class Mapping:
         self._muscles = tuple(t for t in compiled if t.kind == "muscle")
         self._visemes = tuple(t for t in compiled if t.kind == "viseme")
         self._expressions = tuple(t for t in compiled if t.kind == "expression")
-        self._muscle_names = tuple(dict.fromkeys(t.key for t in self._muscles))
+        self.muscle_names = tuple(dict.fromkeys(t.key for t in self._muscles))
         self._shapes = None
         if self._visemes or self._expressions:
             from .fap import high_level_faps
@@ -1026,7 +1027,7 @@ class Mapping:
             v = t.evaluate()
             for i in t.slots:
                 fap[i] += v
-        muscles = dict.fromkeys(self._muscle_names, 0.0)
+        muscles = dict.fromkeys(self.muscle_names, 0.0)
         for t in self._muscles:
             muscles[t.key] += t.evaluate()
         for name, v in muscles.items():

@@ -87,6 +87,8 @@ import scipy.sparse as sp
 
 __all__ = [
     "MODES",
+    "MUSCLE_NAMES",
+    "ControlPointMuscles",
     "EdgeConstraints",
     "LinearMuscle",
     "Muscle",
@@ -183,12 +185,29 @@ def control_point_displacements(muscles: Sequence[Muscle], contractions: Mapping
     """Displacements (n, 3) of control points (n, 3) for muscle contractions {name: c}: each muscle
     moves the points inside its zone by the improved law (no point crosses its fixed end); the
     caller spreads them over the skin (DFFD, ``Runtime.deform``)."""
-    points = np.asarray(points, dtype=float)
-    out = np.zeros_like(points)
-    for m in _contracting(muscles, contractions):
-        rows, direction, travel, dist = _field(m, points)
-        out[rows] += repelled_travel(float(contractions[m.name]) * travel, dist)[:, None] * direction
-    return out
+    return ControlPointMuscles(muscles, points).displace(contractions)
+
+
+class ControlPointMuscles:
+    """``control_point_displacements`` for one fixed set of points, their fields computed once
+    (the runtime's control-point mode: per frame only the contracting muscles' few points)."""
+
+    def __init__(self, muscles: Sequence[Muscle], points: np.ndarray) -> None:
+        self.muscles = list(muscles)
+        self.points = np.asarray(points, dtype=float)
+        self._fields = {m.name: _field(m, self.points) for m in self.muscles}
+
+    def moved(self) -> np.ndarray:
+        """Indices of the points some muscle moves."""
+        return np.unique(np.concatenate([np.zeros(0, np.int64), *(f[0] for f in self._fields.values())]))
+
+    def displace(self, contractions: Mapping[str, float], out: np.ndarray | None = None) -> np.ndarray:
+        """Displacements (n, 3) for contractions {name: c}, added to ``out`` when given."""
+        out = np.zeros_like(self.points) if out is None else out
+        for m in _contracting(self.muscles, contractions):
+            rows, direction, travel, dist = self._fields[m.name]
+            out[rows] += repelled_travel(float(contractions[m.name]) * travel, dist)[:, None] * direction
+        return out
 
 
 def _contracting(muscles: Sequence[Muscle], contractions: Mapping[str, float]) -> list[Muscle]:
@@ -290,6 +309,8 @@ class EdgeConstraints:
         self.floor = EDGE_MIN_HEIGHT * height
         self.inv_mass = movable.astype(float)
         self.n = len(rest)
+        self._triangles, self._tri_normal = tri, self.normal[::3]
+        self._floor2 = (self.floor * self.floor).reshape(-1, 3)
 
     def _heights(self, x: np.ndarray):
         """Signed corner heights above the opposite edge, the edge's in-plane unit normal, and the
@@ -300,6 +321,30 @@ class EdgeConstraints:
         across /= np.maximum(np.linalg.norm(across, axis=1, keepdims=True), 1e-300)
         t = np.clip(np.einsum("ij,ij->i", pv - pa, edge) / np.maximum(np.einsum("ij,ij->i", edge, edge), 1e-300), 0, 1)
         return np.einsum("ij,ij->i", pv - pa, across), across, t
+
+    def guard(self, positions: np.ndarray) -> bool:
+        """Relax deformed ``positions`` (V, 3) in place if any corner is below its floor; returns
+        whether it had to. When nothing is squeezed this costs one check (``squeezed``)."""
+        if not self.squeezed(positions):
+            return False
+        displacement = positions - self.rest
+        self.relax(displacement)
+        positions[...] = self.rest + displacement
+        return True
+
+    def squeezed(self, positions: np.ndarray) -> bool:
+        """Whether some corner of deformed ``positions`` is below its floor, per triangle: a
+        corner's height is the triangle's doubled area projected along its rest normal over the
+        projected length of the opposite edge, so one area and three edge lengths decide all three."""
+        p0, p1, p2 = (positions[self._triangles[:, k]] for k in range(3))
+        n = self._tri_normal
+        area = np.einsum("ij,ij->i", np.cross(p1 - p0, p2 - p0), n)
+        bad = area < 0
+        area *= area
+        for k, edge in enumerate((p2 - p1, p0 - p2, p1 - p0)):  # opposite corner 0, 1, 2
+            across2 = np.einsum("ij,ij->i", edge, edge) - np.einsum("ij,ij->i", edge, n) ** 2
+            bad |= area < self._floor2[:, k] * across2
+        return bool(bad.any())
 
     def relax(self, displacement: np.ndarray) -> None:
         """Push corners back above their floor: ``displacement`` (V, 3) is changed in place."""
@@ -405,28 +450,58 @@ MIRROR_IDS = {
 MIRROR_IDS |= {v: k for k, v in MIRROR_IDS.items()}
 
 
-def default_muscles(face) -> list[Muscle]:
-    """The default muscle set (module docstring) placed on ``face`` by its feature points: 9 pairs
-    of linear muscles named ``<muscle>_l`` / ``_r`` and the three sphincters, ends on the skin."""
-    fp = {k: np.asarray(v, float) for k, v in face.feature_points.items()}
-    skin = np.asarray(face.vertices, float)[face.parts.get("skin", np.arange(len(face.vertices)))]
-    muscles: list[Muscle] = []
-    for name, recipe in LINEAR_RECIPES.items():
-        muscles.append(_linear_from_recipe(f"{name}_l", recipe, fp, skin, _same))
-        muscles.append(_linear_from_recipe(f"{name}_r", recipe, fp, skin, _mirrored))
-    for name, recipe in SPHINCTER_RECIPES.items():
-        muscles.append(_sphincter_from_recipe(name, recipe, fp, _same))
-        if name.endswith("_l"):
-            muscles.append(_sphincter_from_recipe(name[:-2] + "_r", recipe, fp, _mirrored))
-    return muscles
-
-
 def _same(fid: str) -> str:
     return fid
 
 
 def _mirrored(fid: str) -> str:
     return MIRROR_IDS.get(fid, fid)
+
+
+def _default_set() -> list[tuple[str, str, tuple, Callable[[str], str]]]:
+    """(name, "linear" | "sphincter", recipe, feature point renaming) of every default muscle, in
+    order: each linear muscle's left then right strand, then the sphincters (a ``_l`` one followed
+    by its mirror)."""
+    out = []
+    for name, recipe in LINEAR_RECIPES.items():
+        out += [(f"{name}_l", "linear", recipe, _same), (f"{name}_r", "linear", recipe, _mirrored)]
+    for name, recipe in SPHINCTER_RECIPES.items():
+        out.append((name, "sphincter", recipe, _same))
+        if name.endswith("_l"):
+            out.append((name[:-2] + "_r", "sphincter", recipe, _mirrored))
+    return out
+
+
+DEFAULT_SET = _default_set()
+MUSCLE_NAMES = tuple(name for name, *_ in DEFAULT_SET)
+"""The default muscles' names, in rig order: what a mapping's ``muscle:`` targets may name."""
+
+
+def default_muscles(face) -> list[Muscle]:
+    """The default muscle set (module docstring) placed on ``face`` by its feature points: 9 pairs
+    of linear muscles named ``<muscle>_l`` / ``_r`` and the three sphincters, ends on the skin
+    (``MUSCLE_NAMES``, in that order). A muscle whose feature points the face lacks is left out
+    (a face rigged from fewer landmarks still gets the muscles it can place)."""
+    fp = {k: np.asarray(v, float) for k, v in face.feature_points.items()}
+    skin = np.asarray(face.vertices, float)[face.parts.get("skin", np.arange(len(face.vertices)))]
+    muscles: list[Muscle] = []
+    for name, kind, recipe, rename in DEFAULT_SET:
+        if not all(rename(i) in fp for i in _recipe_ids(kind, recipe)):
+            continue
+        if kind == "linear":
+            muscles.append(_linear_from_recipe(name, recipe, fp, skin, rename))
+        else:
+            muscles.append(_sphincter_from_recipe(name, recipe, fp, rename))
+    return muscles
+
+
+def _recipe_ids(kind: str, recipe: tuple) -> set[str]:
+    """The feature point ids a recipe places its muscle by."""
+    if kind == "linear":
+        (fixed_ids, _), (ins_ids, _), *_ = recipe
+        return {*fixed_ids, *ins_ids}
+    (ids, _), scale_ids, *_ = recipe
+    return {*ids, *scale_ids}
 
 
 def _on_skin(point: np.ndarray, skin: np.ndarray) -> np.ndarray:

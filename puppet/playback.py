@@ -95,8 +95,7 @@ def render_take(path: str | os.PathLike, out: str | os.PathLike, *, face: Face |
     out = Path(out)
     partial = out.with_name(f".{out.stem}.partial{out.suffix}")
     try:
-        with Renderer(playback.face.triangles, len(playback.face.vertices), playback.face.colors,
-                      width=size[0], height=size[1]) as renderer:
+        with Renderer.for_face(playback.face, width=size[0], height=size[1]) as renderer:
             frame_head(renderer, playback.face, view)
             total = playback.header.declared_frames
             frames = _progress((renderer.render(v, n) for v, n in playback), total, progress)

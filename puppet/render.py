@@ -15,6 +15,11 @@ teeth); and a sky/ground hemisphere ambient. Lighting is computed in linear spac
 sRGB on output. Back faces are drawn with flipped normals, because the mouth interior is seen
 from inside the mesh.
 
+Optionally the albedo comes from a texture (a face built from a photo, ``puppet.photoface``):
+per-vertex texture coordinates and a per-vertex texture weight that mixes the texture's colour
+over the vertex colour (0 keeps the vertex colour: where the photo does not see the surface).
+Without a texture the weight is 0 everywhere and the colour path is the per-vertex one.
+
 Coordinates follow the face: +x the face's own left, +y up, +z toward the viewer.
 """
 
@@ -75,16 +80,22 @@ in vec3 in_position;
 in vec3 in_normal;
 in vec3 in_albedo;
 in float in_specular;
+in vec2 in_uv;
+in float in_texture_weight;
 out vec3 v_position;
 out vec3 v_normal;
 out vec3 v_albedo;
 out float v_specular;
+out vec2 v_uv;
+out float v_texture_weight;
 
 void main() {
     v_position = in_position;
     v_normal = in_normal;
     v_albedo = in_albedo;
     v_specular = in_specular;
+    v_uv = in_uv;
+    v_texture_weight = in_texture_weight;
     gl_Position = view_projection * vec4(in_position, 1.0);
 }
 """
@@ -101,11 +112,14 @@ uniform vec3 light_color[N_LIGHTS];      // linear
 uniform vec3 eye;
 uniform vec3 sky_color;
 uniform vec3 ground_color;
+uniform sampler2D albedo_map;  // sRGB texture; 1x1 white when the mesh has none
 
 in vec3 v_position;
 in vec3 v_normal;
 in vec3 v_albedo;
 in float v_specular;
+in vec2 v_uv;
+in float v_texture_weight;
 out vec4 f_color;
 
 // Lambert plus the extra light of wrapped diffuse, tinted: skin's reddish terminator.
@@ -124,6 +138,10 @@ float specular(vec3 n, vec3 l, vec3 v, float strength) {
     return strength * fresnel * lobe * max(dot(n, l), 0.0);
 }
 
+vec3 srgb_decode(vec3 c) {
+    return mix(c / 12.92, pow((c + 0.055) / 1.055, vec3(2.4)), step(0.04045, c));
+}
+
 vec3 srgb_encode(vec3 c) {
     c = clamp(c, 0.0, 1.0);
     return mix(c * 12.92, 1.055 * pow(c, vec3(1.0 / 2.4)) - 0.055, step(0.0031308, c));
@@ -135,10 +153,11 @@ void main() {
         n = -n;
     }
     vec3 v = normalize(eye - v_position);
-    vec3 color = v_albedo * mix(ground_color, sky_color, 0.5 + 0.5 * n.y);
+    vec3 albedo = mix(v_albedo, srgb_decode(texture(albedo_map, v_uv).rgb), v_texture_weight);
+    vec3 color = albedo * mix(ground_color, sky_color, 0.5 + 0.5 * n.y);
     for (int i = 0; i < N_LIGHTS; ++i) {
         vec3 l = light_direction[i];
-        vec3 diffuse = v_albedo * skin_diffuse(dot(n, l));
+        vec3 diffuse = albedo * skin_diffuse(dot(n, l));
         color += light_color[i] * (diffuse + specular(n, l, v, v_specular));
     }
     f_color = vec4(srgb_encode(color), 1.0);
@@ -237,6 +256,9 @@ class Renderer:
         colors: np.ndarray | None = None,
         *,
         materials: np.ndarray | None = None,
+        uv: np.ndarray | None = None,
+        texture: np.ndarray | None = None,
+        texture_weight: np.ndarray | None = None,
         width: int = 640,
         height: int = 640,
         backend: str = "egl",
@@ -246,7 +268,10 @@ class Renderer:
         """Upload topology, albedo (sRGB 0-1, per vertex) and specular strengths (0-1).
 
         ``colors`` None paints the mesh in a skin tone; ``materials`` None gives every vertex
-        ``SKIN_SPECULAR``. ``samples`` > 1 antialiases with multisampling where supported.
+        ``SKIN_SPECULAR``. ``texture`` (H, W, 3) uint8 sRGB, top row first, with ``uv`` (N, 2)
+        per vertex (v up, as in OBJ) and ``texture_weight`` (N,) in 0-1 (None: 1) paints the
+        texture over the vertex colours. ``samples`` > 1 antialiases with multisampling where
+        supported.
         """
         self.n_vertices = int(n_vertices)
         self.size = (int(width), int(height))
@@ -257,7 +282,32 @@ class Renderer:
         self._staging = np.empty((self.n_vertices, 6), dtype="f4")
         self.camera: Camera | None = None
         with self._current():
+            self._create_texture(uv, texture, texture_weight)
             self._create_gl_objects(triangles, colors, materials, samples)
+
+    @classmethod
+    def for_face(cls, face: FaceLike, **options) -> Renderer:
+        """A renderer for ``face``: its triangles, vertex colours and, when it has one, its
+        texture (``texture_kwargs``); ``options`` as for the constructor (size, ctx, samples...)."""
+        return cls(face.triangles, len(face.vertices), face.colors, **texture_kwargs(face), **options)
+
+    def _create_texture(
+        self, uv: np.ndarray | None, texture: np.ndarray | None, weight: np.ndarray | None
+    ) -> None:
+        """The albedo texture (mipmapped, clamped) and the per-vertex uv + weight buffer; a 1x1
+        white texture with weight 0 everywhere when there is none, so one shader serves both."""
+        surface = np.zeros((self.n_vertices, 3), dtype="f4")
+        if texture is None:
+            image = np.full((1, 1, 3), 255, dtype=np.uint8)
+        else:
+            image = np.ascontiguousarray(np.asarray(texture, dtype=np.uint8)[::-1, :, :3])
+            surface[:, :2] = uv
+            surface[:, 2] = 1.0 if weight is None else np.clip(weight, 0.0, 1.0)
+        self._texture = self.ctx.texture((image.shape[1], image.shape[0]), 3, image.tobytes(), alignment=1)
+        self._texture.repeat_x = self._texture.repeat_y = False
+        self._texture.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+        self._texture.build_mipmaps()
+        self._surface = self.ctx.buffer(surface)
 
     def _create_gl_objects(
         self,
@@ -266,7 +316,8 @@ class Renderer:
         materials: np.ndarray | None,
         samples: int,
     ) -> None:
-        """Programs, static and dynamic buffers, vertex arrays, constant uniforms, targets."""
+        """Programs, static and dynamic buffers, vertex arrays, constant uniforms, targets
+        (after ``_create_texture``: the mesh's vertex array reads its uv buffer)."""
         self._mesh_program = self.ctx.program(
             vertex_shader=_MESH_VERTEX_SHADER, fragment_shader=_MESH_FRAGMENT_SHADER
         )
@@ -281,6 +332,7 @@ class Renderer:
             [
                 (self._dynamic, "3f 3f", "in_position", "in_normal"),
                 (self._static, "3f 1f", "in_albedo", "in_specular"),
+                (self._surface, "2f 1f", "in_uv", "in_texture_weight"),
             ],
             index_buffer=self._indices,
             index_element_size=4,
@@ -408,6 +460,8 @@ class Renderer:
         with self._current():
             for obj in (
                 self._mesh,
+                self._texture,
+                self._surface,
                 self._background,
                 self._dynamic,
                 self._static,
@@ -472,6 +526,7 @@ class Renderer:
         self.ctx.disable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
         self._background.render(moderngl.TRIANGLES, vertices=3)
         self.ctx.enable(moderngl.DEPTH_TEST)
+        self._texture.use(location=0)
         self._mesh.render(moderngl.TRIANGLES)
 
     def _upload(self, vertices: np.ndarray, normals: np.ndarray | None) -> None:
@@ -503,11 +558,21 @@ def render_face(
     height: int = 640,
 ) -> np.ndarray:
     """One-shot render of ``face`` (its rest pose unless ``vertices`` given), framed on the
-    whole face from ``view``. Uses ``face.colors``, or a skin tone where it has none."""
+    whole face from ``view``. Uses ``face.colors``, or a skin tone where it has none, and the
+    face's texture when it has one (``texture_kwargs``)."""
     vertices = face.vertices if vertices is None else vertices
-    with Renderer(face.triangles, len(face.vertices), face.colors, width=width, height=height) as r:
+    with Renderer.for_face(face, width=width, height=height) as r:
         r.frame(vertices, view=view)
         return r.render(vertices)
+
+
+def texture_kwargs(face: FaceLike) -> dict:
+    """``Renderer`` keyword arguments for a face's texture: ``uv``, ``texture`` and
+    ``texture_weight`` when it has a ``texture`` (a face from ``puppet.facefolder``), else none."""
+    texture = getattr(face, "texture", None)
+    if texture is None:
+        return {}
+    return {"uv": face.uv, "texture": texture, "texture_weight": getattr(face, "texture_weight", None)}
 
 
 def save_png(image: np.ndarray, path: str | Path) -> None:

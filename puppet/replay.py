@@ -16,16 +16,22 @@ of, so a take can always be re-mapped or re-rendered.
   it back; the values it decodes are fed with the logged timestamp (a deterministic clock: the
   adapter's own stamp says when the bytes came back, not when the performer moved). A wire that
   does not carry a value exactly stops the replay with the device, channel and both values.
+
+Muscle-driven frames are written as FAPs measured on the default face, as the live session does
+(``Runtime.muscle_faps``); that face's runtime is built only when a frame contracts a muscle.
 """
 
 from __future__ import annotations
 
 import filecmp
+import functools
 import os
 from collections.abc import Iterator
 from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
+
+import numpy as np
 
 from devices.base import Sample
 from devices.samplelog import LogEvent
@@ -66,7 +72,7 @@ def retake(take: str | os.PathLike | Take, out: str | os.PathLike, *, mapping: s
     with ExitStack() as stack:
         writer = stack.enter_context(FapWriter(out, meta["fps"], name))
         clock = TakeClock(mapper, lambda *frame: write_pose(writer, *frame), meta["t0_ns"], meta["fps"],
-                          hold_ns=meta.get("hold_ns"), layer=_layer(take))
+                          hold_ns=meta.get("hold_ns"), layer=_layer(take), encode_muscles=_muscle_faps)
         entries = take.entries()
         if through_devices:
             entries = _through_devices(entries, take, stack)
@@ -74,6 +80,19 @@ def retake(take: str | os.PathLike | Take, out: str | os.PathLike, *, mapping: s
             clock.apply(entry)
     identical = filecmp.cmp(out, take.fap_path, shallow=False) if mapping is None else None
     return Retake(out, clock.frames, identical)
+
+
+def _muscle_faps(muscles: dict[str, float]) -> np.ndarray:
+    """The FAPs muscle contractions amount to on the default face (its runtime made once)."""
+    return _default_runtime().muscle_faps(muscles)
+
+
+@functools.cache
+def _default_runtime():
+    from .face import load_face
+    from .runtime import Runtime
+
+    return Runtime(load_face())
 
 
 def _layer(take: Take) -> Layer | None:

@@ -26,10 +26,37 @@ is the default.
 Normals are recomputed only where the skin bends (DFFD regions, the neck band); rigid and still
 parts turn their rest normals with their part and the head (the bust base below the neck band
 does not turn).
+
+Muscles (the rig's ``muscles``, ``muscle_names``; ``puppet.muscles``) join a frame as
+``muscles={name: contraction}`` (0..1, more for experiments) in one of three ``MUSCLE_MODES``:
+
+* ``control`` (Zhang & Chen, the default): each muscle moves the active control points inside its
+  zone (improved law: none crosses its fixed end), carried by the rigid parts like the FAPs'
+  displacements, and the rig's DFFD (B's columns for those points) spreads that share over the
+  skin. DFFD alone folds the skin at large contraction (28 triangles at contraction 10 of the left
+  zygomatic major on the default face, where the dragged lip corner meets the nose's and cheeks'
+  anchored borders), so a **fold guard** runs on the muscles' share before it is added to the
+  FAPs' frame: the improved mode's edge constraints (``EdgeConstraints.guard``) over the triangles
+  it reaches. With nothing squeezed it costs one vectorised check (about 0.5 ms on the default
+  face, plus the share's sparse product); it relaxes only where a corner comes within 5% of its
+  opposite edge, and a triangle folds exactly when a corner crosses that edge. It guards the
+  muscles' share alone, like the improved vertex mode, because FAP poses legitimately squeeze
+  the skin (a closed lid, an open jaw) and must draw as they always did. We chose it over changing
+  the rig or the law on control points (sampling the muscle field at every control point, fixed
+  anchors included, folded more, not less): it keeps the rig that FAP takes were made with. It is
+  bounded (``EDGE_ITERATIONS`` sweeps), so where a muscle at several times its normal contraction
+  drags points past the rig's anchors (nose, forehead strands) some folds remain:
+  docs/muscle_experiment.md has the table.
+* ``classic`` (Waters) and ``improved`` (Zhou & Liu): the FAPs' DFFD result plus
+  ``MuscleModel``'s displacement of the skin vertices (the face's ``skin`` part, else the DFFD
+  regions), before the rigid parts and the head turn.
+
+With no muscle contracting (None, {} or every value 0) a frame is the FAP path, untouched.
 """
 
 from __future__ import annotations
 
+import difflib
 import functools
 import warnings
 from collections.abc import Mapping
@@ -42,11 +69,13 @@ from . import coefcache
 from .autorig import rig_for_face
 from .controls import spread_matrix
 from .dffd import DffdError, RegionDeformer
+from .muscles import ControlPointMuscles, EdgeConstraints, MuscleModel
 from .normals import VertexNormals
 from .rig import Rig, rig_to_dict
 from .rigid import compose
 
 MODES = ("precomputed", "realtime")
+MUSCLE_MODES = ("control", "classic", "improved")
 _IDENTITY = np.hstack([np.eye(3), np.zeros((3, 1))])
 
 
@@ -72,6 +101,8 @@ class Runtime:
         self._init_regions(cache)
         self._init_rigid()
         self._init_normals()
+        self.muscle_names: tuple[str, ...] = tuple(m.name for m in self.rig.muscles)
+        self._muscle_models: dict[str, MuscleModel] = {}
 
     # -- set-up ---------------------------------------------------------------------------
 
@@ -105,14 +136,16 @@ class Runtime:
         self._interp = np.array([i for i, p in enumerate(rig.control_points) if p.role == "interpolated"],
                                 dtype=np.int64)
         if self.mode == "precomputed":  # the real-time mode applies each region's own coefficients
-            self._fold()
+            self.B = self._folded()
 
     def _queries(self, region) -> np.ndarray:
         return np.vstack([self.face.vertices[region.vertices], self._p0[self._driven[region.name]]])
 
     def _load_or_compute(self, cache: bool) -> dict[str, RegionDeformer]:
         """Each region's deformer from the coefficient cache, or computed (and then cached)."""
-        key = coefcache.cache_key(self.face.content_hash, rig_to_dict(self.rig))
+        geometry = rig_to_dict(self.rig)
+        del geometry["muscles"]  # muscles change no Sibson coordinate: editing them keeps the cache
+        key = coefcache.cache_key(self.face.content_hash, geometry)
         cached = (coefcache.load(key) if cache else None) or {}
         deformers, computed = {}, False
         for region in self._regions:
@@ -156,9 +189,9 @@ class Runtime:
             done |= {r.name for r in ready}
         return order
 
-    def _fold(self) -> None:
+    def _folded(self) -> sp.csr_matrix:
         """B = sum over regions of (its coefficients) @ (its rows of M), as one CSR matrix
-        (precomputed mode only: a real-time runtime has no ``B``)."""
+        (the precomputed mode's ``B``; a real-time runtime folds it only for muscles)."""
         n = len(self.rest)
         blocks = []
         for region in self._regions:
@@ -173,7 +206,7 @@ class Runtime:
         B = _pruned(sp.csr_matrix(B), self.prune)
         B = sp.csr_matrix(B, dtype=self.dtype)
         B.sort_indices()
-        self.B = B
+        return B
 
     def _init_rigid(self) -> None:
         self._rigid_vertices = {}
@@ -209,10 +242,17 @@ class Runtime:
     # -- per frame ------------------------------------------------------------------------
 
     def deform(self, displacements: np.ndarray, rigid: Mapping[str, np.ndarray] | None = None,
-               *, out: np.ndarray | None = None) -> np.ndarray:
-        """Vertex positions (N, 3) for active control point displacements (K, 3) and rigid motions."""
+               *, out: np.ndarray | None = None, muscles: Mapping[str, float] | None = None,
+               mode: str = "control") -> np.ndarray:
+        """Vertex positions (N, 3) for active control point displacements (K, 3), rigid motions
+        and muscle contractions {name: c} applied in ``mode`` (module docstring)."""
         rigid = self._checked(rigid)
+        contracting = self._contracting(muscles, mode)
         d = self._effective(np.asarray(displacements, dtype=float), rigid)
+        muscle_inputs = None
+        if contracting and mode == "control":  # the muscles' share, attached points carried as the FAPs'
+            moved = self._control_muscles.displace(contracting, np.array(displacements, dtype=float))
+            muscle_inputs = self._effective(moved, rigid) - d
         if out is None:
             out = np.empty_like(self.rest)
         elif out.shape != self.rest.shape or out.dtype != self.dtype or not out.flags.c_contiguous:
@@ -224,6 +264,8 @@ class Runtime:
                                      d.astype(self.dtype, copy=False).ravel(), out.ravel())
         else:
             self._deform_realtime(d, out)
+        if contracting:
+            self._muscles_on_skin(contracting, mode, muscle_inputs, out)
         for part, verts in self._rigid_vertices.items():
             if part in rigid:
                 out[verts] = self._moved(part, self.rest, rigid[part][:, :3], rigid[part][:, 3])
@@ -232,11 +274,86 @@ class Runtime:
         return out
 
     def deform_with_normals(self, displacements: np.ndarray, rigid: Mapping[str, np.ndarray] | None = None,
-                            *, out: np.ndarray | None = None,
-                            normals_out: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                            *, out: np.ndarray | None = None, normals_out: np.ndarray | None = None,
+                            muscles: Mapping[str, float] | None = None,
+                            mode: str = "control") -> tuple[np.ndarray, np.ndarray]:
         """Positions and unit vertex normals for one frame."""
-        vertices = self.deform(displacements, rigid, out=out)
+        vertices = self.deform(displacements, rigid, out=out, muscles=muscles, mode=mode)
         return vertices, self.normals(vertices, rigid, out=normals_out)
+
+    # -- muscles ----------------------------------------------------------------------------
+
+    def _contracting(self, muscles: Mapping[str, float] | None, mode: str) -> Mapping[str, float] | None:
+        """``muscles`` when some muscle contracts (checked against this rig), else None."""
+        if mode not in MUSCLE_MODES:
+            raise ValueError(f"muscle mode {mode!r}: expected one of {MUSCLE_MODES}")
+        if not muscles or not any(muscles.values()):
+            return None
+        unknown = [name for name in muscles if name not in self._muscle_set]
+        if unknown:
+            close = difflib.get_close_matches(unknown[0], self.muscle_names, n=1)
+            hint = f"; did you mean {close[0]!r}?" if close else ""
+            raise ValueError(f"unknown muscle {unknown[0]!r}{hint} (this face has {len(self.muscle_names)} "
+                             f"muscles: {', '.join(self.muscle_names) or 'none'})")
+        return muscles
+
+    @functools.cached_property
+    def _muscle_set(self) -> frozenset[str]:
+        return frozenset(self.muscle_names)
+
+    @functools.cached_property
+    def _control_muscles(self) -> ControlPointMuscles:
+        """The muscles on the active control points' rest positions (control-point mode)."""
+        return ControlPointMuscles(self.rig.muscles, self._p0[self._inputs[: len(self.control_points)]])
+
+    @functools.cached_property
+    def _muscle_spread(self) -> tuple[np.ndarray, sp.csr_matrix]:
+        """(the inputs some muscle moves, B's columns for them in float64): the control-point mode
+        spreads the muscles' share of the inputs by this, apart from the FAPs' share."""
+        columns = self._control_muscles.moved()
+        B = self.B if self.mode == "precomputed" else self._folded()
+        return columns, sp.csr_matrix(B[:, columns], dtype=float)
+
+    @functools.cached_property
+    def _fold_guard(self) -> EdgeConstraints:
+        """Edge constraints over the triangles the muscles' share reaches; only DFFD vertices move."""
+        reached = np.diff(self._muscle_spread[1].indptr) > 0
+        movable = np.zeros(len(self.rest), dtype=bool)
+        for region in self._regions:
+            movable[region.vertices] = True
+        return EdgeConstraints(self.face.vertices, np.asarray(self.face.triangles), movable, reached)
+
+    def _muscle_model(self, mode: str) -> MuscleModel:
+        """The vertex-mode model (made on first use) on the skin: the ``skin`` part, else the DFFD regions."""
+        if mode not in self._muscle_models:
+            skin = self.face.parts.get("skin")
+            if skin is None:
+                skin = np.concatenate([r.vertices for r in self._regions])
+            self._muscle_models[mode] = MuscleModel(self.face.vertices, self.face.triangles, self.rig.muscles,
+                                                    mode, movable=skin)
+        return self._muscle_models[mode]
+
+    def _muscles_on_skin(self, contracting: Mapping[str, float], mode: str, muscle_inputs: np.ndarray | None,
+                         out: np.ndarray) -> None:
+        """After the FAPs' DFFD: the muscles' share spread and fold-guarded (control-point mode), or
+        a vertex mode's displacement, added to ``out``."""
+        if mode == "control":
+            columns, spread = self._muscle_spread
+            moved = self.face.vertices + spread @ muscle_inputs[columns]
+            self._fold_guard.guard(moved)
+            out += (moved - self.face.vertices).astype(self.dtype, copy=False)
+        else:
+            out += self._muscle_model(mode).displace(contracting).astype(self.dtype, copy=False)
+
+    def muscle_faps(self, muscles: Mapping[str, float], mode: str = "control") -> np.ndarray:
+        """The 68 FAP values (FAPU) that the muscles' motion alone measures on the face
+        (``FapEngine.encode`` of the rest face deformed by them): how a muscle-driven pose is written
+        to a .fap, added to the pose's own FAPs."""
+        out = np.zeros(68)
+        if self._contracting(muscles, mode):
+            rest = np.zeros((len(self.control_points), 3))
+            out = self.faps.encode(self.deform(rest, muscles=muscles, mode=mode))
+        return out
 
     def normals(self, vertices: np.ndarray, rigid: Mapping[str, np.ndarray] | None = None,
                 *, out: np.ndarray | None = None) -> np.ndarray:
@@ -266,12 +383,15 @@ class Runtime:
 
     def pose(self, fap: Mapping[int | str, float] | np.ndarray | None = None, *,
              viseme: tuple | None = None, expression: tuple | None = None,
+             muscles: Mapping[str, float] | None = None, mode: str = "control",
              out: np.ndarray | None = None) -> np.ndarray:
         """Vertices for MPEG-4 FAPs: {number or name: value} (or 68 values, index 0 = FAP 1), in
         FAPU units as in a .fap file, plus FAP 1 (select1, select2, blend) and FAP 2 (select1,
-        intensity1, select2, intensity2) blends. Unknown names name the closest FAP."""
+        intensity1, select2, intensity2) blends, and muscle contractions {name: c} (``muscle_names``;
+        0..1, more for experiments) in ``mode`` (``MUSCLE_MODES``, module docstring). Unknown names
+        name the closest FAP or muscle."""
         d, motions = self.fap_controls(fap, viseme=viseme, expression=expression)
-        return self.deform(d, motions, out=out)
+        return self.deform(d, motions, out=out, muscles=muscles, mode=mode)
 
     def fap_controls(self, fap: Mapping[int | str, float] | np.ndarray | None = None, *,
                      viseme: tuple | None = None,

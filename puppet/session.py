@@ -31,8 +31,10 @@ Recording
     ``layer=`` (a ``takeclock.Layer``) records a pass over an earlier take: the face shows and
     the take gets the base take's frames with the armed FAPs replaced by the live pose.
 Muscles
-    ``Pose.muscles`` is carried in the Frame but not drawn: the runtime has FAP drivers only
-    (``Runtime.fap_controls``); muscle targets do nothing to the mesh yet.
+    ``Pose.muscles`` is drawn with the FAPs in one frame (the runtime's control-point mode,
+    ``Runtime.deform(..., muscles=)``), and a take writes it as the FAPs the muscles' motion
+    measures (``Runtime.muscle_faps``, see ``puppet.takeclock``). A mapping naming a muscle this
+    face lacks is refused before any device opens.
 
 ``measure_latency(session, renderer, seconds)`` times input-to-frame latency: from the newest
 Sample's timestamp (``time.monotonic_ns()`` right after the device's read returned) to the mesh
@@ -95,6 +97,10 @@ class LiveSession:
 
                 face = load_face()
             self.runtime = Runtime(face)
+        missing = [m for m in self.mapping.muscle_names if m not in self.runtime.muscle_names]
+        if missing:
+            raise ValueError(f"{self.mapping_path}: this face has no muscle {missing[0]!r} "
+                             f"(it has {', '.join(self.runtime.muscle_names) or 'none'})")
         self.record_root = Path(record_root) if record_root is not None else Path("takes")
         self.take_name, self.fps = take_name, fps
 
@@ -177,7 +183,8 @@ class LiveSession:
             if self.layer is not None:
                 fap, viseme, expression = self._layered(now, pose)
             d, motions = self.runtime.fap_controls(fap, viseme=viseme, expression=expression)
-            self.runtime.deform_with_normals(d, motions, out=self._vertices, normals_out=self._normals)
+            self.runtime.deform_with_normals(d, motions, out=self._vertices, normals_out=self._normals,
+                                             muscles=pose.muscles)
             self._have_mesh = True
         # else: nothing changed since the last frame (a held pose): the buffers already hold it
         self._last_pose_ns = pose_ns
@@ -253,7 +260,8 @@ class LiveSession:
         except OSError as exc:
             raise TakeError(f"{self.record_root}: cannot make a take folder there: {exc.strerror or exc}") from exc
         self.record_error = None
-        self._clock = TakeClock(self.mapping, self._recorder.frame, t0, self.fps, hold_ns=hold_ns, layer=layer)
+        self._clock = TakeClock(self.mapping, self._recorder.frame, t0, self.fps, hold_ns=hold_ns, layer=layer,
+                                encode_muscles=self.runtime.muscle_faps)
         return self._recorder.folder
 
     def stop_recording(self) -> Path:

@@ -16,10 +16,15 @@ writes exactly the frames the live session wrote:
 
 Layered passes: with a ``Layer``, each frame is the base take's frame with the armed FAPs
 replaced by the pose, as animators layer one pass over another.
+
+Muscles: a .fap holds FAPs only, so a frame whose pose contracts a muscle is written as the pose's
+FAPs plus ``encode_muscles(pose.muscles)``, the FAPs the muscles' motion measures on the face
+(``Runtime.muscle_faps``); the live session and the replay pass the same encoder.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
@@ -36,6 +41,8 @@ from .playback import HeldFaps
 
 WriteFrame = Callable[[np.ndarray, "tuple | np.ndarray | None", "tuple | np.ndarray | None"], None]
 """Writes one frame: 68 FAP values (FAPU; FAP 1/2 slots unused), viseme and expression fields."""
+EncodeMuscles = Callable[[dict], np.ndarray]
+"""68 FAP values (FAPU) that muscle contractions {name: c} amount to."""
 
 
 class Layer:
@@ -113,11 +120,13 @@ class TakeClock:
     """Writes a take's frames at its fps from a stream of log entries (see the module docstring)."""
 
     def __init__(self, mapping: Mapping, write: WriteFrame, t0_ns: int, fps: int, *,
-                 hold_ns: int | None = None, layer: Layer | None = None) -> None:
+                 hold_ns: int | None = None, layer: Layer | None = None,
+                 encode_muscles: EncodeMuscles | None = None) -> None:
         self.mapping, self.write = mapping, write
         self.t0_ns, self.fps = int(t0_ns), int(fps)
         self.hold_ns = hold_ns
         self.layer = layer
+        self.encode_muscles = encode_muscles
         self.frames = 0
 
     def tick_ns(self, k: int) -> int:
@@ -152,6 +161,8 @@ class TakeClock:
             if self.hold_ns is not None:
                 t = min(t, self.hold_ns)
             pose = self.mapping.pose(t)
+            if self.encode_muscles is not None and any(pose.muscles.values()):
+                pose = dataclasses.replace(pose, fap=pose.fap + self.encode_muscles(pose.muscles))
             if self.layer is None:
                 self.write(pose.fap, pose.viseme, pose.expression)
             else:

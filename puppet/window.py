@@ -469,8 +469,7 @@ class Player:
         if self.renderer is not None:
             self.renderer.release()
         face = self.face
-        self.renderer = Renderer(face.triangles, len(face.vertices), face.colors, width=size[0],
-                                 height=size[1], samples=0, ctx=self.window.ctx)
+        self.renderer = Renderer.for_face(face, width=size[0], height=size[1], samples=0, ctx=self.window.ctx)
         frame_head(self.renderer, face, self.view)
         self.window.fbo.viewport = (0, 0, *size)
 

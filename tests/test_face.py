@@ -389,7 +389,7 @@ def test_missing_and_unreadable_files(tmp_path):
     garbage.write_bytes(b"\x00\x01 not a ply file")
     with pytest.raises(FaceFileError, match="garbage.ply"):
         load_face(garbage)
-    with pytest.raises(FaceFileError, match="not a file"):
+    with pytest.raises(FaceFileError, match="face folder .* has no face.obj"):  # a folder is a face folder
         load_face(tmp_path)
 
 

@@ -19,6 +19,7 @@ from devices.base import Sample
 from puppet import MappingError, load_mapping
 from puppet.face import AU
 from puppet.fap import high_level_faps
+from puppet.muscles import MUSCLE_NAMES
 from puppet.faptable import faps
 from puppet.mapping import (
     BUTTON_KEYS,
@@ -279,6 +280,7 @@ def test_schema_and_checker_know_the_same_keys_and_names():
     fap_enum = defs["target"]["properties"]["fap"]["anyOf"][1]["enum"]
     assert fap_enum == fap_names() == [f.name for f in faps()][2:]
     assert defs["target"]["properties"]["expression"]["anyOf"][1]["enum"] == list(EXPRESSIONS)
+    assert defs["target"]["properties"]["muscle"]["enum"] == list(MUSCLE_NAMES)
     for kind, section in (("curve", CURVE_KEYS), ("smoothing", SMOOTHING_KEYS)):
         assert set(defs[kind]["properties"]["type"]["enum"]) == set(section)
         for rule in defs[kind]["allOf"]:
@@ -392,7 +394,7 @@ def test_the_whole_file_is_checked_and_lines_are_right():
             "  - fap: opn_jaw\n"                                      # 9
             "    source: box.ch1\n"                                   # 10
             "    range: [0, 1]\n"                                     # 11
-            "  - {muscle: m, source: box.ch0, combine: sun}\n")       # 12
+            "  - {muscle: risorius_l, source: box.ch0, combine: sun}\n")  # 12
     err = yaml_error(text, "rig.yaml")
     assert [(p.line, p.path) for p in err.problems] == [
         (5, 'channels["box.ch0"].dead_zone'), (6, 'channels["box.ch1"].curve.type'),
@@ -600,14 +602,15 @@ def test_one_source_into_several_targets():
 
 def test_momentary_and_toggle_buttons():
     doc = two_devices()
-    doc["targets"] = [{"muscle": "held", "source": "pad.A"}, {"muscle": "toggled", "source": "pad.B"}]
+    held, toggled = "risorius_l", "risorius_r"
+    doc["targets"] = [{"muscle": held, "source": "pad.A"}, {"muscle": toggled, "source": "pad.B"}]
     m = Mapping.from_data(doc)
     seen = []
     presses = [(0, 0), (1, 1), (1, 1), (0, 0.5), (0, 0.7), (1, 0.4), (1, 0.2), (0, 1), (0, 0)]
     for i, (a, b) in enumerate(presses):
         m.feed(Sample((i + 1) * MS, "pad", {"A": a, "B": b}))
         muscles = m.pose().muscles
-        seen.append((muscles["held"], muscles["toggled"]))
+        seen.append((muscles[held], muscles[toggled]))
     # A: 1 while held. B (threshold 0.6, release 0.3): the first press latches it on; 0.5, 0.7 and
     # 0.4 are one long press (never below the release level); 0.2 releases it, still on; the next
     # press turns it off.
@@ -652,20 +655,21 @@ def test_pose_at_a_later_time_settles_held_inputs_without_changing_state():
     doc = two_devices()
     doc["channels"]["pad.A"]["rate_limit"] = 10       # a blink closes in 0.1 s
     doc["channels"]["box.ch0"]["smoothing"] = {"type": "exponential", "tau": 0.05}
-    doc["targets"] = [{"muscle": "blink", "source": "pad.A"}, {"muscle": "jaw", "source": "box.ch0"}]
+    doc["targets"] = [{"muscle": "orbicularis_oculi_l", "source": "pad.A"},
+                      {"muscle": "orbicularis_oris", "source": "box.ch0"}]
     m = Mapping.from_data(doc)
     m.feed(Sample(1000 * MS, "pad", {"A": 0}))
     m.feed(Sample(1000 * MS, "box", {"ch0": 0}))
     m.feed(Sample(1010 * MS, "pad", {"A": 1}))        # pressed: one message, then nothing
     m.feed(Sample(1010 * MS, "box", {"ch0": 1000}))
-    assert m.pose().muscles["blink"] == pytest.approx(0.1)
+    assert m.pose().muscles["orbicularis_oculi_l"] == pytest.approx(0.1)
     later = m.pose(1060 * MS).muscles
-    assert later["blink"] == pytest.approx(0.6)
-    assert later["jaw"] == pytest.approx(1 - math.exp(-0.06 / 0.05), abs=1e-12)
-    assert m.pose(2000 * MS).muscles["blink"] == 1.0
-    assert m.pose().muscles["blink"] == pytest.approx(0.1)   # looking ahead kept nothing
+    assert later["orbicularis_oculi_l"] == pytest.approx(0.6)
+    assert later["orbicularis_oris"] == pytest.approx(1 - math.exp(-0.06 / 0.05), abs=1e-12)
+    assert m.pose(2000 * MS).muscles["orbicularis_oculi_l"] == 1.0
+    assert m.pose().muscles["orbicularis_oculi_l"] == pytest.approx(0.1)   # looking ahead kept nothing
     m.feed(Sample(1030 * MS, "pad", {"A": 1}))               # a sample older than the look-ahead
-    assert m.pose().muscles["blink"] == pytest.approx(0.3)
+    assert m.pose().muscles["orbicularis_oculi_l"] == pytest.approx(0.3)
 
 
 def test_garbage_values_are_counted_and_skipped():

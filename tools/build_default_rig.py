@@ -22,7 +22,6 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     face = load_face()
     rig = build_rig(face)
-    rig.face_hash = face.content_hash
     save_rig(rig, args.out)
     print(f"{args.out}: {len(rig.control_points)} control points, {len(rig.regions)} regions")
     return 0

@@ -1,0 +1,137 @@
+"""The auto-rig from landmarks: deterministic, regions partition the mesh, rotation and scale do
+not change the motion, landmark errors are named, iBUG 68 works (puppet.landmarks, puppet.autorig)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from puppet.autorig import _loop_path_via, build_rig
+from puppet.face import load_face
+from puppet.landmarks import IBUG_FDP, LandmarkError, read_landmarks
+from puppet.rig import rig_to_dict
+from puppet.runtime import Runtime
+
+from tools.rig_faces import ict_inputs, mediapipe_inputs
+from puppet.bench import shared_assets
+
+
+def _write_obj(path, vertices, triangles):
+    lines = [f"v {float(x)!r} {float(y)!r} {float(z)!r}" for x, y, z in vertices] + [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in triangles]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def _rotation(axis, angle):
+    a = np.asarray(axis, float) / np.linalg.norm(axis)
+    K = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
+
+
+@pytest.fixture(scope="module")
+def default():
+    return load_face()
+
+
+def _covered_once(face, rig):
+    count = np.zeros(len(face.vertices), dtype=int)
+    for region in rig.regions:
+        np.add.at(count, region.vertices, 1)
+    return bool((count[face.parts["skin"]] == 1).all() and (count == 1).all())
+
+
+def test_the_auto_rig_is_deterministic(default):
+    assert rig_to_dict(build_rig(default)) == rig_to_dict(build_rig(load_face()))
+
+
+def test_regions_cover_every_skin_vertex_once(default):
+    assert _covered_once(default, build_rig(default))
+
+
+@pytest.mark.parametrize("which", ["ict", "mediapipe"])
+def test_shared_faces_rig_and_regions_cover_them(which):
+    inputs = (ict_inputs if which == "ict" else mediapipe_inputs)(shared_assets())
+    if inputs is None:
+        pytest.skip(f"{which} assets absent")
+    mesh, landmarks = inputs
+    face = load_face(mesh, landmarks=landmarks)
+    rig = build_rig(face)
+    assert _covered_once(face, rig)
+    assert rig_to_dict(rig) == rig_to_dict(build_rig(load_face(mesh, landmarks=landmarks)))
+    assert {"forehead", "nose", "upper_mouth", "lower_mouth", "cheek_l", "cheek_r"} <= {r.name for r in rig.regions}
+
+
+def test_a_scaled_rotated_copy_moves_the_same_scaled_and_rotated(default, tmp_path):
+    R = _rotation((0.3, 1.0, -0.4), 0.7)
+    shift = np.array([2.0, -1.0, 0.5])
+    landmarks = dict(default.feature_vertices)
+    a = load_face(_write_obj(tmp_path / "a.obj", default.vertices, default.triangles), landmarks=landmarks)
+    b = load_face(_write_obj(tmp_path / "b.obj", 1.7 * default.vertices @ R.T + shift, default.triangles),
+                  landmarks=landmarks)
+    rig_a, rig_b = build_rig(a), build_rig(b)
+    assert [(r.name, r.vertices.tolist()) for r in rig_a.regions] == [(r.name, r.vertices.tolist()) for r in rig_b.regions]
+    fap = {3: 400, 31: 200, 53: 150, 19: 300}
+    moves = []
+    for face, rig in ((a, rig_a), (b, rig_b)):
+        runtime = Runtime(face, rig, cache=False, dtype=np.float64, prune=0)
+        d = runtime.pose(fap, expression=(1, 40, 0, 0)) - face.vertices
+        moves.append(d @ face.frame[:, :3])  # back into the file's own axes
+    assert np.abs(moves[0]).max() > 0.01
+    np.testing.assert_allclose(moves[1], 1.7 * moves[0] @ R.T, atol=1e-6 * np.abs(moves[0]).max())
+
+
+@pytest.mark.parametrize("landmarks, message", [
+    ({"2.1": 10 ** 7}, "outside"),
+    ({"2.1": 1.5}, "integer"),
+    ({"12.1": 3}, "unknown FDP"),
+    ({"2.15": 3}, "unknown FDP"),
+    (list(range(67)), "68 iBUG"),
+    ({"2.1": 3}, "needed"),
+    ("not landmarks", "expected an object"),
+])
+def test_landmark_errors_are_clear(default, tmp_path, landmarks, message):
+    mesh = _write_obj(tmp_path / "m.obj", default.vertices, default.triangles)
+    with pytest.raises(LandmarkError, match=message):
+        source = tmp_path / "l.json"
+        source.write_text(json.dumps(landmarks))
+        load_face(mesh, landmarks=landmarks if isinstance(landmarks, list) else source)
+
+
+def test_a_landmark_file_that_is_not_json_is_named(tmp_path):
+    bad = tmp_path / "bad.json"
+    bad.write_text("{2.1: 3")
+    with pytest.raises(LandmarkError, match="bad.json:1: not valid JSON"):
+        read_landmarks(bad, 10)
+
+
+def _ibug_for(face) -> list[int]:
+    """68 iBUG vertices of the default face: the FDPs where iBUG has them, points one and two
+    thirds along the lid and lower-lip loops for the rest of the eyes and lips."""
+    fv = face.feature_vertices
+    ibug = [fv["2.1"]] * 68
+    for fid, i in IBUG_FDP.items():
+        ibug[i] = fv[fid]
+    for contour, start, end, via, slots in (
+        ("left_lid_opening", "3.11", "3.7", "3.1", (43, 44)), ("left_lid_opening", "3.7", "3.11", "3.3", (46, 47)),
+        ("right_lid_opening", "3.12", "3.8", "3.2", (37, 38)), ("right_lid_opening", "3.8", "3.12", "3.4", (40, 41)),
+        ("vermilion_border", "8.3", "8.2", "8.7", (55, 56)), ("vermilion_border", "8.2", "8.4", "8.8", (58, 59)),
+    ):
+        loop = [int(v) for v in face.contours[contour]]
+        path = _loop_path_via(loop, loop.index(fv[start]), loop.index(fv[end]), fv[via])
+        for slot, f in zip(slots, (1 / 3, 2 / 3)):
+            ibug[slot] = path[round(f * (len(path) - 1))]
+    return ibug
+
+
+def test_68_ibug_points_rig_the_default_face(default, tmp_path):
+    mesh = _write_obj(tmp_path / "m.obj", default.vertices, default.triangles)
+    face = load_face(mesh, landmarks=_ibug_for(default))
+    rig = build_rig(face)
+    assert _covered_once(face, rig)
+    size = np.linalg.norm(default.feature_points["3.5"] - default.feature_points["3.6"])
+    for fid in ("3.1", "3.3", "8.7", "5.1", "2.13", "11.1", "9.7"):
+        assert np.linalg.norm(face.feature_points[fid] - default.feature_points[fid]) < 0.35 * size, fid
+    moved = Runtime(face, rig, cache=False).pose(expression=(1, 63, 0, 0)) - face.vertices
+    assert np.isfinite(moved).all() and np.abs(moved).max() > 0.01 * size

@@ -1,0 +1,197 @@
+"""Muscles in the face runtime: the rig carries them, a pose contracts them (three modes, with FAPs),
+a live take writes them as FAPs and replays byte for byte, a mapping names them or is refused."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from devices import State, open_device
+from puppet import MappingError, load_mapping
+from puppet.autorig import build_rig
+from puppet.fapfile import read_fap
+from puppet.faptable import fap
+from puppet.muscles import MUSCLE_NAMES, folded_triangles
+from puppet.replay import retake
+from puppet.rig import rig_from_dict, rig_to_dict
+from puppet.runtime import MUSCLE_MODES, Runtime
+from puppet.session import LiveSession
+from puppet.takes import open_take
+
+JOYSTICK = "sim://joystick?protocol=ascii&rate=200&channels=6"
+SMILE_MAPPING = """\
+devices:
+  box: {url: "serial:///dev/ttyACM0?baudrate=115200", options: {protocol: ascii}}
+channels:
+  box.ch1: {min: 8, max: 1015}
+  box.ch2: {min: 8, max: 1015}
+targets:
+  - {muscle: zygomatic_major_l, source: box.ch1}
+  - {muscle: zygomatic_major_r, source: box.ch2}
+"""
+
+
+def _skin_triangles(face) -> np.ndarray:
+    skin = np.zeros(len(face.vertices), bool)
+    skin[face.parts["skin"]] = True
+    return face.triangles[skin[face.triangles].all(axis=1)]
+
+
+def _moved(runtime, point: str, **pose) -> np.ndarray:
+    """How far a feature point's vertex moves from rest in a pose."""
+    v = runtime.face.feature_vertices[point]
+    return runtime.pose(**pose)[v] - runtime.rest[v]
+
+
+# -- the rig carries the muscles ------------------------------------------------------------------
+
+def test_the_default_face_carries_the_default_muscles(runtime):
+    assert runtime.muscle_names == MUSCLE_NAMES
+    assert len([n for n in MUSCLE_NAMES if n.endswith(("_l", "_r"))]) == 20  # 9 pairs + the eyes' sphincters
+
+
+def test_muscles_round_trip_through_the_rig_file_and_a_version_1_file_loads_without(face):
+    rig = build_rig(face)
+    data = rig_to_dict(rig)
+    again = rig_from_dict(data)
+    assert [m.name for m in again.muscles] == list(MUSCLE_NAMES)
+    np.testing.assert_array_equal(again.muscles[0].fixed, rig.muscles[0].fixed)
+    old = {**data, "version": 1}
+    del old["muscles"]
+    assert rig_from_dict(old).muscles == []
+
+
+def test_a_rig_without_muscles_refuses_a_contraction_by_name(face):
+    rig = build_rig(face)
+    rig.muscles = []
+    bare = Runtime(face, rig)
+    assert bare.muscle_names == ()
+    np.testing.assert_array_equal(bare.pose(muscles={"zygomatic_major_l": 0.0}), bare.rest)
+    with pytest.raises(ValueError, match="unknown muscle 'zygomatic_major_l'"):
+        bare.pose(muscles={"zygomatic_major_l": 0.5})
+
+
+# -- poses -----------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("mode", MUSCLE_MODES)
+def test_zygomatic_major_pulls_the_mouth_corner_up_and_out(runtime, mode):
+    d = _moved(runtime, "8.3", muscles={"zygomatic_major_l": 1.0}, mode=mode)
+    assert d[0] > 0.005 and d[1] > 0.005  # +x is the face's left: out; +y: up
+    assert np.linalg.norm(_moved(runtime, "8.4", muscles={"zygomatic_major_l": 1.0}, mode=mode)) < 1e-3
+
+
+@pytest.mark.parametrize("mode", MUSCLE_MODES)
+def test_the_pair_is_mirror_symmetric(runtime, mode):
+    left = _moved(runtime, "8.3", muscles={"zygomatic_major_l": 1.0}, mode=mode)
+    right = _moved(runtime, "8.4", muscles={"zygomatic_major_r": 1.0}, mode=mode)
+    np.testing.assert_allclose(right * [-1, 1, 1], left, atol=0.15 * np.linalg.norm(left))
+
+
+@pytest.mark.parametrize("mode", MUSCLE_MODES)
+def test_muscles_and_faps_combine_in_one_pose(runtime, mode):
+    faps = {"raise_l_i_eyebrow": 150, "raise_r_cornerlip": 100}
+    muscles = {"zygomatic_major_l": 0.8, "frontalis_major_r": 0.6}
+    both = runtime.pose(faps, muscles=muscles, mode=mode) - runtime.rest
+    apart = (runtime.pose(faps) - runtime.rest) + (runtime.pose(muscles=muscles, mode=mode) - runtime.rest)
+    np.testing.assert_allclose(both, apart, atol=1e-9)  # no jaw: both drivers add up exactly
+    opened = _moved(runtime, "8.3", fap={"open_jaw": 300}, muscles=muscles, mode=mode)
+    assert opened[1] > _moved(runtime, "8.3", fap={"open_jaw": 300})[1] + 0.005
+
+
+def test_no_muscle_contracting_is_the_fap_frame_exactly(runtime):
+    faps = {"open_jaw": 250, "raise_l_cornerlip": 80}
+    rest = dict.fromkeys(runtime.muscle_names, 0.0)
+    np.testing.assert_array_equal(runtime.pose(faps, muscles=rest), runtime.pose(faps))
+
+
+def test_an_unknown_muscle_or_mode_is_named(runtime):
+    with pytest.raises(ValueError, match="did you mean 'zygomatic_major_l'"):
+        runtime.pose(muscles={"zygomatic_majr_l": 0.5})
+    with pytest.raises(ValueError, match="muscle mode 'vertex'"):
+        runtime.pose(muscles={"zygomatic_major_l": 0.5}, mode="vertex")
+
+
+@pytest.mark.parametrize("mode, folds", [("control", False), ("improved", False), ("classic", True)])
+def test_contraction_10_folds_only_the_classic_skin(runtime, face, mode, folds):
+    triangles = _skin_triangles(face)
+    for name in ("zygomatic_major_l", "zygomatic_major_r"):
+        folded = folded_triangles(face.vertices, runtime.pose(muscles={name: 10.0}, mode=mode), triangles)
+        assert folded.any() == folds, (name, int(folded.sum()))
+
+
+def test_the_fold_guard_costs_nothing_at_ordinary_contraction(runtime, face):
+    calm = runtime.pose(muscles={"zygomatic_major_l": 1.0})
+    assert not runtime._fold_guard.squeezed(calm)  # so the guard left this frame as DFFD made it
+    assert not folded_triangles(face.vertices, calm, _skin_triangles(face)).any()
+
+
+# -- mappings ------------------------------------------------------------------------------------------
+
+def test_a_mapping_naming_an_unknown_muscle_fails_with_the_closest_name(tmp_path):
+    path = tmp_path / "smile.yaml"
+    path.write_text(SMILE_MAPPING.replace("zygomatic_major_r", "zygomaticus_major_r"))
+    with pytest.raises(MappingError) as err:
+        load_mapping(path)
+    message = str(err.value)
+    assert "targets[1].muscle" in message and "zygomaticus_major_r" in message
+    assert "did you mean 'zygomatic_major_r'?" in message
+
+
+def test_the_slider_box_drives_smile_frown_and_brow_muscles():
+    mapping = load_mapping(Path(__file__).resolve().parents[1] / "mappings" / "arduino_sliders.yaml")
+    assert {"zygomatic_major_l", "zygomatic_major_r", "corrugator_supercilii_l", "frontalis_inner_r"} \
+        <= set(mapping.muscle_names) <= set(MUSCLE_NAMES)
+
+
+# -- a live take ----------------------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def smile_take(face, tmp_path_factory):
+    """A take of the simulated slider box through a mapping that drives only muscles."""
+    root = tmp_path_factory.mktemp("smile")
+    mapping = root / "smile.yaml"
+    mapping.write_text(SMILE_MAPPING)
+    session = LiveSession(mapping, face=Runtime(face), devices={"box": open_device(JOYSTICK, "box")},
+                          record_root=root, fps=30)
+    try:
+        deadline = time.monotonic() + 5
+        while not (all(s is State.OPEN for s in session.frame().states.values()) and session.samples_fed):
+            assert time.monotonic() < deadline, "the simulated device never opened"
+            time.sleep(0.01)
+        session.start_recording()
+        end = time.monotonic() + 0.6
+        shown = []
+        while time.monotonic() < end:
+            f = session.frame()
+            shown.append((dict(f.pose.muscles), f.vertices.copy()))
+            time.sleep(0.01)
+        return open_take(session.stop_recording()), shown, session.runtime
+    finally:
+        session.close()
+
+
+def test_the_live_face_shows_the_muscles(smile_take):
+    _, shown, runtime = smile_take
+    muscles, vertices = max(shown, key=lambda s: s[0]["zygomatic_major_l"])
+    assert muscles["zygomatic_major_l"] > 0.05
+    np.testing.assert_allclose(vertices, runtime.pose(muscles=muscles), atol=1e-6)
+
+
+def test_a_muscle_take_is_written_as_faps_of_the_moved_feature_points(smile_take):
+    take, _, _ = smile_take
+    values = read_fap(take.fap_path).values
+    corner = [fap(n).number - 1 for n in ("stretch_l_cornerlip_o", "raise_l_cornerlip_o",
+                                         "stretch_r_cornerlip_o", "raise_r_cornerlip_o")]
+    assert len(values) >= 10
+    assert (np.abs(values[:, corner]) > 0).any(axis=0).all()
+    assert (values[:, [fap(n).number - 1 for n in ("raise_l_cornerlip_o", "raise_r_cornerlip_o")]] >= 0).all()
+    assert not values[:, [fap("open_jaw").number - 1, fap("head_yaw").number - 1]].any()
+
+
+def test_a_muscle_take_replays_identically(smile_take, tmp_path):
+    take, _, _ = smile_take
+    result = retake(take, tmp_path / "again.fap")
+    assert result.identical and result.frames == take.meta["frames"]
