@@ -154,7 +154,10 @@ class _Builder:
         nose_w = (1 - t) * 1.25 * fp["9.1"][0] + t * 1.3 * fp["9.7"][0]
         label[front & (y >= nose_base) & (y < nasion) & (ax < nose_w)] = "nose"
         s = np.clip((nose_base - y) / (nose_base - lip_y), 0, 1)
-        upper_w = (1 - s) * 1.25 * fp["9.1"][0] + s * 1.3 * mouth_w
+        # The nasolabial lines diverge downward: at the nose base the upper mouth is no wider than
+        # the mouth, even when the nostril points sit wide (else a box cut through the cheeks
+        # that the lips' motion lifts as a block: a raised rectangle on smiling).
+        upper_w = (1 - s) * min(1.25 * fp["9.1"][0], mouth_w) + s * 1.3 * mouth_w
         label[front & (y < nose_base) & (y >= lip_y) & (ax < upper_w)] = "upper_mouth"
         r = np.clip((lip_y - y) / (lip_y - chin), 0, 1)
         lower_w = (1 - r) * 1.3 * mouth_w + r * 1.2 * fp["2.11"][0]

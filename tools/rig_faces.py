@@ -23,11 +23,13 @@ import time
 from pathlib import Path
 
 import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
 
 from puppet.autorig import build_rig
 from puppet.bench import shared_assets
 from puppet.face import Face, load_face
-from puppet.render import Renderer, save_png, texture_kwargs
+from puppet.render import SKIN_SRGB, Renderer, save_png, texture_kwargs
 from puppet.runtime import Runtime
 
 EXPRESSIONS = ("joy", "sadness", "anger", "fear", "disgust", "surprise")
@@ -63,12 +65,71 @@ def rig_time(mesh: Path, landmarks, runs: int = 3) -> float:
     return statistics.median(times)
 
 
+def drawn_triangles(face: Face) -> np.ndarray:
+    """The face's triangles less the overlay shells over the eyes.
+
+    ICT-FaceKit's eye occlusion and eye blend meshes (``attached`` parts) cover the whole eye
+    opening; they are meant to be drawn translucent, and drawn opaque they hide the eyeballs (the
+    sockets look empty). An attached component that lies in front of a pupil (3.5 / 3.6), the
+    pupil inside one of its triangles seen from the front, is such a shell and is not drawn;
+    lashes and tear lines pass beside the pupil and stay.
+    """
+    tri = np.asarray(face.triangles)
+    attached = face.parts.get("attached")
+    pupils = [np.asarray(face.feature_points[f], float) for f in ("3.5", "3.6") if f in face.feature_points]
+    if attached is None or not len(attached) or not pupils:
+        return tri
+    v = np.asarray(face.vertices, float)
+    mask = np.zeros(len(v), dtype=bool)
+    mask[attached] = True
+    own = tri[mask[tri].all(axis=1)]
+    graph = sp.coo_matrix((np.ones(own.size), (own.ravel(), np.roll(own, 1, axis=1).ravel())), shape=(len(v),) * 2)
+    _, comp = connected_components(graph, directed=False)
+    hidden = set()
+    a, b, c = (v[own[:, k], :2] for k in range(3))
+    for pupil in pupils:
+        p = pupil[:2]
+        d1, d2, d3 = (_cross2(q - o, p - o) for o, q in ((a, b), (b, c), (c, a)))
+        inside = ((d1 >= 0) & (d2 >= 0) & (d3 >= 0)) | ((d1 <= 0) & (d2 <= 0) & (d3 <= 0))
+        front = v[own].mean(axis=1)[:, 2] >= pupil[2] - 1e-9 * np.ptp(v[:, 2])
+        hidden |= set(comp[own[inside & front, 0]].tolist())
+    if not hidden:
+        return tri
+    drop = np.zeros(len(v), dtype=bool)
+    drop[attached] = np.isin(comp[attached], list(hidden))
+    return tri[~drop[tri].any(axis=1)]
+
+
+def vertex_colors(face: Face) -> np.ndarray | None:
+    """The face's colours; a face without any (ICT) gets skin, and on its eyeballs a white
+    sclera with a dark iris around the pupil (3.5 / 3.6), so that the eyes read as eyes."""
+    if face.colors is not None or not any(p in face.parts for p in ("eye_l", "eye_r")):
+        return face.colors
+    v = np.asarray(face.vertices, float)
+    colors = np.tile(np.asarray(SKIN_SRGB, float), (len(v), 1))
+    for part, pupil in (("eye_l", "3.5"), ("eye_r", "3.6")):
+        if part not in face.parts or pupil not in face.feature_points:
+            continue
+        eye = np.asarray(face.parts[part])
+        p = np.asarray(face.feature_points[pupil], float)
+        radius = np.linalg.norm(v[eye] - v[eye].mean(axis=0), axis=1).max()
+        off = np.linalg.norm(v[eye] - p, axis=1) / radius
+        colors[eye] = np.where(off[:, None] < 0.18, (0.05, 0.04, 0.04),
+                               np.where(off[:, None] < 0.45, (0.35, 0.25, 0.15), (0.92, 0.90, 0.88)))
+    return colors
+
+
+def _cross2(u: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """z of the cross product of 2-D vectors (rows)."""
+    return u[..., 0] * w[..., 1] - u[..., 1] * w[..., 0]
+
+
 def expression_row(face: Face, size: int) -> np.ndarray:
     """Neutral and the six expressions side by side, framed on the face's deforming regions."""
     runtime = Runtime(face, build_rig(face), cache=False)
     front = np.concatenate([r.vertices for r in runtime.rig.regions if r.kind == "dffd"])
     poses = [runtime.pose()] + [runtime.pose(expression=(k, 63, 0, 0)) for k in range(1, 7)]
-    with Renderer(face.triangles, len(face.vertices), face.colors, width=size, height=size,
+    with Renderer(drawn_triangles(face), len(face.vertices), vertex_colors(face), width=size, height=size,
                   **texture_kwargs(face)) as renderer:
         renderer.frame(face.vertices[front])
         return np.hstack([renderer.render(np.asarray(p, dtype=np.float32)) for p in poses])
