@@ -43,22 +43,29 @@ Three ways to apply them:
   contraction wherever the classic travel is concave in D (inside r_e, where Waters' sine
   fall-off is) or decreasing (beyond r_e), so the rays cannot fold either (a triangle spanning
   several rays still can, where the zone is squeezed hard near the bone).
-  (2) *Edge constraints*: for every triangle corner, a spring from the vertex to the opposite edge
-  keeps the corner's height above that edge (measured in the plane normal to
-  the triangle's rest normal) at least ``EDGE_MIN_HEIGHT`` of its rest height. It is
-  compression-only, so ordinary motion is untouched; where two muscles' fields, or the surface's
-  curvature, squeeze a triangle, a few vectorised Jacobi relaxation sweeps (position-based: each
-  violated constraint moves the vertex and the two edge ends along the edge's in-plane normal by
-  inverse-mass-weighted shares, averaged per vertex) push it back before it can flip. A triangle
-  folds exactly when a corner crosses its opposite edge, so this is the constraint that matters.
+  (2) *Edge constraints* (:class:`EdgeConstraints`): for every triangle corner, a spring from the
+  vertex to the opposite edge keeps the corner's height above that edge (measured in the plane
+  normal to the triangle's rest normal) at least ``EDGE_MIN_HEIGHT`` of its rest height. It is
+  compression-only, so ordinary motion is untouched (nothing is done unless a corner is below
+  that floor). Where two muscles' fields, or the surface's curvature, squeeze a triangle, a few
+  vectorised Jacobi sweeps (position-based: each violated constraint moves the vertex and the two
+  edge ends along the edge's in-plane normal by inverse-mass-weighted shares, averaged per vertex)
+  on the squeezed triangles and ``EDGE_RINGS`` rings around them push it back; if that is not
+  enough (far beyond the normal contraction the zone is squeezed against the bone harder than any
+  arrangement of the springs there allows), the displacement is scaled back toward rest around the
+  squeezed triangles (by ``EDGE_DAMP`` there, less in the rings around, repeated) until no corner
+  is below its floor. The rest mesh satisfies every constraint, so this always ends, and a triangle folds
+  exactly when a corner crosses its opposite edge: the improved mode folds no skin triangle at
+  any contraction.
 * **Control points** (``control_point_displacements``, Zhang & Chen): the muscles move the rig's
   active control points inside their zones, and DFFD spreads that over the skin. The points move
   by the improved law (1): a control point that crossed its muscle's fixed end would turn the
   whole region it controls inside out, and there is no mesh between control points to hold it.
   That alone does not keep the skin from folding at large contraction (tools/muscle_experiment.py:
   the zone squeezed toward the bone flips spread triangles on a grid at c = 5 and 10, and on the
-  default face the rig's region borders next to the moving lip corner fold from c = 3);
-  ``EdgeConstraints`` run on the spread displacement removes those folds.
+  default face DFFD folds the rig's region borders next to the moving lip corner from c = 3);
+  ``EdgeConstraints`` run on the spread displacement removes those folds. The default muscles are
+  tuned so that none folds the skin alone at c <= 1, nor all of them at 0.5, without that guard.
 
 Adaptive placement (Zhou & Liu): a muscle end is stored as coefficients in the frame of three
 MPEG-4 feature points (``place`` / ``frame_coefficients``), so the same recipe places it on any
@@ -107,7 +114,13 @@ __all__ = [
 
 MODES = ("classic", "improved")
 EDGE_MIN_HEIGHT = 0.05  # edge constraints keep a corner's height above this share of its rest height
-EDGE_ITERATIONS = 30  # most relaxation sweeps per frame (it stops as soon as nothing is violated)
+EDGE_ITERATIONS = 8  # most relaxation sweeps per fix (they stop as soon as nothing is squeezed)
+EDGE_RINGS = 2  # rings of triangles around the squeezed ones whose vertices the sweeps may move
+EDGE_TARGET = 1.5  # a squeezed corner is pushed to this multiple of its floor
+EDGE_OVERRELAX = 1.0  # the sweeps' averaged corrections are scaled by this (1: plain averaged Jacobi)
+EDGE_DAMP = 0.75  # the fallback shrinks a squeezed triangle's vertices' displacement by this factor
+EDGE_DAMP_STEPS = 12  # this many times at most, then drops it
+EDGE_DAMP_RINGS = (0.85, 0.95)  # and the rings of vertices around them by these factors
 
 
 @dataclass
@@ -246,6 +259,7 @@ class MuscleModel:
             self._fields[m.name] = (rows[keep], direction[keep], travel[keep], dist[keep])
         self._classic = self._classic_matrix()
         self._edges = EdgeConstraints(self.rest, np.asarray(triangles), mask, self._reached())
+        self._watch_cache: dict[tuple[str, ...], np.ndarray] = {}
 
     def _classic_matrix(self) -> sp.csr_matrix:
         """G (3V x muscles): the classic displacement is G @ contractions, raveled (V, 3)."""
@@ -277,96 +291,227 @@ class MuscleModel:
             rows, direction, travel, dist = self._fields[m.name]
             out[rows] += repelled_travel(float(contractions[m.name]) * travel, dist)[:, None] * direction
         if active:
-            self._edges.relax(out)
+            self._edges.relax(out, self._watched(tuple(m.name for m in active)))
         return out
+
+    def _watched(self, names: tuple[str, ...]) -> np.ndarray:
+        """The edge constraints' triangles that muscles ``names`` can squeeze (cached per set)."""
+        if names not in self._watch_cache:
+            if len(self._watch_cache) >= 64:
+                self._watch_cache.clear()
+            rows = np.concatenate([self._fields[n][0] for n in names])
+            self._watch_cache[names] = self._edges.touching(rows)
+        return self._watch_cache[names]
 
 
 class EdgeConstraints:
-    """Compression-only springs from each triangle corner to its opposite edge (improved mode).
+    """Compression-only springs from each triangle corner to its opposite edge (improved mode and
+    the runtime's fold guard).
 
     Built once per mesh for the triangles that touch a ``reached`` vertex (bool mask, default all)
-    and a ``movable`` one (bool mask; others have infinite mass); ``relax`` runs Jacobi sweeps on a
-    displacement field in place until no corner is below ``EDGE_MIN_HEIGHT`` of its rest height (or
-    ``EDGE_ITERATIONS`` sweeps). The floor is low on purpose: at extreme contraction the repulsive
-    law squeezes the skin near the bone harder than a higher floor allows, and the sweeps would
-    then chase an unreachable target; any positive floor keeps triangles from flipping. Usable on
-    any displacement field, e.g. the skin after DFFD.
+    and a ``movable`` one (bool mask), with the vertex -> triangle adjacency (CSR) of those
+    triangles; only vertices both reached and movable move (the others have infinite mass), so
+    every triangle a fix can change is watched. A corner is *squeezed* when its height above the opposite
+    edge, in the plane normal to the triangle's rest normal, is below its floor, ``EDGE_MIN_HEIGHT``
+    of its rest height; a triangle folds exactly when a corner crosses its opposite edge (height
+    < 0), so a displacement with no squeezed corner folds nothing. ``relax`` (on a displacement)
+    and ``guard`` (on positions) fix a field in place, touching only the neighbourhood of the
+    squeezed triangles:
+
+    1. **Sweeps**: the squeezed triangles grown by ``EDGE_RINGS`` rings (through shared vertices)
+       are the vertices that may move; every corner of the triangles around them is watched. Up to
+       ``EDGE_ITERATIONS`` vectorised, over-relaxed Jacobi sweeps: each corner below its floor is
+       projected (position-based, inverse-mass weighted: the corner and the two edge ends move along
+       the edge's in-plane normal by their share of the gradient) to ``EDGE_TARGET`` times its floor,
+       the corrections averaged per vertex and scaled by ``EDGE_OVERRELAX``; they stop as soon as
+       no watched corner is squeezed.
+    2. **Fallback**, only if some corner is still squeezed (a muscle at several times its normal
+       contraction dragging the skin past fixed parts, where the springs ask for the impossible):
+       the displacement of every vertex of a squeezed triangle is scaled toward rest by
+       ``EDGE_DAMP`` (and the rings around by ``EDGE_DAMP_RINGS``, so the motion saturates
+       smoothly instead of leaving a dent), after ``EDGE_DAMP_STEPS`` such steps dropped,
+       re-checking only the triangles around the vertices it changed, until no corner is squeezed.
+       The rest mesh squeezes no corner and every pass shrinks some non-zero displacement for good,
+       so this ends, and the result folds no watched triangle. The price: where it acts (several
+       times the normal contraction) the squeezed skin moves less than the muscle asks, e.g. the
+       lip corner under the zygomatic major at 10 moves less than at 3 (docs/muscle_experiment.md).
+
+    When nothing is squeezed this costs one vectorised check (``squeezed``) and changes nothing.
+    Usable on any displacement field, e.g. the skin after DFFD.
     """
 
     def __init__(self, rest: np.ndarray, triangles: np.ndarray, movable: np.ndarray | None = None,
                  reached: np.ndarray | None = None) -> None:
-        triangles = np.asarray(triangles, dtype=np.int64)
-        movable = np.ones(len(rest), bool) if movable is None else movable
-        reached = np.ones(len(rest), bool) if reached is None else reached
+        rest = np.asarray(rest, dtype=float)
+        triangles = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+        movable = np.ones(len(rest), bool) if movable is None else np.asarray(movable, bool)
+        reached = np.ones(len(rest), bool) if reached is None else np.asarray(reached, bool)
         tri = triangles[reached[triangles].any(axis=1) & movable[triangles].any(axis=1)]
         self.rest = rest
-        self.corner = tri.ravel()  # vertex v of each corner, its opposite edge a -> b below
-        self.a = np.roll(tri, -1, axis=1).ravel()
-        self.b = np.roll(tri, -2, axis=1).ravel()
-        normal = np.cross(rest[tri[:, 1]] - rest[tri[:, 0]], rest[tri[:, 2]] - rest[tri[:, 0]])
-        self.normal = np.repeat(normal / np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300), 3, axis=0)
-        height, _, _ = self._heights(rest)
-        self.floor = EDGE_MIN_HEIGHT * height
-        self.inv_mass = movable.astype(float)
         self.n = len(rest)
-        self._triangles, self._tri_normal = tri, self.normal[::3]
-        self._floor2 = (self.floor * self.floor).reshape(-1, 3)
+        self.triangles = tri
+        self._all = np.arange(len(tri))
+        normal = np.cross(rest[tri[:, 1]] - rest[tri[:, 0]], rest[tri[:, 2]] - rest[tri[:, 0]])
+        self.normal = normal / np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
+        self._normal_t = np.ascontiguousarray(self.normal.T)
+        self._corners = tuple(np.ascontiguousarray(tri[:, k]) for k in range(3))
+        area, perp2 = self._area_perp2(rest, self._all)
+        height = np.abs(area) / np.sqrt(np.maximum(perp2, 1e-300))
+        self.floor = np.ascontiguousarray(EDGE_MIN_HEIGHT * height.T)  # (T, 3): corner k's floor
+        self._floor2 = np.ascontiguousarray((self.floor * self.floor).T)  # (3, T)
+        self.inv_mass = (movable & reached).astype(float)  # only reached vertices move: their triangles are all watched
+        flat = tri.ravel()
+        order = np.argsort(flat, kind="stable")
+        self._vt_ptr = np.searchsorted(flat[order], np.arange(self.n + 1))
+        self._vt_tri = order // 3
 
-    def _heights(self, x: np.ndarray):
-        """Signed corner heights above the opposite edge, the edge's in-plane unit normal, and the
-        foot of the corner along the edge (0 at a, 1 at b)."""
-        pa, pb, pv = x[self.a], x[self.b], x[self.corner]
-        edge = pb - pa
-        across = np.cross(self.normal, edge)
-        across /= np.maximum(np.linalg.norm(across, axis=1, keepdims=True), 1e-300)
-        t = np.clip(np.einsum("ij,ij->i", pv - pa, edge) / np.maximum(np.einsum("ij,ij->i", edge, edge), 1e-300), 0, 1)
-        return np.einsum("ij,ij->i", pv - pa, across), across, t
+    # -- geometry ----------------------------------------------------------------------------
 
-    def guard(self, positions: np.ndarray) -> bool:
-        """Relax deformed ``positions`` (V, 3) in place if any corner is below its floor; returns
-        whether it had to. When nothing is squeezed this costs one check (``squeezed``)."""
-        if not self.squeezed(positions):
+    def _area_perp2(self, x: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """For triangles ``idx`` of positions ``x``: twice the area projected along the rest normal
+        (negative: folded) and, per corner (rows 0, 1, 2), the squared length of the opposite edge
+        in the plane normal to it. The corner's height is the first over the root of the second.
+        Coordinates as rows (x, y, z) of contiguous arrays: a few dozen cheap whole-array steps."""
+        full = idx is self._all
+        xt = np.ascontiguousarray(np.asarray(x, dtype=float).T)
+        p0, p1, p2 = (xt[:, c if full else c[idx]] for c in self._corners)
+        n = self._normal_t if full else self._normal_t[:, idx]
+        u, v, w = p1 - p0, p2 - p0, p2 - p1
+        area = (u[1] * v[2] - u[2] * v[1]) * n[0]
+        area += (u[2] * v[0] - u[0] * v[2]) * n[1]
+        area += (u[0] * v[1] - u[1] * v[0]) * n[2]
+        perp2 = np.empty((3, len(idx)))
+        for k, edge in enumerate((w, v, u)):  # opposite corner 0, 1, 2 (the sign does not matter)
+            along = edge[0] * n[0] + edge[1] * n[1] + edge[2] * n[2]
+            perp2[k] = edge[0] * edge[0] + edge[1] * edge[1] + edge[2] * edge[2] - along * along
+        return area, perp2
+
+    def _squeezed(self, x: np.ndarray, idx: np.ndarray) -> np.ndarray:
+        """Mask over triangles ``idx``: some corner of positions ``x`` is below its floor."""
+        area, perp2 = self._area_perp2(x, idx)
+        perp2 *= self._floor2 if idx is self._all else self._floor2[:, idx]
+        return (area < 0) | (area * area < perp2.max(axis=0))
+
+    def touching(self, vertices: np.ndarray) -> np.ndarray:
+        """Indices of the watched triangles that touch ``vertices`` (ids or a bool mask): what a
+        displacement that moves only those vertices can squeeze (``among`` below)."""
+        vertices = np.asarray(vertices)
+        tris = self._touching(np.flatnonzero(vertices) if vertices.dtype == bool else np.unique(vertices))
+        return self._all if len(tris) == len(self._all) else tris  # all: the check's faster path
+
+    def squeezed(self, positions: np.ndarray, among: np.ndarray | None = None) -> bool:
+        """Whether some corner of deformed ``positions`` (V, 3) is below its floor (only the watched
+        triangles ``among`` are checked when given)."""
+        return bool(self._squeezed(positions, self._all if among is None else among).any())
+
+    # -- fixing ------------------------------------------------------------------------------
+
+    def guard(self, positions: np.ndarray, among: np.ndarray | None = None) -> bool:
+        """Fix deformed ``positions`` (V, 3) in place if some corner is below its floor; returns
+        whether it had to. ``among``: the watched triangles that can be squeezed, when the caller
+        knows (``touching`` the vertices it moved); all by default."""
+        idx = self._all if among is None else among
+        bad = idx[self._squeezed(positions, idx)]
+        if len(bad) == 0:
             return False
         displacement = positions - self.rest
-        self.relax(displacement)
+        self._fix(displacement, bad)
         positions[...] = self.rest + displacement
         return True
 
-    def squeezed(self, positions: np.ndarray) -> bool:
-        """Whether some corner of deformed ``positions`` is below its floor, per triangle: a
-        corner's height is the triangle's doubled area projected along its rest normal over the
-        projected length of the opposite edge, so one area and three edge lengths decide all three."""
-        p0, p1, p2 = (positions[self._triangles[:, k]] for k in range(3))
-        n = self._tri_normal
-        area = np.einsum("ij,ij->i", np.cross(p1 - p0, p2 - p0), n)
-        bad = area < 0
-        area *= area
-        for k, edge in enumerate((p2 - p1, p0 - p2, p1 - p0)):  # opposite corner 0, 1, 2
-            across2 = np.einsum("ij,ij->i", edge, edge) - np.einsum("ij,ij->i", edge, n) ** 2
-            bad |= area < self._floor2[:, k] * across2
-        return bool(bad.any())
+    def relax(self, displacement: np.ndarray, among: np.ndarray | None = None) -> bool:
+        """Fix ``displacement`` (V, 3) from the rest mesh in place (class docstring); returns
+        whether some corner was squeezed. ``among`` as for ``guard``."""
+        idx = self._all if among is None else among
+        bad = idx[self._squeezed(self.rest + displacement, idx)]
+        if len(bad) == 0:
+            return False
+        self._fix(displacement, bad)
+        return True
 
-    def relax(self, displacement: np.ndarray) -> None:
-        """Push corners back above their floor: ``displacement`` (V, 3) is changed in place."""
+    def _fix(self, displacement: np.ndarray, bad: np.ndarray) -> None:
+        grown = self._grow(bad, EDGE_RINGS)
+        watched = self._grow(grown, 1)
+        free = np.zeros(self.n, bool)
+        free[self.triangles[grown].ravel()] = True
+        left = self._sweep(displacement, watched, free)
+        if len(left):
+            self._damp(displacement, left)
+
+    def _touching(self, verts: np.ndarray) -> np.ndarray:
+        """The watched triangles that touch vertices ``verts`` (sorted, unique)."""
+        start, end = self._vt_ptr[verts], self._vt_ptr[verts + 1]
+        lens = end - start
+        idx = np.repeat(start - np.cumsum(lens) + lens, lens) + np.arange(lens.sum())
+        return np.unique(self._vt_tri[idx])
+
+    def _grow(self, tris: np.ndarray, rings: int) -> np.ndarray:
+        for _ in range(rings):
+            tris = self._touching(np.unique(self.triangles[tris]))
+        return tris
+
+    def _sweep(self, displacement: np.ndarray, watched: np.ndarray, free: np.ndarray) -> np.ndarray:
+        """The sweeps (class docstring, step 1) on triangles ``watched``, moving only ``free`` movable
+        vertices; returns the watched triangles still squeezed."""
+        verts, local = np.unique(self.triangles[watched], return_inverse=True)
+        local = local.reshape(-1, 3)
+        x = self.rest[verts] + displacement[verts]
+        w_v = self.inv_mass[verts] * free[verts]
+        normal, floor = self.normal[watched], self.floor[watched]
+        m = len(verts)
         for _ in range(EDGE_ITERATIONS):
-            height, across, t = self._heights(self.rest + displacement)
-            bad = np.flatnonzero(height < self.floor)
-            if len(bad) == 0:
-                return
-            self._push(displacement, bad, self.floor[bad] - height[bad], across[bad], t[bad])
+            ids, vecs = [], []
+            for k in range(3):
+                v, a, b = local[:, k], local[:, (k + 1) % 3], local[:, (k + 2) % 3]
+                edge = x[b] - x[a]
+                across = np.cross(normal, edge)
+                across /= np.maximum(np.linalg.norm(across, axis=1, keepdims=True), 1e-300)
+                rel = x[v] - x[a]
+                height = np.einsum("ij,ij->i", rel, across)
+                low = np.flatnonzero(height < floor[:, k])
+                if len(low) == 0:
+                    continue
+                e = edge[low]
+                t = np.clip(np.einsum("ij,ij->i", rel[low], e) / np.maximum(np.einsum("ij,ij->i", e, e), 1e-300), 0, 1)
+                corner_ids = np.stack([v[low], a[low], b[low]])  # (3, c)
+                grad = np.stack([np.ones(len(low)), t - 1.0, -t])  # d height / d position, along `across`
+                wg = w_v[corner_ids] * grad
+                denom = (wg * grad).sum(axis=0)
+                ok = denom > 0
+                step = np.where(ok, (EDGE_TARGET * floor[low, k] - height[low]) / np.where(ok, denom, 1.0), 0.0)
+                ids.append(corner_ids.ravel())
+                vecs.append(((wg * step)[..., None] * across[low][None]).reshape(-1, 3))
+            if not ids:
+                break
+            ids_all, vec_all = np.concatenate(ids), np.concatenate(vecs)
+            moving = np.any(vec_all != 0, axis=1)
+            count = np.maximum(np.bincount(ids_all, weights=moving, minlength=m), 1.0)
+            for j in range(3):
+                x[:, j] += EDGE_OVERRELAX * np.bincount(ids_all, weights=vec_all[:, j], minlength=m) / count
+        displacement[verts] = x - self.rest[verts]
+        return watched[self._squeezed(self.rest + displacement, watched)]
 
-    def _push(self, displacement: np.ndarray, bad: np.ndarray, deficit: np.ndarray,
-              across: np.ndarray, t: np.ndarray) -> None:
-        """One Jacobi sweep: each violated corner's position-based correction, averaged per vertex."""
-        ids = np.concatenate([self.corner[bad], self.a[bad], self.b[bad]])
-        grad = np.concatenate([np.ones(len(bad)), t - 1.0, -t])  # d height / d position, along `across`
-        w = self.inv_mass[ids] * grad
-        denom = np.maximum(np.bincount(np.tile(np.arange(len(bad)), 3), weights=w * grad, minlength=len(bad)), 1e-300)
-        step = np.tile(deficit / denom, 3) * w
-        vec = np.tile(across, (3, 1)) * step[:, None]
-        count = np.maximum(np.bincount(ids, weights=(w != 0).astype(float), minlength=self.n), 1.0)
-        for k in range(3):
-            displacement[:, k] += np.bincount(ids, weights=vec[:, k], minlength=self.n) / count
+    def _damp(self, displacement: np.ndarray, bad: np.ndarray) -> None:
+        """The fallback (class docstring, step 2), from squeezed triangles ``bad``: the displacement
+        becomes ``scale * displacement`` with a per-vertex scale that only shrinks (``steps``: how
+        often each vertex was a squeezed triangle's)."""
+        start = displacement.copy()
+        scale = np.ones(self.n)
+        steps = np.zeros(self.n, np.int64)
+        while len(bad):
+            core = np.unique(self.triangles[bad])
+            steps[core] += 1
+            scale[core] = np.where(steps[core] >= EDGE_DAMP_STEPS, 0.0, EDGE_DAMP * scale[core])
+            inside = core
+            for factor in EDGE_DAMP_RINGS:  # the rings around shrink less: a smooth saturation, not a dent
+                grown = np.unique(self.triangles[self._touching(inside)])
+                ring = np.setdiff1d(grown, inside, assume_unique=True)
+                scale[ring] *= factor
+                inside = grown
+            verts = inside
+            displacement[verts] = scale[verts, None] * start[verts]
+            near = self._touching(verts)
+            bad = near[self._squeezed(self.rest + displacement, near)]
 
 
 def folded_triangles(rest: np.ndarray, deformed: np.ndarray, triangles: np.ndarray) -> np.ndarray:
@@ -410,23 +555,27 @@ def frame_coefficients(point: np.ndarray, feature_points: Mapping[str, np.ndarra
 # -- the default muscles ----------------------------------------------------------------------------
 
 # Left-side recipes (the face's own left, +x). An end is (feature point ids, (w_a, w_b, w_c, h));
-# r_e and r_f are multiples of the muscle's length, pull a multiple of r_e.
+# r_e and r_f are multiples of the muscle's length, pull a multiple of r_e (``PULL`` unless given).
+# The levators and the inner frontalis pull less, and the levators have narrower zones, than the
+# rest: at contraction 1 their zones drag the nostril's and the brow's control points hardest, and
+# DFFD folded the nostril and the upper lip there (tools/muscle_experiment.py: no muscle alone at
+# c <= 1, nor all of them at 0.5, folds a triangle in the control-point mode without the guard).
 LINEAR_RECIPES = {
-    # name: (fixed end, insertion, alpha (deg), r_e / length, r_f / length)
+    # name: (fixed end, insertion, alpha (deg), r_e / length, r_f / length[, pull / r_e])
     "zygomatic_major": ((("5.3", "10.7", "5.1"), (0.5, 0.35, 0.15, 0)),
                         (("8.3", "5.1", "8.5"), (0.85, 0.15, 0, 0)), 22, 1.0, 1.4),
     "depressor_anguli_oris": ((("2.11", "2.13", "2.1"), (0.75, 0.25, 0, 0)),
                               (("8.3", "8.7", "2.11"), (0.9, 0, 0.1, 0)), 25, 1.0, 1.4),
     "frontalis_inner": ((("11.1", "11.3", "4.1"), (0.75, 0.2, 0.05, 0)),
-                        (("4.1", "11.1", "4.3"), (0.9, 0.1, 0, 0)), 18, 1.0, 1.3),
+                        (("4.1", "11.1", "4.3"), (0.9, 0.1, 0, 0)), 18, 1.0, 1.3, 0.11),
     "frontalis_major": ((("11.3", "11.1", "4.3"), (0.55, 0.45, 0, 0)),
                         (("4.3", "11.3", "4.1"), (0.9, 0.1, 0, 0)), 18, 1.0, 1.3),
     "frontalis_outer": ((("11.3", "4.5", "11.1"), (0.9, 0.1, 0, 0)),
                         (("4.5", "11.3", "3.7"), (0.9, 0.1, 0, 0)), 18, 1.0, 1.3),
     "levator_labii_superioris": ((("3.9", "5.3", "9.13"), (0.3, 0.4, 0.3, 0)),
-                                 (("8.5", "9.1", "8.3"), (0.8, 0.2, 0, 0)), 20, 1.0, 1.3),
+                                 (("8.5", "9.1", "8.3"), (0.8, 0.2, 0, 0)), 12, 1.0, 1.3, 0.12),
     "levator_labii_alaeque_nasi": ((("9.7", "3.11", "9.13"), (0.4, 0.4, 0.2, 0)),
-                                   (("9.1", "8.5", "9.5"), (0.6, 0.4, 0, 0)), 18, 1.0, 1.3),
+                                   (("9.1", "8.5", "9.5"), (0.6, 0.4, 0, 0)), 15, 1.0, 1.3, 0.09),
     "corrugator_supercilii": ((("4.1", "9.7", "3.11"), (0.3, 0.6, 0.1, 0)),
                               (("4.3", "4.1", "3.13"), (0.7, 0.3, 0, 0)), 20, 1.0, 1.4),
     "risorius": ((("2.13", "5.1", "10.7"), (0.5, 0.4, 0.1, 0)),
@@ -435,7 +584,7 @@ LINEAR_RECIPES = {
 PULL = 0.15  # a linear muscle's pull at contraction 1, as a share of its r_e
 SPHINCTER_RECIPES = {
     # name: (centre, (feature points whose distance scales the radii), radii / that distance, squeeze)
-    "orbicularis_oris": ((("2.2", "2.3", "8.3"), (0.5, 0.5, 0, 0)), ("8.3", "8.4"), (0.7, 0.45, 0.5), 0.3),
+    "orbicularis_oris": ((("2.2", "2.3", "8.3"), (0.5, 0.5, 0, 0)), ("8.3", "8.4"), (0.7, 0.45, 0.5), 0.2),
     "orbicularis_oculi_l": ((("3.5", "3.7", "3.11"), (1, 0, 0, 0)), ("3.7", "3.11"), (1.15, 0.95, 0.8), 0.35),
 }
 # Feature point ids of the face's left side and their mirror on the right (MPEG-4 numbering is
@@ -510,11 +659,12 @@ def _on_skin(point: np.ndarray, skin: np.ndarray) -> np.ndarray:
 
 def _linear_from_recipe(name: str, recipe: tuple, fp: Mapping[str, np.ndarray], skin: np.ndarray,
                         rename: Callable[[str], str]) -> LinearMuscle:
-    (fixed_ids, fixed_w), (ins_ids, ins_w), alpha, r_e, r_f = recipe
+    (fixed_ids, fixed_w), (ins_ids, ins_w), alpha, r_e, r_f, *pull = recipe
     fixed = _on_skin(place(fp, [rename(i) for i in fixed_ids], fixed_w), skin)
     insertion = _on_skin(place(fp, [rename(i) for i in ins_ids], ins_w), skin)
     length = float(np.linalg.norm(insertion - fixed))
-    return LinearMuscle(name, fixed, insertion, float(alpha), r_e * length, r_f * length, PULL * r_e * length)
+    return LinearMuscle(name, fixed, insertion, float(alpha), r_e * length, r_f * length,
+                        (pull[0] if pull else PULL) * r_e * length)
 
 
 def _sphincter_from_recipe(name: str, recipe: tuple, fp: Mapping[str, np.ndarray],

@@ -37,16 +37,19 @@ Muscles (the rig's ``muscles``, ``muscle_names``; ``puppet.muscles``) join a fra
   zygomatic major on the default face, where the dragged lip corner meets the nose's and cheeks'
   anchored borders), so a **fold guard** runs on the muscles' share before it is added to the
   FAPs' frame: the improved mode's edge constraints (``EdgeConstraints.guard``) over the triangles
-  it reaches. With nothing squeezed it costs one vectorised check (about 0.5 ms on the default
-  face, plus the share's sparse product); it relaxes only where a corner comes within 5% of its
-  opposite edge, and a triangle folds exactly when a corner crosses that edge. It guards the
+  it reaches. Per frame it checks only the triangles touching the vertices the moving inputs'
+  columns of B reach (cached per set of moving inputs): with nothing squeezed that is one
+  vectorised check and the share's sparse product. It acts only where a corner comes within 5% of
+  its opposite edge (a triangle folds exactly when a corner crosses that edge), and then only on
+  a few rings of triangles around those corners: sweeps, then scaling the share back toward rest
+  there until no corner is that close, so no muscle folds the skin at any contraction. The default
+  muscles squeeze nothing at normal contractions (each alone up to 1, all together at 0.5), so
+  there the guard never acts; it is the safety net for experiments beyond. It guards the
   muscles' share alone, like the improved vertex mode, because FAP poses legitimately squeeze
   the skin (a closed lid, an open jaw) and must draw as they always did. We chose it over changing
   the rig or the law on control points (sampling the muscle field at every control point, fixed
-  anchors included, folded more, not less): it keeps the rig that FAP takes were made with. It is
-  bounded (``EDGE_ITERATIONS`` sweeps), so where a muscle at several times its normal contraction
-  drags points past the rig's anchors (nose, forehead strands) some folds remain:
-  docs/muscle_experiment.md has the table.
+  anchors included, folded more, not less): it keeps the rig that FAP takes were made with.
+  docs/muscle_experiment.md has the tables and timings.
 * ``classic`` (Waters) and ``improved`` (Zhou & Liu): the FAPs' DFFD result plus
   ``MuscleModel``'s displacement of the skin vertices (the face's ``skin`` part, else the DFFD
   regions), before the rigid parts and the head turn.
@@ -323,6 +326,22 @@ class Runtime:
             movable[region.vertices] = True
         return EdgeConstraints(self.face.vertices, np.asarray(self.face.triangles), movable, reached)
 
+    def _guarded(self, moving: np.ndarray) -> np.ndarray:
+        """The fold guard's triangles that the muscles' share can squeeze when it moves the inputs
+        ``moving`` (positions in ``_muscle_spread``'s columns): those touching the vertices their
+        columns of B reach, cached per set (a frame checks only these, not the whole skin)."""
+        key = moving.tobytes()
+        cache = self._guard_cache
+        if key not in cache:
+            if len(cache) >= 64:
+                cache.clear()
+            cache[key] = self._fold_guard.touching(np.diff(self._muscle_spread[1][:, moving].tocsr().indptr) > 0)
+        return cache[key]
+
+    @functools.cached_property
+    def _guard_cache(self) -> dict[bytes, np.ndarray]:
+        return {}
+
     def _muscle_model(self, mode: str) -> MuscleModel:
         """The vertex-mode model (made on first use) on the skin: the ``skin`` part, else the DFFD regions."""
         if mode not in self._muscle_models:
@@ -339,8 +358,9 @@ class Runtime:
         a vertex mode's displacement, added to ``out``."""
         if mode == "control":
             columns, spread = self._muscle_spread
-            moved = self.face.vertices + spread @ muscle_inputs[columns]
-            self._fold_guard.guard(moved)
+            share = muscle_inputs[columns]
+            moved = self.face.vertices + spread @ share
+            self._fold_guard.guard(moved, self._guarded(np.flatnonzero(np.any(share != 0, axis=1))))
             out += (moved - self.face.vertices).astype(self.dtype, copy=False)
         else:
             out += self._muscle_model(mode).displace(contracting).astype(self.dtype, copy=False)

@@ -14,7 +14,7 @@ from puppet import MappingError, load_mapping
 from puppet.autorig import build_rig
 from puppet.fapfile import read_fap
 from puppet.faptable import fap
-from puppet.muscles import MUSCLE_NAMES, folded_triangles
+from puppet.muscles import MUSCLE_NAMES, control_point_displacements, folded_triangles
 from puppet.replay import retake
 from puppet.rig import rig_from_dict, rig_to_dict
 from puppet.runtime import MUSCLE_MODES, Runtime
@@ -120,6 +120,29 @@ def test_contraction_10_folds_only_the_classic_skin(runtime, face, mode, folds):
     for name in ("zygomatic_major_l", "zygomatic_major_r"):
         folded = folded_triangles(face.vertices, runtime.pose(muscles={name: 10.0}, mode=mode), triangles)
         assert folded.any() == folds, (name, int(folded.sum()))
+
+
+@pytest.mark.parametrize("mode", ["control", "improved"])
+@pytest.mark.parametrize("name", MUSCLE_NAMES)
+def test_no_muscle_folds_the_skin_at_contraction_10(runtime, face, name, mode):
+    folded = folded_triangles(face.vertices, runtime.pose(muscles={name: 10.0}, mode=mode), _skin_triangles(face))
+    assert not folded.any(), int(folded.sum())
+
+
+def _unguarded(runtime, muscles) -> np.ndarray:
+    """The control-point mode without its fold guard: DFFD of the moved control points alone."""
+    points = np.array([runtime.rig.point(n).position for n in runtime.control_points])
+    return runtime.deform(control_point_displacements(runtime.rig.muscles, muscles, points))
+
+
+@pytest.mark.parametrize("pose", [{name: c} for name in MUSCLE_NAMES for c in (0.5, 1.0)]
+                         + [dict.fromkeys(MUSCLE_NAMES, 0.5)], ids=lambda p: "all_0.5" if len(p) > 1 else
+                         "-".join(f"{k}={v}" for k, v in p.items()))
+def test_normal_contractions_squeeze_nothing_even_without_the_guard(runtime, face, pose):
+    unguarded = _unguarded(runtime, pose)
+    assert not folded_triangles(face.vertices, unguarded, _skin_triangles(face)).any()
+    assert not runtime._fold_guard.squeezed(unguarded)  # so the guard never acts there
+    np.testing.assert_allclose(runtime.pose(muscles=pose), unguarded, atol=1e-12)
 
 
 def test_the_fold_guard_costs_nothing_at_ordinary_contraction(runtime, face):
