@@ -675,6 +675,17 @@ def _sphincter_from_recipe(name: str, recipe: tuple, fp: Mapping[str, np.ndarray
     return Sphincter(name, center, scale * np.asarray(radii, float), float(squeeze))
 
 
+def flat_grid(n: int = 41) -> tuple[np.ndarray, np.ndarray]:
+    """The paper's experiment mesh: vertices (n*n, 3) on [-0.5, 0.5]^2 at z = 0 and triangles
+    (2 (n-1)^2, 3), counter-clockwise seen from +z."""
+    x = np.linspace(-0.5, 0.5, n)
+    gx, gy = np.meshgrid(x, x)
+    vertices = np.c_[gx.ravel(), gy.ravel(), np.zeros(n * n)]
+    i, j = np.meshgrid(np.arange(n - 1), np.arange(n - 1))
+    a = (j * n + i).ravel()
+    return vertices, np.r_[np.c_[a, a + 1, a + n + 1], np.c_[a, a + n + 1, a + n]]
+
+
 def mirror_muscle(m: Muscle, name: str | None = None) -> Muscle:
     """The muscle mirrored across the plane x = 0 (the face's mid-line)."""
     flip = np.array([-1.0, 1.0, 1.0])

@@ -13,6 +13,7 @@ from puppet.muscles import (
     Sphincter,
     control_point_displacements,
     default_muscles,
+    flat_grid,
     folded_triangles,
     frame_coefficients,
     mirror_muscle,
@@ -25,16 +26,7 @@ from puppet.muscles import (
 AXIS_MUSCLE = LinearMuscle("m", np.zeros(3), np.array([1.0, 0, 0]), alpha=30.0, r_e=1.0, r_f=2.0, pull=0.1)
 
 
-def grid(n: int = 41) -> tuple[np.ndarray, np.ndarray]:
-    x = np.linspace(-0.5, 0.5, n)
-    gx, gy = np.meshgrid(x, x)
-    vertices = np.c_[gx.ravel(), gy.ravel(), np.zeros(n * n)]
-    i, j = np.meshgrid(np.arange(n - 1), np.arange(n - 1))
-    a = (j * n + i).ravel()
-    return vertices, np.r_[np.c_[a, a + 1, a + n + 1], np.c_[a, a + n + 1, a + n]]
-
-
-GRID = grid()
+GRID = flat_grid()
 GRID_MUSCLE = LinearMuscle("g", np.array([-0.25, 0, 0]), np.array([0.25, 0, 0]), 30.0, 0.5, 0.75, 0.075)
 
 

@@ -59,6 +59,7 @@ from puppet.muscles import (
     LinearMuscle,
     MuscleModel,
     control_point_displacements,
+    flat_grid,
     folded_triangles,
 )
 from puppet.runtime import Runtime
@@ -71,23 +72,12 @@ PANEL = 220
 FACE_MUSCLE = "zygomatic_major_l"
 
 
-def grid(n: int = 41) -> tuple[np.ndarray, np.ndarray]:
-    """Vertices (n*n, 3) on [-0.5, 0.5]^2 at z = 0 and triangles (2 (n-1)^2, 3), counter-clockwise."""
-    x = np.linspace(-0.5, 0.5, n)
-    gx, gy = np.meshgrid(x, x)
-    vertices = np.c_[gx.ravel(), gy.ravel(), np.zeros(n * n)]
-    i, j = np.meshgrid(np.arange(n - 1), np.arange(n - 1))
-    a = (j * n + i).ravel()
-    triangles = np.r_[np.c_[a, a + 1, a + n + 1], np.c_[a, a + n + 1, a + n]]
-    return vertices, triangles
-
-
 GRID_MUSCLE = LinearMuscle("grid", np.array([-0.25, 0.0, 0.0]), np.array([0.25, 0.0, 0.0]), 30.0, 0.5, 0.75, 0.075)
 
 
 def grid_cases() -> dict[str, dict[int, np.ndarray]]:
     """Deformed grid vertices per mode and contraction."""
-    vertices, triangles = grid()
+    vertices, triangles = flat_grid()
     coarse = np.arange(41) % 5 == 0
     control = np.flatnonzero(np.logical_and.outer(coarse, coarse).ravel())
     edges = EdgeConstraints(vertices, triangles)
@@ -255,7 +245,7 @@ def main() -> None:
     face = load_face()
     runtime = Runtime(face, dtype=np.float64)
     zygomatic = next(m for m in runtime.rig.muscles if m.name == FACE_MUSCLE)
-    grid_mesh = grid()
+    grid_mesh = flat_grid()
     grid_out = grid_cases()
     face_out = face_cases(runtime)
     rows = (table_rows("grid", grid_mesh[0], grid_mesh[1], GRID_MUSCLE, grid_out)
