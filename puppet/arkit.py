@@ -30,7 +30,7 @@ from devices.base import Sample
 from devices.samplelog import LogEvent
 
 from .mapping import load_mapping
-from .takeclock import TakeClock
+from .takeclock import TakeClock, default_muscle_faps
 from .takes import TakeRecorder
 
 DEVICE = "csv"
@@ -165,7 +165,7 @@ def import_csv(csv_path: str | os.PathLike, root: str | os.PathLike, name: str =
     extra = {"source": str(csv_path), "t0_ns": 0, "hold_ns": None, "mapping_state": mapping.snapshot(),
              "wire": {}, "layer": None}
     recorder = TakeRecorder(root, name, fps, mapping_path=mapping_path, devices=mapping.devices, extra=extra)
-    clock = TakeClock(mapping, recorder.frame, 0, fps)
+    clock = TakeClock(mapping, recorder.frame, 0, fps, encode_muscles=default_muscle_faps)
     try:
         for t_ns, values in rows:
             sample = Sample(t_ns, DEVICE, values)

@@ -57,6 +57,7 @@ class FapEngine:
     def __init__(self, runtime) -> None:
         self.runtime = runtime
         self.face, self.rig = runtime.face, runtime.rig
+        self._points = {p.name: p for p in self.rig.control_points}  # looked up every encoded frame
         self.fapu = self.face.fapu
         self.rest = np.asarray(self.face.vertices, dtype=float)
         self._index = {name: i for i, name in enumerate(runtime.control_points)}
@@ -182,13 +183,26 @@ class FapEngine:
         self._encode_jaw(jaw, out)
         for part, (yaw, pitch, thrust) in EYE_FAPS.items():
             self._encode_eye(part, local, out, yaw, pitch, thrust)
-        for number, (_, point, sign) in LID_FAPS.items():
-            p = self.face.feature_vertices[point]
-            out[number - 1] = sign * (self.rest[p, 1] - local[p, 1]) / self.fapu["IRISD0"]
+        self._encode_lids(local, out)
         if "tongue" in self.rig.rigid_parts:
             self._encode_tongue(jaw, local, out)
         self._encode_translations(local, {"jaw": jaw}, out)
         return out
+
+    def encode_skin(self, vertices: np.ndarray) -> np.ndarray:
+        """``encode`` for a mesh whose rigid parts did not move (the head, jaw, eyes where they
+        rest, as muscles leave them): the lid and translational FAPs only, without measuring
+        the parts; what a muscle-driven pose adds to a take, once per frame."""
+        local = np.asarray(vertices, dtype=float)
+        out = np.zeros(N_FAPS)
+        self._encode_lids(local, out)
+        self._encode_translations(local, {}, out)
+        return out
+
+    def _encode_lids(self, local: np.ndarray, out: np.ndarray) -> None:
+        for number, (_, point, sign) in LID_FAPS.items():
+            p = self.face.feature_vertices[point]
+            out[number - 1] = sign * (self.rest[p, 1] - local[p, 1]) / self.fapu["IRISD0"]
 
     @functools.cached_property
     def _head_rows(self) -> np.ndarray:
@@ -230,7 +244,7 @@ class FapEngine:
             columns = np.flatnonzero(np.abs(T[k]).sum(axis=0))
             if not len(columns):
                 continue
-            point = self.rig.point(name)
+            point = self._points[name]
             delta = local[point.vertex] - self.rest[point.vertex]
             d = _own_displacement(point, delta, motions.get(point.attach))
             for c in columns:

@@ -10,7 +10,8 @@
   grows), and the device queue's longest backlog (bounded by ``Device.QUEUE``).
 * ``long_take``: a take of ``take_seconds`` made at an accelerated clock -- the recorder and
   take clock, the parts that grow with a take's length, fed ``rate`` readings a second through
-  the shipped mapping as fast as they go -- with the resident memory at checkpoints.
+  the shipped mapping (its muscles written as FAPs) as fast as they go -- with the resident
+  memory at checkpoints.
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ from .mapping import load_mapping
 from .render import Renderer
 from .runtime import Runtime
 from .session import LiveSession, measure_latency
-from .takeclock import TakeClock
+from .takeclock import TakeClock, default_muscle_faps
 from .takes import TakeRecorder
 
 MAPPING = Path(__file__).resolve().parents[1] / "mappings" / "arduino_sliders.yaml"
@@ -133,7 +134,7 @@ def long_take(take_seconds: float = 3600.0, rate: float = 100.0, fps: int = 30, 
     start = time.perf_counter()
     with tempfile.TemporaryDirectory() as root:
         recorder = TakeRecorder(root, "long", fps, mapping_path=MAPPING, devices=mapping.devices)
-        clock = TakeClock(mapping, recorder.frame, 0, fps)
+        clock = TakeClock(mapping, recorder.frame, 0, fps, encode_muscles=default_muscle_faps)
         values = rng.uniform(0, 1023, size=6)
         for i in range(total):
             values = np.clip(values + rng.normal(0, 8, size=6), 0, 1023)

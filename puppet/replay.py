@@ -24,21 +24,18 @@ Muscle-driven frames are written as FAPs measured on the default face, as the li
 from __future__ import annotations
 
 import filecmp
-import functools
 import os
 from collections.abc import Iterator
 from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-
 from devices.base import Sample
 from devices.samplelog import LogEvent
 
 from .fapfile import FapWriter, iter_fap
 from .mapping import load_mapping, parse_mapping
-from .takeclock import Layer, TakeClock
+from .takeclock import Layer, TakeClock, default_muscle_faps
 from .takes import Take, TakeError, open_take, write_pose
 
 
@@ -72,7 +69,7 @@ def retake(take: str | os.PathLike | Take, out: str | os.PathLike, *, mapping: s
     with ExitStack() as stack:
         writer = stack.enter_context(FapWriter(out, meta["fps"], name))
         clock = TakeClock(mapper, lambda *frame: write_pose(writer, *frame), meta["t0_ns"], meta["fps"],
-                          hold_ns=meta.get("hold_ns"), layer=_layer(take), encode_muscles=_muscle_faps)
+                          hold_ns=meta.get("hold_ns"), layer=_layer(take), encode_muscles=default_muscle_faps)
         entries = take.entries()
         if through_devices:
             entries = _through_devices(entries, take, stack)
@@ -80,19 +77,6 @@ def retake(take: str | os.PathLike | Take, out: str | os.PathLike, *, mapping: s
             clock.apply(entry)
     identical = filecmp.cmp(out, take.fap_path, shallow=False) if mapping is None else None
     return Retake(out, clock.frames, identical)
-
-
-def _muscle_faps(muscles: dict[str, float]) -> np.ndarray:
-    """The FAPs muscle contractions amount to on the default face (its runtime made once)."""
-    return _default_runtime().muscle_faps(muscles)
-
-
-@functools.cache
-def _default_runtime():
-    from .face import load_face
-    from .runtime import Runtime
-
-    return Runtime(load_face())
 
 
 def _layer(take: Take) -> Layer | None:

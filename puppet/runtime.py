@@ -367,12 +367,12 @@ class Runtime:
 
     def muscle_faps(self, muscles: Mapping[str, float], mode: str = "control") -> np.ndarray:
         """The 68 FAP values (FAPU) that the muscles' motion alone measures on the face
-        (``FapEngine.encode`` of the rest face deformed by them): how a muscle-driven pose is written
-        to a .fap, added to the pose's own FAPs."""
+        (``FapEngine.encode_skin`` of the rest face deformed by them: muscles move no rigid part):
+        how a muscle-driven pose is written to a .fap, added to the pose's own FAPs."""
         out = np.zeros(68)
         if self._contracting(muscles, mode):
             rest = np.zeros((len(self.control_points), 3))
-            out = self.faps.encode(self.deform(rest, muscles=muscles, mode=mode))
+            out = self.faps.encode_skin(self.deform(rest, muscles=muscles, mode=mode))
         return out
 
     def normals(self, vertices: np.ndarray, rigid: Mapping[str, np.ndarray] | None = None,

@@ -25,6 +25,7 @@ FAPs plus ``encode_muscles(pose.muscles)``, the FAPs the muscles' motion measure
 from __future__ import annotations
 
 import dataclasses
+import functools
 import os
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
@@ -43,6 +44,20 @@ WriteFrame = Callable[[np.ndarray, "tuple | np.ndarray | None", "tuple | np.ndar
 """Writes one frame: 68 FAP values (FAPU; FAP 1/2 slots unused), viseme and expression fields."""
 EncodeMuscles = Callable[[dict], np.ndarray]
 """68 FAP values (FAPU) that muscle contractions {name: c} amount to."""
+
+
+def default_muscle_faps(muscles: dict[str, float]) -> np.ndarray:
+    """``encode_muscles`` on the default face (its runtime made on first use): for takes made
+    without a live runtime at hand (an import, a replay, a benchmark)."""
+    return _default_runtime().muscle_faps(muscles)
+
+
+@functools.cache
+def _default_runtime():
+    from .face import load_face
+    from .runtime import Runtime
+
+    return Runtime(load_face())
 
 
 class Layer:
