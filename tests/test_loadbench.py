@@ -31,6 +31,6 @@ def test_a_flood_of_input_is_taken_in_without_anything_growing(shared_runtime):
 
 
 def test_a_long_take_records_in_bounded_memory():
-    result = loadbench.long_take(take_seconds=600.0, rate=100.0, fps=30)
-    assert result["frames"] == 600 * 30 + 1 and result["samples"] == 60_000
+    result = loadbench.long_take(take_seconds=300.0, rate=100.0, fps=30)
+    assert result["frames"] == 300 * 30 + 1 and result["samples"] == 30_000
     assert result["rss_growth_mb"] < 2
