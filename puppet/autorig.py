@@ -50,7 +50,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from .muscles import default_muscles
-from .rig import ControlPoint, LipLine, Region, Rig, RigidPart, RigError
+from .rig import ControlPoint, LipLine, Region, Rig, RigError, RigidPart
 
 INDIRECT_WEIGHT = 0.5
 CORNER_JAW_SHARE = 0.5  # how far the lip corners go with the jaw

@@ -192,8 +192,8 @@ def _render(args: argparse.Namespace) -> int:
     from .face import FaceFileError, MissingFeaturePointsError
     from .fapfile import FapError
     from .playback import render_take
-    from .takes import TakeError
     from .rig import RigError
+    from .takes import TakeError
 
     try:
         face = _face(args.face)

@@ -9,13 +9,12 @@ import numpy as np
 import pytest
 
 from puppet.autorig import _loop_path_via, build_rig
+from puppet.bench import shared_assets
 from puppet.face import load_face
 from puppet.landmarks import IBUG_FDP, LandmarkError, read_landmarks
 from puppet.rig import rig_to_dict
 from puppet.runtime import Runtime
-
 from tools.rig_faces import ict_inputs, mediapipe_inputs
-from puppet.bench import shared_assets
 
 
 def _write_obj(path, vertices, triangles):

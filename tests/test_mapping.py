@@ -19,7 +19,6 @@ from devices.base import Sample
 from puppet import MappingError, load_mapping
 from puppet.face import AU
 from puppet.fap import high_level_faps
-from puppet.muscles import MUSCLE_NAMES
 from puppet.faptable import faps
 from puppet.mapping import (
     BUTTON_KEYS,
@@ -38,6 +37,7 @@ from puppet.mapping import (
     fap_names,
     parse_mapping,
 )
+from puppet.muscles import MUSCLE_NAMES
 
 MAPPINGS = Path(__file__).resolve().parents[1] / "mappings"
 SCHEMA = json.loads((MAPPINGS / "schema.json").read_text())
