@@ -3,6 +3,9 @@
 For each mesh (the default face; it with its skin subdivided once and twice, about 23k and 75k
 vertices; the ICT face when ``../shared/assets/ict_facekit`` is there) it measures, as medians:
 
+* ``rig_s``: auto-rigging the face from its feature points (``autorig.build_rig``: regions,
+  control points, rigid parts, muscles), where it has them (the ICT face: from its 68 iBUG
+  landmarks, converted when it is loaded);
 * ``precompute_s``: building the runtime with no cache: every region's Sibson coordinates, the
   weighted coefficients, folding them into one matrix, the normals' set-up (the rig itself is
   built once beforehand, outside the timing);
@@ -45,7 +48,7 @@ from pathlib import Path
 import numpy as np
 
 from . import rigid
-from .autorig import rig_for_face
+from .autorig import build_rig, rig_for_face
 from .face import Face, load_face
 from .inputbench import bench_inputs
 from .runtime import MUSCLE_MODES, Runtime
@@ -87,6 +90,7 @@ def _private_cache() -> Iterator[None]:
 def bench_face(face: Face, frames: int, rig=None) -> dict:
     """All measurements for one face (see module docstring)."""
     rig = rig if rig is not None else rig_for_face(face)
+    rig_s = median_time(lambda: build_rig(face), 3, warm_up=False) if face.feature_points else float("nan")
     with _private_cache():
         precompute_s = median_time(lambda: Runtime(face, rig, cache=False), 3, warm_up=False)
         Runtime(face, rig)
@@ -128,6 +132,7 @@ def bench_face(face: Face, frames: int, rig=None) -> dict:
         "vertices": len(face.vertices),
         "triangles": len(face.triangles),
         "control_points": k,
+        "rig_s": rig_s,
         "precompute_s": precompute_s,
         "load_s": load_s,
         "deform_ms": deform_ms,
@@ -254,7 +259,7 @@ def run_bench(frames: int = 300, as_json: bool = False, ict: bool = True, flood_
         print(json.dumps({"deform": rows, "frames": split, "muscles": muscles, "inputs": inputs, "live": live},
                          indent=1))
         return 0
-    _table(rows, ("face", "vertices", "control_points", "precompute_s", "load_s", "deform_ms",
+    _table(rows, ("face", "vertices", "control_points", "rig_s", "precompute_s", "load_s", "deform_ms",
                   "deform_normals_ms", "realtime_ms", "dense_ms", "ratio"))
     print()
     _table(split, ("face", "input", "size", "controls_ms", "dffd_ms", "normals_ms", "draw_ms", "read_ms",

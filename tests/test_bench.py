@@ -10,7 +10,7 @@ import numpy as np
 
 def test_bench_face_reports_every_figure():
     row = bench_face(load_face(), frames=3)
-    for key in ("precompute_s", "load_s", "deform_ms", "deform_normals_ms", "realtime_ms", "dense_ms", "ratio"):
+    for key in ("rig_s", "precompute_s", "load_s", "deform_ms", "deform_normals_ms", "realtime_ms", "dense_ms", "ratio"):
         assert row[key] > 0, key
     assert row["vertices"] == len(load_face().vertices)
     assert row["deform_normals_ms"] >= row["deform_ms"] * 0.5
