@@ -14,6 +14,7 @@ from cantools.database.can import Message, Signal
 from cantools.database.conversion import BaseConversion
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from polling import wait_for
 
 from devices import DeviceError, State, Url, open_device
 from devices.can_device import BadFrame, CanDevice, CanSignal, SignalDecoder, load_dbc
@@ -31,15 +32,6 @@ _channels = itertools.count()
 def channel() -> str:
     """A virtual bus of this test's own (virtual buses are process-wide, by channel name)."""
     return f"test-can-{next(_channels)}"
-
-
-def wait_for(predicate, timeout: float = 2.0) -> bool:
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        if time.monotonic() > deadline:
-            return False
-        time.sleep(0.002)
-    return True
 
 
 # -- our decoder against cantools ------------------------------------------------------------------

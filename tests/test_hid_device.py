@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from polling import wait_for
 
 from devices import DeviceError, State, Url, open_device
 from devices.hid_descriptor import (
@@ -193,15 +194,6 @@ def fast(device: HidDevice) -> HidDevice:
 
 def hid_device(module: FakeHidModule, url: str = "hid://046d:c21d", **kw) -> HidDevice:
     return fast(HidDevice.from_url(Url.parse(url), "pad", hid_module=module, **kw))
-
-
-def wait_for(predicate, timeout: float = 2.0) -> bool:
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        if time.monotonic() > deadline:
-            return False
-        time.sleep(0.002)
-    return True
 
 
 def test_a_gamepad_gives_samples_named_by_its_descriptor():
