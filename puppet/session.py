@@ -86,9 +86,7 @@ class LiveSession:
                  arm: list[str] | tuple[str, ...] = ()) -> None:
         self.mapping_path = Path(mapping_path)
         self.mapping = load_mapping(mapping_path)  # checked before anything opens
-        self.layer_over = None if layer_over is None else take_fap(layer_over)
-        self.arm = tuple(arm)
-        self.layer = None if self.layer_over is None else Layer.armed(self.layer_over, self.mapping, self.arm)
+        self.layer = None if layer_over is None else Layer.armed(take_fap(layer_over), self.mapping, arm)
         if isinstance(face, Runtime):
             self.runtime = face
         else:
@@ -143,7 +141,7 @@ class LiveSession:
 
     def frame(self, now_ns: int | None = None) -> Frame:
         """Drain, map, deform: one frame at ``now_ns`` (default: ``time.monotonic_ns()``)."""
-        states = {name: d.state for name, d in self.devices.items()}
+        states = self.states
         batches = [d.drain() for d in self.devices.values()]
         now = time.monotonic_ns() if now_ns is None else int(now_ns)
         if all(s is State.OPEN for s in states.values()):
@@ -248,9 +246,8 @@ class LiveSession:
         t0 = time.monotonic_ns() if now_ns is None else int(now_ns)
         hold_ns = self._hold_ns if self._held else None
         layer = None
-        if self.layer_over is not None:
-            self.layer = Layer.armed(self.layer_over, self.mapping, self.arm)  # from the base's start
-            layer = Layer.armed(self.layer_over, self.mapping, self.arm)
+        if self.layer is not None:  # shown and recorded from the base's start, each its own stream
+            self.layer, layer = self.layer.restarted(), self.layer.restarted()
         extra = {"t0_ns": t0, "hold_ns": hold_ns, "mapping_state": self.mapping.snapshot(),
                  "wire": {name: d.wire_info() for name, d in self.devices.items()},
                  "layer": None if layer is None else layer.spec()}
@@ -269,8 +266,8 @@ class LiveSession:
         if self._recorder is None:
             raise RuntimeError("not recording")
         recorder, self._recorder, self._clock = self._recorder, None, None
-        if self.layer_over is not None:  # the next pass shows the base from its start again
-            self.layer = Layer.armed(self.layer_over, self.mapping, self.arm)
+        if self.layer is not None:  # the next pass shows the base from its start again
+            self.layer = self.layer.restarted()
         return recorder.close()
 
     # -- closing ----------------------------------------------------------------------------

@@ -103,6 +103,10 @@ class Layer:
     def from_spec(cls, spec: dict) -> Layer:
         return cls(spec["over"], spec["slots"], viseme=spec["viseme"], expression=spec["expression"])
 
+    def restarted(self) -> Layer:
+        """The same layer, its base streamed from the first frame again (for the next pass)."""
+        return Layer(self.base_fap, self.slots, viseme=self.viseme, expression=self.expression)
+
     @classmethod
     def armed(cls, base_fap: str | os.PathLike, mapping: Mapping, arm: Iterable[str]) -> Layer:
         """A layer whose armed targets are named by ``arm``: channels (``box.ch0``: whatever
