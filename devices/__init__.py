@@ -8,9 +8,7 @@ the devices that need it); the rest of the URL is the backend's business.
 
 from __future__ import annotations
 
-import importlib
-
-from .base import Counters, Device, DeviceError, DeviceLost, Sample, State, Url
+from .base import Counters, Device, DeviceError, DeviceLost, Sample, State, Url, table_class
 
 BACKENDS: dict[str, str] = {
     "can": "devices.can_device:CanDevice",
@@ -29,13 +27,12 @@ def open_device(url: str, name: str | None = None) -> Device:
     parsed = Url.parse(url)
     if parsed.scheme not in BACKENDS:
         raise DeviceError(f"device URL {url!r}: unknown scheme {parsed.scheme!r}; known: {sorted(BACKENDS)}")
-    module_name, class_name = BACKENDS[parsed.scheme].split(":")
     try:
-        module = importlib.import_module(module_name)
+        backend = table_class(BACKENDS[parsed.scheme])
     except ImportError as exc:
         raise DeviceError(f"device URL {url!r}: the {parsed.scheme} backend needs {exc.name!r} "
                           f"(pip install {exc.name})") from None
-    device = getattr(module, class_name).from_url(parsed, name or url)
+    device = backend.from_url(parsed, name or url)
     device.url = url
     return device
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 import collections
 import contextlib
 import enum
+import importlib
 import threading
 import time
 from abc import ABC, abstractmethod
@@ -73,6 +74,13 @@ class Url:
             raise DeviceError(f"device URL {url!r}: expected scheme://target, e.g. serial:///dev/ttyACM0")
         target = (parts.netloc + parts.path) if parts.netloc else parts.path
         return cls(parts.scheme, target, dict(parse_qsl(parts.query)))
+
+
+def table_class(entry: str) -> type:
+    """The class a ``"module:Class"`` table entry names (``BACKENDS``, ``TWINS``), its module
+    imported only now, so a missing optional library only matters to what needs it (ImportError)."""
+    module_name, class_name = entry.split(":")
+    return getattr(importlib.import_module(module_name), class_name)
 
 
 class Device(ABC):
@@ -138,6 +146,11 @@ class Device(ABC):
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+    @property
+    def backlog(self) -> int:
+        """Samples read and waiting to be drained (at most ``QUEUE``)."""
+        return len(self._queue)
 
     def drain(self) -> list[Sample]:
         """Every Sample read since the last call, oldest first (never blocks)."""

@@ -16,14 +16,13 @@ has no twin: ``open_twin`` raises ``DeviceError`` naming it.
 
 from __future__ import annotations
 
-import importlib
 import struct
 import time
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from typing import Self
 
-from .base import Device, DeviceError, Sample, State, Url
+from .base import Device, DeviceError, Sample, State, Url, table_class
 
 TWINS: dict[str, str] = {
     "can": "devices.simulated_can:CanTwin",
@@ -153,13 +152,12 @@ def open_twin(url: str, name: str, wire_info: Mapping | None = None) -> Twin:
     if scheme not in TWINS:
         raise DeviceError(f"{name}: {url!r} cannot be replayed through a device: only device URLs "
                           f"with a wire have a twin ({', '.join(s + '://' for s in sorted(TWINS))})")
-    module_name, class_name = TWINS[scheme].split(":")
     try:
-        module = importlib.import_module(module_name)
+        twin = table_class(TWINS[scheme])
     except ImportError as exc:
         raise DeviceError(f"{name}: the twin of {url!r} needs {exc.name!r} (pip install {exc.name})") from None
     try:
-        return getattr(module, class_name).from_url(url, name, wire_info or {})
+        return twin.from_url(url, name, wire_info or {})
     except DeviceError as exc:
         if str(exc).startswith(f"{name}: "):
             raise

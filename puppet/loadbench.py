@@ -82,7 +82,7 @@ def _loop(session: LiveSession, renderer: Renderer, seconds: float) -> dict:
     frames, fed, backlog, rss = 0, session.samples_fed, 0, [rss_mb()]
     start = last = time.perf_counter()
     while (now := time.perf_counter()) - start < seconds:
-        backlog = max(backlog, len(device._queue))
+        backlog = max(backlog, device.backlog)
         f = session.frame()
         renderer.render(f.vertices, f.normals)
         frames += 1
