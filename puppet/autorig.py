@@ -7,7 +7,9 @@ the output of this module (``tools/build_default_face.py`` writes it).
 Regions (Zhang & Chen's functional regions), decided per skin vertex, first rule that matches:
 
 * ``rest``: behind the face (z below the jaw angle 2.13), above the hairline band, below the neck
-  line: neck, scalp, ears; still except for head rotation.
+  line: neck, scalp, ears; still except for head rotation. The jaw band is taken out of it: the
+  skin outside the face oval below the jaw angles' height, within ``JAW_BAND`` of the jaw line
+  along the skin (under the chin, the throat's top, under the ears); it joins the regions below.
 * ``upper_mouth`` / ``lower_mouth``: the mouth bag (the skin reached from the lips' meeting line
   without crossing it) split at the lip line; the skin between the nose base and the lip line,
   and between the lip line and the chin/throat, inside the nasolabial and chin lines.
@@ -40,15 +42,20 @@ edges between regions:
 A few indirect anchors under the skin (off the surface, weight 0.5: softer) steady each region's
 interior; under the lower mouth they ride on the jaw. Weights: 1 for points on the skin; the 8 box
 corners weigh 0 (see ``puppet.dffd``).
+
+The skin grid's points ride on the jaw by a share: all of it on the chin, fading up the cheeks to
+the mouth corners, and over the jaw band fading from the jaw line down the throat and toward the
+ears, so that the jaw's pull eases into the still neck with no seam or pinned row at the jaw line.
 """
 
 from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
+from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
+from .motiontransfer import transfer_motions
 from .muscles import default_muscles
 from .rig import ControlPoint, LipLine, Region, Rig, RigError, RigidPart
 
@@ -60,6 +67,12 @@ DRIVERS = {"cheek_l": ("upper_mouth", "lower_mouth"), "cheek_r": ("upper_mouth",
 UNPINNED = {frozenset(("upper_mouth", "lower_mouth"))}  # the lips part; neither pins the other
 DFFD_REGIONS = ("forehead", "nose", "upper_mouth", "lower_mouth", "cheek_l", "cheek_r")
 BOX_SCALE = 1.5
+BAG_FREE_DEPTH = 0.3  # mouth-bag skin this close to the lips' meeting line follows the lips only
+BAG_SPACING = 0.12  # spacing of the mouth bag's anchors (fractions of the eye separation)
+GRID_SPACING = {"forehead": 0.055, "nose": 0.055, "cheek_l": 0.055, "cheek_r": 0.055,
+                "upper_mouth": 0.045, "lower_mouth": 0.045}  # as BORDER_SPACING
+JAW_BAND = 1.2  # how far below and behind the jaw line the jaw's pull reaches (eye separations)
+JAW_BAND_RISE = 0.5  # ... and how far below the jaw angles' height (fraction of angle to chin height)
 
 # Lip lines: FDP keys in order along each contour, from the right corner to the left.
 LIP_LINES = {
@@ -94,20 +107,38 @@ def rig_for_face(face) -> Rig:
     return build_rig(face)
 
 
-def build_rig(face) -> Rig:
-    """Build the rig of a face with feature points, parts and contours (see module docstring)."""
+def build_rig(face, *, grid: bool = True, calibrated: bool = True) -> Rig:
+    """Build the rig of a face with feature points, parts and contours (see module docstring).
+
+    ``grid=False`` leaves out the skin grid: the coarse layout of feature points, lines and
+    borders only (what FAPs move by definition; the calibration starts from how it moves).
+    ``calibrated`` gives the grid the default face's calibrated FAP motions, carried over by
+    ``puppet.motiontransfer``."""
     missing = [f for f in REQUIRED if f not in face.feature_points]
     if missing:
         raise RigError(f"face {face.name!r}: cannot rig without feature points {missing}")
-    rig = _Builder(face).build()
+    rig = _Builder(face, grid).build()
     rig.muscles = default_muscles(face)  # Waters' muscles, placed by the feature points (puppet.muscles)
     rig.face_hash = face.content_hash    # the mesh it was made for: a saved rig is only reused on it
+    if grid and calibrated:
+        rig.fap_motions = _default_motions(face, rig)
     return rig
 
 
+def _default_motions(face, rig: Rig) -> dict[int, dict[str, np.ndarray]]:
+    """The shipped default rig's FAP motions, carried over to ``rig`` (none if it has none)."""
+    from .face import load_default_rig, load_face
+
+    default = load_default_rig(generate=False)
+    if default is None or not default.fap_motions:
+        return {}
+    return transfer_motions(default, load_face().feature_points, rig, face.feature_points)
+
+
 class _Builder:
-    def __init__(self, face) -> None:
+    def __init__(self, face, grid: bool = True) -> None:
         self.face = face
+        self.grid = grid
         self.v = np.array(face.vertices, dtype=float)
         self.fp = {k: np.array(p, dtype=float) for k, p in face.feature_points.items()}
         self.fv = dict(face.feature_vertices)
@@ -146,7 +177,9 @@ class _Builder:
         z_front = fp["2.13"][2]
 
         label = np.full(len(skin), "rest", dtype=object)
-        front = (z > z_front) & (y > neck_y) & (y < hair_y)
+        self.jaw_share = self._jaw_band_share()
+        self.in_jaw_band = np.isfinite(self.jaw_share)
+        front = ((z > z_front) & (y > neck_y) & (y < hair_y)) | self.in_jaw_band[skin]
         label[front & (x >= 0)] = "cheek_l"
         label[front & (x < 0)] = "cheek_r"
         label[front & (y >= lid_y)] = "forehead"
@@ -163,8 +196,8 @@ class _Builder:
         lower_w = (1 - r) * 1.3 * mouth_w + r * 1.2 * fp["2.11"][0]
         label[front & (y < lip_y) & (ax < lower_w)] = "lower_mouth"
         bag = self._mouth_bag(skin)
-        label[bag & (y >= lip_y)] = "upper_mouth"
-        label[bag & (y < lip_y)] = "lower_mouth"
+        self.bag = skin[bag]
+        label[bag] = np.where(self._bag_upper(self.bag), "upper_mouth", "lower_mouth")
         self.region_of[skin] = label
         for part, region in (("eye_l", "eyeball_l"), ("eye_r", "eyeball_r"), ("teeth_upper", "upper_teeth"),
                              ("teeth_lower", "lower_teeth"), ("tongue", "tongue")):
@@ -177,6 +210,42 @@ class _Builder:
             a = self.face.parts["attached"]
             nearest = cKDTree(v[skin]).query(v[a])[1]
             self.region_of[a] = label[nearest]
+
+    def _jaw_band_share(self) -> np.ndarray:
+        """How much of the jaw's motion each skin vertex below and behind the jaw line takes (NaN
+        off that band): all of it on the jaw line (the face oval's arc below the jaw angles), easing
+        to none ``JAW_BAND`` away along the skin outside the oval (down the throat, back under the
+        ears) and toward the jaw angles' height (``JAW_BAND_RISE``). An opening or shifting jaw
+        then stretches the skin under the chin smoothly into the still neck, as the submandibular
+        skin does, instead of folding it against a seam where jaw-carried skin meets the neck."""
+        n = len(self.v)
+        share = np.full(n, np.nan)
+        if "face_oval" not in self.face.contours:
+            return share
+        oval = np.asarray(self.face.contours["face_oval"])
+        skin = np.zeros(n, dtype=bool)
+        skin[self.face.parts["skin"]] = True
+        on_oval = np.zeros(n, dtype=bool)
+        on_oval[oval] = True
+        tri = np.asarray(self.face.triangles)
+        edges = np.vstack([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
+        edges = edges[skin[edges].all(axis=1)]
+        cut = edges[~on_oval[edges].any(axis=1)]
+        _, comp = connected_components(sp.coo_matrix((np.ones(len(cut)), (cut[:, 0], cut[:, 1])), shape=(n, n)),
+                                       directed=False)
+        nose = np.flatnonzero(skin)[np.argmin(np.linalg.norm(self.v[skin] - self.fp["9.3"], axis=1))]
+        outside = skin & ~on_oval & (comp != comp[nose])
+        e = edges[(outside | on_oval)[edges].all(axis=1)]
+        length = np.linalg.norm(self.v[e[:, 0]] - self.v[e[:, 1]], axis=1)
+        graph = sp.coo_matrix((length, (e[:, 0], e[:, 1])), shape=(n, n)).tocsr()
+        angle_y = (self.fp["2.13"][1] + self.fp["2.14"][1]) / 2
+        d = dijkstra(graph, directed=False, min_only=True, indices=oval[self.v[oval, 1] <= angle_y])
+        y = self.v[:, 1]
+        rise = JAW_BAND_RISE * (angle_y - self.fp["2.1"][1])
+        fade = _smoothstep(1 - d / self._scale(JAW_BAND)) * _smoothstep((angle_y - y) / rise)
+        band = outside & (d < self._scale(JAW_BAND)) & (y < angle_y)
+        share[band] = fade[band]
+        return share
 
     def _mouth_bag(self, skin: np.ndarray) -> np.ndarray:
         """Skin vertices reachable from inside the mouth without crossing the lips' meeting line."""
@@ -195,6 +264,24 @@ class _Builder:
         outside = comp[self.fv["11.4"]] if "11.4" in self.fv else comp[self.fv["9.3"]]
         return (comp[skin] != outside) & ~blocked[skin]
 
+    def _bag_upper(self, bag: np.ndarray) -> np.ndarray:
+        """Which mouth-bag vertices go with the upper lip: those nearer, along the bag's edges,
+        to the upper half of the lips' meeting line than to its lower half. Behind closed lips
+        the bag starts as a flat tube at the lips' height, so height alone does not split it:
+        its lower rim would hang from the upper lip and curtain the opened mouth."""
+        loop = list(np.asarray(self.face.contours["mouth_opening"]))
+        a, b = loop.index(self.fv["2.5"]), loop.index(self.fv["2.4"])
+        inside = np.zeros(len(self.v), dtype=bool)
+        inside[bag] = inside[loop] = True
+        tri = np.asarray(self.face.triangles)
+        e = np.vstack([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
+        e = e[inside[e].all(axis=1)]
+        w = np.linalg.norm(self.v[e[:, 0]] - self.v[e[:, 1]], axis=1)
+        graph = sp.coo_matrix((w, (e[:, 0], e[:, 1])), shape=(len(self.v),) * 2).tocsr()
+        d_up, d_lo = (dijkstra(graph, directed=False, min_only=True,
+                               indices=_loop_path_via(loop, a, b, self.fv[mid])[1:-1]) for mid in ("2.2", "2.3"))
+        return d_up[bag] <= d_lo[bag]
+
     def _regions_with_points(self) -> list[Region]:
         self.members: dict[str, list[str]] = {}
         self.lip_lines: list[LipLine] = []
@@ -203,6 +290,8 @@ class _Builder:
         self._mouth()
         self._cheeks()
         self._borders()
+        if self.grid:
+            self._skin_grid()
         regions = []
         for name in DFFD_REGIONS:
             verts = np.flatnonzero(self.region_of == name).astype(np.int32)
@@ -265,7 +354,33 @@ class _Builder:
             if driven:
                 self._add(name, f"{name}_from_{other}_{vertex}", "passive", vertex=int(vertex), driver=other)
             else:
-                self._add(name, f"{name}_edge_{vertex}", "fixed", vertex=int(vertex))
+                role = "active" if other in DFFD_REGIONS else "fixed"  # skin on both sides: calibratable
+                self._add(name, f"{name}_edge_{vertex}", role, vertex=int(vertex))
+
+    def _skin_grid(self) -> None:
+        """Active points spread over each region's front skin, ``GRID_SPACING`` apart: the
+        capacity the skin needs between the feature points (brows, lids, nasolabial fold, cheeks,
+        chin). No FAP moves them until a calibration (``puppet.fapcalibration``) says how; until
+        then they hold the skin like anchors. Under the mouth corners they ride on the jaw, fully
+        on the chin and fading out up the cheeks, so an opening jaw stretches the cheek evenly;
+        below and behind the jaw line they take the jaw band's share (``_jaw_band_share``), fading
+        down the throat into the still neck."""
+        skin = np.zeros(len(self.v), dtype=bool)
+        skin[self.face.parts["skin"]] = True
+        skin[self.face.parts["skin"][self._mouth_bag(self.face.parts["skin"])]] = False
+        positions = {p.name: p.position for p in self.points}
+        corner_y = self.fp["8.3"][1]
+        jaw_y = (self.fp["2.13"][1] + self.fp["2.1"][1]) / 2
+        up_cheek = np.clip((corner_y - self.v[:, 1]) / (corner_y - jaw_y), 0, 1)
+        for region, spacing in GRID_SPACING.items():
+            verts = np.flatnonzero((self.region_of == region) & skin)
+            taken = [positions[n] for n in self.members.get(region, [])]
+            on_face = 1.0 if region == "lower_mouth" else up_cheek
+            shares = np.where(self.in_jaw_band, self.jaw_share, on_face)
+            for vertex in _spread_out(self.v, verts, taken, self._scale(spacing)):
+                share = float(shares[vertex])
+                carried = {"attach": "jaw", "attach_weight": max(share, 0.05)} if share > 0 else {}
+                self._add(region, f"{region}_grid_{vertex}", "active", vertex=int(vertex), **carried)
 
     def _midline_anchors(self, region: str) -> None:
         """Fixed anchors down the mid-line, so one side's motion does not leak to the other."""
@@ -275,12 +390,13 @@ class _Builder:
         positions = {p.name: p.position for p in self.points}
         taken = [positions[n] for n in self.members.get(region, [])]
         for vertex in _spread_out(self.v, middle, taken, self._scale(BORDER_SPACING)):
-            self._add(region, f"{region}_midline_{vertex}", "fixed", vertex=vertex)
+            self._add(region, f"{region}_midline_{vertex}", "active", vertex=vertex)
 
     def _deep_anchors(self, region: str, prefix: str, depth: float, attach: str | None = None) -> None:
         """Indirect fixed anchors under the region's skin (its centre pushed back along -z),
-        carried by a rigid part if one is named."""
-        verts = np.flatnonzero(self.region_of == region)
+        carried by a rigid part if one is named. The jaw band is left out of the centre: the
+        anchors steady the face, not the throat."""
+        verts = np.flatnonzero((self.region_of == region) & ~self.in_jaw_band)
         p = self.v[verts]
         lo, hi = p.min(axis=0), p.max(axis=0)
         for i, fx in enumerate((0.25, 0.75)):
@@ -309,7 +425,7 @@ class _Builder:
                 path = _loop_path_via(loop, a, b, centre)
                 for vertex in path[1:-1]:
                     if vertex != centre:
-                        self._add("forehead", f"{lid}_lid_{side}_{vertex}", "fixed", vertex=int(vertex),
+                        self._add("forehead", f"{lid}_lid_{side}_{vertex}", "active", vertex=int(vertex),
                                   group=f"{lid}_lid_{side}", attach=f"{lid}_lid_{side}")
 
     def _nose(self) -> None:
@@ -333,6 +449,22 @@ class _Builder:
             self.lip_lines.append(LipLine(name, keys, points))
         self._deep_anchors("upper_mouth", "upper_mouth_deep_", self._scale(0.35))
         self._deep_anchors("lower_mouth", "lower_mouth_deep_", self._scale(0.35), attach="jaw")
+        self._mouth_bag_anchors()
+
+    def _mouth_bag_anchors(self) -> None:
+        """Fixed points on the mouth bag away from the lips: on the lower half they ride on the
+        jaw, on the upper half they stay. Without them DFFD extrapolates the deep bag from the
+        lip points alone, and an opening jaw rolls the bag's floor forward out of the mouth
+        instead of carrying it down with the teeth and tongue."""
+        opening = self.v[np.asarray(self.face.contours["mouth_opening"])]
+        bag = self.bag[cKDTree(opening).query(self.v[self.bag])[0] > self._scale(BAG_FREE_DEPTH)]
+        spacing = self._scale(BAG_SPACING)
+        for region, attach in (("upper_mouth", None), ("lower_mouth", "jaw")):
+            verts = bag[self.region_of[bag] == region]
+            positions = {p.name: p.position for p in self.points}
+            taken = [positions[n] for n in self.members.get(region, [])]
+            for vertex in _spread_out(self.v, verts, taken, spacing):
+                self._add(region, f"{region}_bag_{vertex}", "fixed", vertex=int(vertex), attach=attach)
 
     def _lip_points(self, name: str, contour: str, keys: list[str], region: str) -> list[str]:
         """One interpolated point on the contour midway between each pair of consecutive keys."""
@@ -415,6 +547,12 @@ def _loop_path(loop: list[int], i: int, j: int) -> list[int]:
     forward = [loop[(i + k) % n] for k in range((j - i) % n + 1)]
     backward = [loop[(i - k) % n] for k in range((i - j) % n + 1)]
     return forward if len(forward) <= len(backward) else backward
+
+
+def _smoothstep(t: np.ndarray) -> np.ndarray:
+    """0 below 0, 1 above 1, easing in between with zero slope at both ends (no kink)."""
+    t = np.clip(t, 0.0, 1.0)
+    return t * t * (3 - 2 * t)
 
 
 def _spread_out(v: np.ndarray, candidates: np.ndarray, taken: list[np.ndarray], spacing: float) -> list[int]:

@@ -1,7 +1,9 @@
 """``puppet bench``: what the runtime costs, against a dense blendshape baseline, in one run.
 
 For each mesh (the default face; it with its skin subdivided once and twice, about 23k and 75k
-vertices; the ICT face when ``../shared/assets/ict_facekit`` is there) it measures, as medians:
+vertices; the ICT face when ``../shared/assets/ict_facekit`` is there) it measures, as medians
+(``default-coarse`` is the default face on its coarse rig, ``build_rig(grid=False)``: the layout
+before the skin grid and the calibrated FAP motions, the "before" of that change in the same run):
 
 * ``rig_s``: auto-rigging the face from its feature points (``autorig.build_rig``: regions,
   control points, rigid parts, muscles), where it has them (the ICT face: from its 68 iBUG
@@ -87,7 +89,7 @@ def _private_cache() -> Iterator[None]:
                 os.environ["FACEPUPPET_CACHE"] = saved
 
 
-def bench_face(face: Face, frames: int, rig=None) -> dict:
+def bench_face(face: Face, frames: int, rig=None, label: str | None = None) -> dict:
     """All measurements for one face (see module docstring)."""
     rig = rig if rig is not None else rig_for_face(face)
     rig_s = median_time(lambda: build_rig(face), 3, warm_up=False) if face.feature_points else float("nan")
@@ -128,7 +130,7 @@ def bench_face(face: Face, frames: int, rig=None) -> dict:
     deform_ms = 1e3 * median_time(deform, frames)
     dense_ms = 1e3 * median_time(blend, frames)
     return {
-        "face": face.name,
+        "face": label or face.name,
         "vertices": len(face.vertices),
         "triangles": len(face.triangles),
         "control_points": k,
@@ -155,7 +157,8 @@ def performance(rng: np.random.Generator, frames: int, k: int, amplitude: float)
     return displacements, angles
 
 
-def bench_frame_split(face: Face, frames: int, rig=None, size: tuple[int, int] = (640, 480)) -> dict:
+def bench_frame_split(face: Face, frames: int, rig=None, size: tuple[int, int] = (640, 480),
+                      label: str | None = None) -> dict:
     """Median ms per step of a whole offscreen frame, and frames per second (module docstring)."""
     from .render import Renderer
 
@@ -183,7 +186,7 @@ def bench_frame_split(face: Face, frames: int, rig=None, size: tuple[int, int] =
                     steps[step].append(b - a)
     ms = {f"{step}_ms": 1e3 * statistics.median(v) for step, v in steps.items()}
     frame = sum(ms.values())
-    return {"face": face.name, "vertices": len(face.vertices), "input": kind, "size": f"{size[0]}x{size[1]}",
+    return {"face": label or face.name, "vertices": len(face.vertices), "input": kind, "size": f"{size[0]}x{size[1]}",
             **ms, "fps": 1e3 / frame,
             "deform_share": (ms["controls_ms"] + ms["dffd_ms"] + ms["normals_ms"]) / frame}
 
@@ -231,16 +234,19 @@ def _dense_baseline(runtime: Runtime) -> tuple[np.ndarray, np.ndarray, np.ndarra
     return deltas, rest, np.empty_like(rest)
 
 
-def bench_faces(ict: bool) -> list[tuple[Face, object]]:
-    """The meshes to measure: default, subdivided twice over, and ICT when present."""
+def bench_faces(ict: bool) -> list[tuple[Face, object, str]]:
+    """The meshes to measure, with their rig and label: default (and on its coarse rig),
+    subdivided twice over, and ICT when present."""
     face = load_face()
-    faces: list[tuple[Face, object]] = [(face, None), (subdivide(face, 1), None), (subdivide(face, 2), None)]
+    coarse = build_rig(face, grid=False, calibrated=False)
+    faces = [(face, None, "default"), (face, coarse, "default-coarse")]
+    faces += [(f, None, f.name) for f in (subdivide(face, 1), subdivide(face, 2))]
     if ict:
         from .ict import ict_face_and_rig
 
         found = ict_face_and_rig()
         if found is not None:
-            faces.append(found)
+            faces.append((*found, found[0].name))
     return faces
 
 
@@ -249,8 +255,8 @@ def run_bench(frames: int = 300, as_json: bool = False, ict: bool = True, flood_
     """Measure every mesh, the inputs and the live pipeline; print tables (or JSON); return the
     process exit code."""
     faces = bench_faces(ict)
-    rows = [bench_face(face, frames, rig) for face, rig in faces]
-    split = [bench_frame_split(face, min(frames, 120), rig) for face, rig in faces
+    rows = [bench_face(face, frames, rig, label) for face, rig, label in faces]
+    split = [bench_frame_split(face, min(frames, 120), rig, label=label) for face, rig, label in faces
              if face.name in ("default", "ict")]
     muscles = bench_muscles(faces[0][0], frames)
     inputs = bench_inputs()

@@ -156,16 +156,16 @@ def _load_mesh(path: str | os.PathLike) -> Face:
     )
 
 
-def load_default_rig():
+def load_default_rig(generate: bool = True):
     """The default face's rig: ``puppet/data/default_rig.json`` when it is shipped, else the rig
-    ``puppet.autorig`` generates from the default face's feature points."""
+    ``puppet.autorig`` generates from the default face's feature points (None if not ``generate``)."""
     from . import autorig, rig
 
     resource = _data_file(DEFAULT_RIG)
     if resource.is_file():
         with importlib.resources.as_file(resource) as p:
             return rig.load_rig(p)
-    return autorig.build_rig(load_face())
+    return autorig.build_rig(load_face()) if generate else None
 
 
 # -- the default face ------------------------------------------------------------------------

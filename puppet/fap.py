@@ -6,6 +6,10 @@ file; index 0 = FAP 1) into the runtime's inputs: control point displacements an
 * Translations (every FAP whose unit is a distance and whose feature point is an active control
   point of the rig): the point moves by value x FAPU along the FAP's positive direction. They are
   one small dense product.
+* Calibrated motions (the rig's ``fap_motions``, ``puppet.fapcalibration``): every FAP, rigid ones
+  included, also moves the skin grid's points as the example shapes showed, value x FAPU x the
+  stored motion; they join the same product. A FAP's own feature point still moves by exactly
+  value x FAPU: the grid holds none of them, so the encoder reads every FAP off its own point.
 * open_jaw (3) turns the jaw about its hinge so that 2.1 drops by exactly value x MNS;
   thrust_jaw (14) and shift_jaw (15) translate it.
 * Eyelids (19-22) turn the lid margins about the eyeball centre so that 3.1 / 3.2 drop (3.3 /
@@ -15,6 +19,8 @@ file; index 0 = FAP 1) into the runtime's inputs: control point displacements an
 * Head: pitch (48), yaw (49), roll (50) about 7.1, as yaw * pitch * roll.
 * Tongue (43-46): the default face's tongue is rigid on the jaw, so tip and body FAPs translate
   it whole (44 and 46 both raise it).
+* Reach (the rig's ``fap_reach``): a FAP beyond the values this face can show without a fold is
+  limited to them here, after the high-level FAPs are expanded; what a file says is never changed.
 * High-level FAPs 1 and 2 expand into low-level FAPs from ``data/high_level_faps.yaml`` (blends as
   the standard says) and add to the frame's low-level values.
 
@@ -61,8 +67,13 @@ class FapEngine:
         self.fapu = self.face.fapu
         self.rest = np.asarray(self.face.vertices, dtype=float)
         self._index = {name: i for i, name in enumerate(runtime.control_points)}
-        self._translations = self._translation_matrix()
+        self._own = self._translation_matrix()
+        self._translations = self._own + self._calibrated_matrix()
         self._high = high_level_faps()
+        self.reach = np.full((2, N_FAPS), np.inf)
+        self.reach[0] = -np.inf
+        for number, (low, high) in self.rig.fap_reach.items():
+            self.reach[:, number - 1] = low, high
 
     # -- decoding ------------------------------------------------------------------------
 
@@ -79,9 +90,19 @@ class FapEngine:
                     T[self._index[point], :, f.number - 1] += f.axis * self.fapu[f.unit]
         return T.reshape(-1, N_FAPS)
 
+    def _calibrated_matrix(self) -> np.ndarray:
+        """(K * 3, 68): the rig's calibrated FAP motions, in mesh units per unit of each FAP."""
+        T = np.zeros((len(self._index), 3, N_FAPS))
+        for number, motions in self.rig.fap_motions.items():
+            unit = self.fapu[fap(number).unit]
+            for name, motion in motions.items():
+                if name in self._index:
+                    T[self._index[name], :, number - 1] += motion * unit
+        return T.reshape(-1, N_FAPS)
+
     def effects(self) -> dict[int, str]:
         """What each FAP does on this face (or why it does nothing), by FAP number."""
-        moved = np.abs(self._translations).sum(axis=0) > 0
+        moved = np.abs(self._own).sum(axis=0) > 0
         parts = self.rig.rigid_parts
         out = {}
         for f in faps():
@@ -129,8 +150,9 @@ class FapEngine:
         return out
 
     def controls(self, values: np.ndarray) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-        """Control point displacements (K, 3) and rigid motions for 68 low-level FAP values."""
-        v = np.asarray(values, dtype=float)
+        """Control point displacements (K, 3) and rigid motions for 68 low-level FAP values,
+        each within the face's reach."""
+        v = np.clip(np.asarray(values, dtype=float), self.reach[0], self.reach[1])
         d = (self._translations @ v).reshape(-1, 3)
         motions = {"jaw": self._jaw(v), "head": self._head(v)}
         for part, (yaw, pitch, thrust) in EYE_FAPS.items():
@@ -239,7 +261,7 @@ class FapEngine:
 
     def _encode_translations(self, local: np.ndarray, motions: dict[str, np.ndarray], out: np.ndarray) -> None:
         """Each translational FAP from its point's own displacement (the part's motion undone)."""
-        T = self._translations.reshape(len(self._index), 3, N_FAPS)
+        T = self._own.reshape(len(self._index), 3, N_FAPS)
         for name, k in self._index.items():
             columns = np.flatnonzero(np.abs(T[k]).sum(axis=0))
             if not len(columns):

@@ -42,9 +42,10 @@ Muscles (the rig's ``muscles``, ``muscle_names``; ``puppet.muscles``) join a fra
   vectorised check and the share's sparse product. It acts only where a corner comes within 5% of
   its opposite edge (a triangle folds exactly when a corner crosses that edge), and then only on
   a few rings of triangles around those corners: sweeps, then scaling the share back toward rest
-  there until no corner is that close, so no muscle folds the skin at any contraction. The default
-  muscles squeeze nothing at normal contractions (each alone up to 1, all together at 0.5), so
-  there the guard never acts; it is the safety net for experiments beyond. It guards the
+  there until no corner is that close, so no muscle folds the skin at any contraction. On the skin
+  grid (``puppet.autorig``) a muscle moves many more points, and a few (the lids' orbicularis,
+  the inner frontalis, risorius_r) squeeze a triangle at contraction 0.5-1: there the guard acts
+  at normal contractions too, not only as the safety net for experiments beyond. It guards the
   muscles' share alone, like the improved vertex mode, because FAP poses legitimately squeeze
   the skin (a closed lid, an open jaw) and must draw as they always did. We chose it over changing
   the rig or the law on control points (sampling the muscle field at every control point, fixed
@@ -147,7 +148,8 @@ class Runtime:
     def _load_or_compute(self, cache: bool) -> dict[str, RegionDeformer]:
         """Each region's deformer from the coefficient cache, or computed (and then cached)."""
         geometry = rig_to_dict(self.rig)
-        del geometry["muscles"]  # muscles change no Sibson coordinate: editing them keeps the cache
+        for key in ("muscles", "fap_motions", "fap_reach"):  # they change no Sibson coordinate: editing them keeps the cache
+            del geometry[key]
         key = coefcache.cache_key(self.face.content_hash, geometry)
         cached = (coefcache.load(key) if cache else None) or {}
         deformers, computed = {}, False

@@ -24,7 +24,7 @@ def test_the_benchmark_take_is_smooth():
 
 
 def test_run_bench_prints_json(capsys, monkeypatch):
-    monkeypatch.setattr("puppet.bench.bench_faces", lambda ict: [(load_face(), None)])
+    monkeypatch.setattr("puppet.bench.bench_faces", lambda ict: [(load_face(), None, "default")])
     monkeypatch.setattr("puppet.bench.bench_inputs", lambda: [{"adapter": "x", "samples_s": 1.0}])
     assert run_bench(frames=2, as_json=True, ict=False, flood_seconds=1.0, take_seconds=30.0) == 0
     report = json.loads(capsys.readouterr().out)

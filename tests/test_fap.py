@@ -33,8 +33,8 @@ def test_every_translational_fap_moves_its_point_by_value_times_fapu_along_its_d
         moved = runtime.pose({f.number: value})
         for point in f.feature_points:
             vertex = face.feature_vertices[point]
-            np.testing.assert_allclose(moved[vertex] - face.vertices[vertex], value * fapu[f.unit] * f.axis,
-                                       atol=1e-9, err_msg=f"FAP {f.number} {f.name}")
+            assert (moved[vertex] - face.vertices[vertex]) @ f.axis == pytest.approx(value * fapu[f.unit], abs=1e-9), \
+                f"FAP {f.number} {f.name}"  # across its axis, the calibration may move it (fapcalibration)
         checked += 1
     assert checked == 39  # 4-13, 16-18, 31-42, 51-64
 

@@ -60,7 +60,10 @@ def test_moving_the_nose_moves_no_forehead_vertex(runtime, face):
         assert not moved[_region(runtime, other)].any(), other
 
 
-def test_passive_points_carry_motion_across_their_border_one_way(runtime, face):
+def test_passive_points_carry_motion_across_their_border_one_way(face):
+    from puppet.autorig import build_rig
+
+    runtime = Runtime(face, build_rig(face, grid=False, calibrated=False), dtype=np.float64)  # no grid point in the way
     lower_lip = runtime.deform(_displace(runtime, {"8.2": (0, -0.04, 0), "8.7": (0, -0.03, 0), "8.8": (0, -0.03, 0)}))
     moved = np.linalg.norm(lower_lip - face.vertices, axis=1) > 1e-9
     assert moved[_region(runtime, "cheek_l")].any() and moved[_region(runtime, "cheek_r")].any()
@@ -211,8 +214,10 @@ def test_the_shipped_rig_is_what_autorig_builds_today(face):
     from puppet.rig import rig_to_dict
 
     shipped = rig_to_dict(load_default_rig())
-    built = build_rig(face)
-    assert shipped == json.loads(json.dumps(rig_to_dict(built))), "run tools/build_default_rig.py"
+    built = json.loads(json.dumps(rig_to_dict(build_rig(face, calibrated=False))))
+    for calibrated in ("fap_motions", "fap_reach"):  # what the calibration adds (test_fapcalibration)
+        del shipped[calibrated], built[calibrated]
+    assert shipped == built, "run tools/build_default_rig.py"
 
 
 def test_hybrid_eyelid_turns_its_margin_about_the_eyeball_and_the_lid_follows(runtime, face):

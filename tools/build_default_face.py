@@ -29,14 +29,16 @@ What it does, in order (each step is a function below):
    incisors to second molars, average adult sizes scaled by the mouth width, and a scalloped gum
    band) along a smooth curve fitted to each helper's incisal row; the arch is set back where
    teeth come within a clearance of the mouth bag, and the gum's deep rows are drawn back where
-   the bag is shallow. At rest the teeth are a little apart, so the lips' slit shows the dark
-   mouth rather than a line of teeth.
+   the bag is shallow. At rest the incisal edges are level with the lips' meeting line (the
+   lower ones just behind the upper ones), so the teeth show as soon as the lips part.
    Tongue: the helper tongue is as wide as the whole arch and its tip reaches through the lower
    incisors once the teeth have a real thickness, so it is reshaped (same vertices and faces,
    shortened toward its root and narrowed above the floor of the mouth) until no tooth vertex is
    inside it and none of its vertices is inside a tooth; its ``source_index`` is -1 since its
    positions are no longer base.obj's (vertex i is base vertex 13380 + i).
-5. Vertex albedo (skin, lips, brows, lash line, mouth interior, teeth, gums, tongue, eyes).
+5. Vertex albedo (skin, lips, brows, lash line, mouth interior, teeth, gums, tongue, eyes). The
+   mouth's occlusion is baked in: the bag darkens fast along its surface behind the lips, the
+   tongue and teeth with their depth behind the lips, so an open mouth shows a dark cavity.
 6. Feature points: the candidates' 84 FDP points carried to the new vertex indices; changed are
    3.5/3.6 (eyeball front poles), 9.8-9.11 (generated teeth), 4.5/4.6 (brow tails: the candidate
    was on the temple) and the tongue points 6.1-6.4 move with the tongue (see ``feature_points``);
@@ -131,11 +133,12 @@ TOOTH_SEGMENTS = 12
 SUPERELLIPSE = 2.6
 MOUTH_WIDTH_MM = 50.0
 LOWER_INSET = 0.028  # dm: the lower arch's labial line behind the upper one (overjet)
-# Rest position: lips closed, teeth slightly apart (the physiological rest space), so the slit
-# between the lips shows the dark mouth, not a line of teeth: the upper teeth a little above the
-# helper's incisal row (above the lips' meeting line), the lower ones a little below theirs.
-UPPER_REST_LIFT = 0.015  # dm
-LOWER_REST_DROP = 0.015  # dm
+# Rest position: lips closed; the upper incisal edges a little below the lips' meeting line
+# (behind the lower lip), so they show as soon as the lips part, and the lower incisal edges
+# level with the lower lip's inner edge, just behind the upper incisors (a slight overbite), so
+# they show as the jaw opens. Both relative to the helpers' incisal rows (lift: up, drop: down).
+UPPER_REST_LIFT = -0.004  # dm
+LOWER_REST_DROP = -0.001  # dm
 GUM_COLUMNS_PER_TOOTH = 6
 # gum profile levels (same f as LEVELS): margin at the tooth centres, extra at the papillae,
 # the labial/lingual faces' deepest row and the ridge over the roots
@@ -147,7 +150,13 @@ CLEARANCE = 0.004  # dm kept between teeth/gums and the mouth-bag skin
 SKIN = np.array([0.87, 0.67, 0.57])
 LIP = np.array([0.74, 0.40, 0.40])
 LIP_INNER = np.array([0.66, 0.28, 0.30])
-MOUTH_DEEP = np.array([0.20, 0.05, 0.06])
+MOUTH_DEEP = np.array([0.10, 0.025, 0.03])
+# The mouth's occlusion, baked into the albedo: light reaches the cavity only through the lips'
+# opening, so the surfaces inside darken fast with their distance behind it. (strength, span in dm)
+# of ``depth_shade`` per part; the mouth bag darkens along its own surface over BAG_DARK_SPAN.
+BAG_DARK_SPAN = 0.12
+TONGUE_SHADE = (0.8, 0.35)
+TEETH_SHADE = (0.6, 0.4)
 BROW = np.array([0.28, 0.19, 0.13])
 LASH = np.array([0.13, 0.09, 0.08])
 BLUSH = np.array([0.88, 0.58, 0.53])
@@ -804,7 +813,7 @@ def skin_colors(V, T, skin_mask, contours, fp, eye_centres) -> tuple[np.ndarray,
     col = lerp(col, LIP, a * skin_mask)
     # inside the mouth: wet red at the lips' meeting line, darkening with depth
     depth = np.where(bag, d_mouth, 0.0)
-    interior = lerp(LIP_INNER, MOUTH_DEEP, smoothstep(0.0, 0.22, depth))
+    interior = lerp(LIP_INNER, MOUTH_DEEP, smoothstep(0.0, BAG_DARK_SPAN, depth))
     col[bag] = interior[bag]
     # eyebrows: a soft band along 4.1-4.3-4.5 (and mirrored)
     for side, ids in (("l", ("4.1", "4.3", "4.5")), ("r", ("4.2", "4.4", "4.6"))):
@@ -992,11 +1001,11 @@ def build(source: Path) -> tuple[dict[str, np.ndarray], dict, str]:
     tongue_col = np.tile(TONGUE, (len(tongue), 1))
     underside = smoothstep(0.0, 0.06, tongue_underside(V[tongue]))
     tongue_col = lerp(tongue_col, TONGUE * 0.7, underside)
-    col[tongue] = depth_shade(V[tongue], tongue_col, front_z, 0.6, 0.5)
+    col[tongue] = depth_shade(V[tongue], tongue_col, front_z, *TONGUE_SHADE)
     for part in ("eye_l", "eye_r"):
         col[parts[part]] = generated_colors[part]
     for part in ("teeth_upper", "teeth_lower"):
-        col[parts[part]] = depth_shade(V[parts[part]], generated_colors[part], front_z, 0.45, 0.5)
+        col[parts[part]] = depth_shade(V[parts[part]], generated_colors[part], front_z, *TEETH_SHADE)
     colors = np.clip(col, 0.0, 1.0)
 
     arrays = {

@@ -1,0 +1,181 @@
+"""FAP motions calibrated from example shapes: what a user sees (the face reproduces an artist's
+shape better, a FAP still moves its own point exactly, nothing folds), and that it carries over."""
+
+from __future__ import annotations
+
+import copy
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import puppet
+from puppet.autorig import build_rig
+from puppet.examples import ExampleError, load_examples, read_target
+from puppet.fapcalibration import calibrate, capacity, fit_faps, fold_free_reach, relative_residual
+from puppet.faptable import clamp_ranges, fap
+from puppet.muscles import folded_triangles
+from puppet.rig import load_rig, save_rig
+from puppet.subdivide import subdivide
+
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLES = ROOT.parent / "shared" / "assets" / "makehuman" / "faceunits_arkit"
+needs_examples = pytest.mark.skipif(not EXAMPLES.is_dir(), reason="../shared/assets/makehuman is not here")
+
+
+@pytest.fixture(scope="module")
+def face():
+    return puppet.load_face()
+
+
+@pytest.fixture(scope="module")
+def runtime(face):
+    return puppet.Runtime(face, dtype=np.float64)
+
+
+@pytest.fixture(scope="module")
+def examples(face):
+    if not EXAMPLES.is_dir():
+        pytest.skip("../shared/assets/makehuman is not here")
+    return load_examples(face, EXAMPLES)
+
+
+def test_a_target_file_reads_as_rows_and_a_bad_line_names_its_place(tmp_path):
+    good = tmp_path / "smile.target"
+    good.write_text("# a comment\n\n12 0.1 -0.2 .003\n7 0 0 1\n")
+    assert read_target(good).tolist() == [[12, 0.1, -0.2, 0.003], [7, 0, 0, 1]]
+    bad = tmp_path / "bad.target"
+    bad.write_text("12 0.1 -0.2 .003\n13 0.1 oops 0\n")
+    with pytest.raises(ExampleError, match=r"bad.target:2: expected 'INDEX DX DY DZ'"):
+        read_target(bad)
+
+
+def test_targets_land_on_the_face_vertices_through_their_source_index(tmp_path, face):
+    base = int(face.source_index[face.feature_vertices["8.3"]])
+    (tmp_path / "corner.target").write_text(f"{base} 0.01 0.02 0.0\n99999999 1 1 1\n")
+    shape = load_examples(face, tmp_path)["corner"]
+    assert shape.shape == face.vertices.shape
+    assert shape[face.feature_vertices["8.3"]].tolist() == [0.01, 0.02, 0.0]
+    assert np.count_nonzero(np.linalg.norm(shape, axis=1)) == 1  # a vertex the face lacks is dropped
+
+
+def test_a_fap_still_moves_its_own_feature_point_by_value_times_fapu_exactly(runtime, face):
+    assert runtime.rig.fap_motions, "the default rig ships calibrated"
+    rest = runtime.pose({})
+    for name, value in (("raise_l_cornerlip_o", 80), ("raise_r_i_eyebrow", 60), ("lower_t_midlip", 100)):
+        f = fap(name)
+        moved = runtime.pose({name: value}) - rest
+        point = face.feature_vertices[f.feature_points[0]]
+        assert moved[point] @ f.axis == pytest.approx(value * face.fapu[f.unit], rel=1e-6)
+
+
+def test_the_encoder_reads_back_a_calibrated_pose(runtime):
+    rng = np.random.default_rng(3)
+    values = np.zeros(68)
+    for number in (4, 5, 12, 13, 31, 33, 41, 59, 60):
+        values[number - 1] = rng.uniform(-60, 60)
+    encoded = runtime.faps.encode(runtime.pose(values))
+    assert np.abs(encoded - values).max() < 1e-6
+
+
+@needs_examples
+def test_the_calibrated_face_reproduces_artist_shapes_better_than_the_coarse_rig(face, runtime, examples):
+    coarse = puppet.Runtime(face, build_rig(face, grid=False, calibrated=False), dtype=np.float64)
+    for name in ("mouthSmileLeft", "browInnerUp", "jawOpen"):
+        shape = examples[name]
+        now = relative_residual(runtime, fit_faps(runtime, shape), shape)
+        before = relative_residual(coarse, fit_faps(coarse, shape, where="moved"), shape)
+        assert now < 0.75 * before, name
+    assert capacity(runtime, examples["noseSneerLeft"]) < capacity(coarse, examples["noseSneerLeft"])
+
+
+@needs_examples
+def test_a_smile_fit_raises_and_widens_the_lip_corner(face, runtime, examples):
+    values = fit_faps(runtime, examples["mouthSmileLeft"])
+    moved = runtime.pose(values) - runtime.pose({})
+    corner = moved[face.feature_vertices["8.3"]]
+    assert corner[1] > 0 and corner[0] > 0  # up and out, toward the face's own left
+
+
+def test_the_fold_free_reach_of_a_fap_folds_nothing_and_its_range_end_does(runtime, face):
+    low, high = clamp_ranges()
+    reach = fold_free_reach(runtime, numbers=(6, 53))
+    triangles = np.asarray(face.triangles)
+    for number, (lo, hi) in reach.items():
+        for value, end in ((lo, low[number - 1]), (hi, high[number - 1])):
+            values = np.zeros(68)
+            values[number - 1] = value
+            assert not folded_triangles(face.vertices, runtime.pose(values), triangles).any()
+            if np.isfinite(value):
+                values[number - 1] = 2 * end
+                assert folded_triangles(face.vertices, runtime.pose(values), triangles).any()
+
+
+def test_a_value_beyond_the_reach_is_limited_at_pose_time_only(face, runtime):
+    rig = copy.deepcopy(runtime.rig)
+    rig.fap_reach = {12: (-40.0, 50.0)}
+    limited = puppet.Runtime(face, rig)
+    values = np.zeros(68)
+    values[11] = 50.0
+    at_reach = limited.pose(values)
+    values[11] = 400.0
+    beyond = values.copy()
+    assert np.array_equal(limited.pose(values), at_reach)
+    assert np.array_equal(values, beyond)  # the caller's (the file's) values are untouched
+
+
+def test_a_rig_file_keeps_its_motions_and_reach(tmp_path, runtime):
+    rig = copy.deepcopy(runtime.rig)
+    rig.fap_reach = {3: (-np.inf, 700.0), 12: (-40.5, 50.0)}
+    path = tmp_path / "face.rig"
+    save_rig(rig, path)
+    again = load_rig(path)
+    assert again.fap_reach == rig.fap_reach
+    number = next(iter(rig.fap_motions))
+    some = next(iter(rig.fap_motions[number]))
+    assert np.allclose(again.fap_motions[number][some], rig.fap_motions[number][some], atol=1e-5)
+
+
+def test_the_calibration_carries_over_to_a_face_rigged_anew(face, runtime):
+    finer = subdivide(face, 1)
+    rig = build_rig(finer)
+    assert rig.fap_motions
+    fine = puppet.Runtime(finer, rig, dtype=np.float64)
+    coarse = puppet.Runtime(finer, build_rig(finer, calibrated=False), dtype=np.float64)
+    values = {"raise_l_cornerlip_o": 100, "stretch_l_cornerlip_o": 40}
+    skin = face.parts["skin"]
+    want = (runtime.pose(values) - runtime.pose({}))[skin]
+    got = (fine.pose(values) - fine.pose({}))[skin]
+    without = (coarse.pose(values) - coarse.pose({}))[skin]
+    assert np.linalg.norm(got - want) < 0.5 * np.linalg.norm(without - want)
+
+
+@needs_examples
+def test_a_calibration_fits_its_examples_better_and_keeps_its_held_out_ones_apart(face, examples):
+    few = {n: examples[n] for n in ("mouthSmileLeft", "jawOpen", "browInnerUp")}
+    result = calibrate(face, few, held_out=("browInnerUp",), iterations=1)
+    assert result.held_out == ("browInnerUp",)
+    assert set(result.weights) == set(few)
+    assert result.rig.fap_motions
+    calibrated = puppet.Runtime(face, result.rig, dtype=np.float64)
+    coarse = puppet.Runtime(face, build_rig(face, grid=False, calibrated=False), dtype=np.float64)
+    smile = few["mouthSmileLeft"]
+    assert relative_residual(calibrated, result.weights["mouthSmileLeft"], smile) < \
+        relative_residual(coarse, fit_faps(coarse, smile), smile)
+
+
+def test_the_arkit_mappings_are_written_from_the_solved_vectors(tmp_path):
+    sys.path.insert(0, str(ROOT / "tools"))
+    try:
+        import build_arkit_mappings
+    finally:
+        sys.path.remove(str(ROOT / "tools"))
+    build_arkit_mappings.main(["--out", str(tmp_path)])
+    for name in ("arkit_csv.yaml", "arkit_osc.yaml"):
+        assert (tmp_path / name).read_text() == (ROOT / "mappings" / name).read_text(), \
+            "run tools/build_arkit_mappings.py"
+    vectors = json.loads((ROOT / "puppet" / "data" / "arkit_faps.json").read_text())["faps"]
+    mapping = puppet.load_mapping(ROOT / "mappings" / "arkit_csv.yaml")
+    assert mapping is not None and vectors["jawOpen"]["open_jaw"] > 0

@@ -1,0 +1,75 @@
+"""The open mouth reads as a mouth: a dark cavity with teeth in it, the tongue behind the lower
+incisors, the mouth bag behind the lips (issue 11)."""
+
+from __future__ import annotations
+
+import moderngl
+import numpy as np
+import pytest
+
+import puppet
+from puppet.autorig import build_rig
+from puppet.mouthcheck import mouth_pixels
+
+JAW_OPENINGS = np.arange(0.0, 1081.0, 120.0)
+
+
+@pytest.fixture(scope="module")
+def face():
+    return puppet.load_face()
+
+
+@pytest.fixture(scope="module")
+def runtime(face):
+    return puppet.Runtime(face, rig=build_rig(face))
+
+
+@pytest.fixture(scope="module")
+def egl() -> None:
+    """Skip the test unless a headless EGL context can be created."""
+    try:
+        moderngl.create_context(standalone=True, backend="egl").release()
+    except Exception as exc:  # any failure means no usable headless GL here
+        pytest.skip(f"headless EGL OpenGL context unavailable: {exc}")
+
+
+@pytest.fixture(scope="module")
+def open_mouth(face, runtime, egl):
+    return mouth_pixels(face, runtime, open_jaw=400)
+
+
+def test_open_mouth_is_mostly_dark_with_teeth_showing(open_mouth):
+    assert open_mouth.area > 1000
+    assert open_mouth.dark_fraction >= 0.25
+    assert open_mouth.teeth_fraction >= 0.08
+
+
+def test_closed_mouth_shows_neither_cavity_nor_teeth(face, runtime, open_mouth):
+    closed = mouth_pixels(face, runtime, open_jaw=0)
+    assert closed.area < 0.15 * open_mouth.area  # the lips' slit only
+    assert closed.dark + closed.teeth < 0.1 * open_mouth.area
+
+
+def _mouth_bag(face) -> np.ndarray:
+    from puppet.autorig import _Builder
+
+    skin = face.parts["skin"]
+    return skin[_Builder(face)._mouth_bag(skin)]
+
+
+def test_tongue_stays_behind_the_lower_incisors(face, runtime):
+    tongue, lower = face.parts["tongue"], face.parts["teeth_lower"]
+    front = np.abs(face.vertices[lower, 0]) < 0.05  # the lower incisors
+    for open_jaw in JAW_OPENINGS:
+        v = runtime.pose({"open_jaw": open_jaw})
+        incisors = v[lower[front]]
+        # in the jaw's frame the tongue rides with the teeth: compare along the jaw's forward axis
+        assert v[tongue, 2].max() < incisors[:, 2].max(), open_jaw
+
+
+def test_mouth_bag_never_comes_out_in_front_of_the_lips(face, runtime):
+    bag = _mouth_bag(face)
+    lips = np.asarray(face.contours["mouth_opening"])  # the inner lip line
+    for open_jaw in JAW_OPENINGS:
+        v = runtime.pose({"open_jaw": open_jaw})
+        assert v[bag, 2].max() <= v[lips, 2].max() + 1e-9, open_jaw
