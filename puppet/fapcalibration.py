@@ -14,8 +14,11 @@ of the FAP. ``calibrate`` learns them from example shapes (``puppet.examples``) 
 * **Alternating least squares.** With E fixed, each example gets the FAP vector that reproduces
   it best within the FAPs' ranges (bounded least squares over every skin vertex, so motion where
   the example has none costs too). With those vectors fixed, E is the ridge solution pulled toward
-  the prior; both steps are exact and the second is closed-form (two SVDs). A FAP's own feature
-  point never moves by E, so it still moves by exactly value x FAPU and the encoder is unchanged.
+  the prior and smooth across neighbouring grid points; both steps are exact and the second is
+  closed-form (one generalised eigenproblem per axis). A translational FAP's motions stay in the
+  regions of its feature point and those they drive. No motion moves a feature point along the
+  axis of a FAP defined on it (``free_axes``), so each FAP still moves its own point by exactly
+  value x FAPU along its direction and the encoder is unchanged.
 * **Held out.** ``HELD_OUT`` shapes (whole left/right pairs) never reach the calibration; the
   report gives their fit separately: a calibration that only memorises its examples is no win.
 
