@@ -259,19 +259,24 @@ class FapEngine:
         out[43] = move[1] / self.fapu["MNS0"]
         out[44] = move[2] / self.fapu["MW0"]
 
-    def _encode_translations(self, local: np.ndarray, motions: dict[str, np.ndarray], out: np.ndarray) -> None:
-        """Each translational FAP from its point's own displacement (the part's motion undone)."""
+    @functools.cached_property
+    def _own_axes(self) -> list[tuple[object, np.ndarray, np.ndarray]]:
+        """(control point, FAP columns, their axes) for each point a translational FAP moves by
+        definition: the few feature points among the rig's many control points."""
         T = self._own.reshape(len(self._index), 3, N_FAPS)
+        plan = []
         for name, k in self._index.items():
             columns = np.flatnonzero(np.abs(T[k]).sum(axis=0))
-            if not len(columns):
-                continue
-            point = self._points[name]
+            if len(columns):
+                axes = T[k][:, columns].T
+                plan.append((self._points[name], columns, axes / (axes * axes).sum(axis=1)[:, None]))
+        return plan
+
+    def _encode_translations(self, local: np.ndarray, motions: dict[str, np.ndarray], out: np.ndarray) -> None:
+        """Each translational FAP from its point's own displacement (the part's motion undone)."""
+        for point, columns, axes in self._own_axes:
             delta = local[point.vertex] - self.rest[point.vertex]
-            d = _own_displacement(point, delta, motions.get(point.attach))
-            for c in columns:
-                axis = T[k, :, c]
-                out[c] = d @ axis / (axis @ axis)
+            out[columns] = axes @ _own_displacement(point, delta, motions.get(point.attach))
 
 
 def _own_displacement(point, delta: np.ndarray, motion: np.ndarray | None) -> np.ndarray:
