@@ -30,11 +30,12 @@ from devices.base import Sample
 from devices.samplelog import LogEvent
 
 from .mapping import load_mapping
+from .shipped import shipped_mapping
 from .takeclock import TakeClock, default_muscle_faps
 from .takes import TakeRecorder
 
 DEVICE = "csv"
-DEFAULT_MAPPING = Path(__file__).resolve().parents[1] / "mappings" / "arkit_csv.yaml"
+DEFAULT_MAPPING = shipped_mapping("arkit_csv")
 SKIPPED = ("BlendShapeCount",)
 DAY_NS = 24 * 3600 * 1_000_000_000
 

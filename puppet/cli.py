@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from .render import VIEW_DIRECTIONS
+from .shipped import MappingExists, MappingNotFound, copy_mapping, mapping_path, mappings_folder, shipped_mappings
 
 VIEWS = tuple(VIEW_DIRECTIONS)
 FACE_HELP = "a face folder (puppet face-from-photo) or a mesh with feature points (default: the embedded face)"
@@ -61,7 +62,7 @@ def main(argv: list[str] | None = None) -> int:
                        help="the rate of the timecodes' frame field (default 60)")
 
     live = commands.add_parser("live", help="run a mapping's devices onto the face in a window, live")
-    live.add_argument("--mapping", required=True, help="the mapping YAML")
+    live.add_argument("--mapping", required=True, help="the mapping: a YAML file or a shipped name (puppet mappings)")
     live.add_argument("--record", default=None, metavar="NAME", help="take name for R (default: take)")
     live.add_argument("--fps", type=_positive, default=30, help="recorded take fps (default 30)")
     live.add_argument("--size", type=_size, default=(960, 720), help="window size WxH (default 960x720)")
@@ -76,8 +77,13 @@ def main(argv: list[str] | None = None) -> int:
 
     commands.add_parser("devices", help="list the controllers that are connected (serial, HID, MIDI, CAN)")
 
+    mappings = commands.add_parser("mappings", help="list the shipped mappings, or write an editable copy of one")
+    mappings.add_argument("--copy", metavar="NAME", default=None, help="write NAME.yaml here (or to -o) to edit")
+    mappings.add_argument("-o", "--output", default=".", help="folder or file for --copy (default: here)")
+
     calibrate = commands.add_parser("calibrate", help="record rest and a sweep per channel; write them into the mapping")
-    calibrate.add_argument("--mapping", required=True, help="the mapping YAML to calibrate (a .bak copy is kept)")
+    calibrate.add_argument("--mapping", required=True,
+                           help="the mapping YAML to calibrate (a .bak copy is kept; copy a shipped one first)")
     calibrate.add_argument("--rest", type=_positive_float, default=2.0, help="seconds of rest to record (default 2)")
     calibrate.add_argument("--sweep", type=_positive_float, default=8.0, help="seconds of sweep to record (default 8)")
 
@@ -110,6 +116,14 @@ def main(argv: list[str] | None = None) -> int:
     pick.add_argument("--no-browser", action="store_true", help="print the address only")
 
     args = parser.parse_args(argv)
+    if getattr(args, "mapping", None):
+        try:
+            args.mapping = str(mapping_path(args.mapping))
+        except MappingNotFound as exc:
+            print(f"puppet {args.command}: {exc}", file=sys.stderr)
+            return 2
+    if args.command == "mappings":
+        return _mappings(args)
     if args.command == "face-from-photo":
         return _face_from_photo(args)
     if args.command == "pick-landmarks":
@@ -157,6 +171,24 @@ def main(argv: list[str] | None = None) -> int:
         return run_bench(frames=args.frames, as_json=args.json, ict=not args.no_ict,
                          flood_seconds=args.flood_seconds, take_seconds=args.take_seconds)
     return 2
+
+
+def _mappings(args: argparse.Namespace) -> int:
+    """``puppet mappings``: the shipped mappings by name with the start of their description, or
+    ``--copy NAME``: an editable copy (never over an existing file)."""
+    if args.copy:
+        try:
+            print(copy_mapping(args.copy, args.output))
+        except (MappingNotFound, MappingExists) as exc:
+            print(f"puppet mappings: {exc}", file=sys.stderr)
+            return 2
+        return 0
+    for name, path in shipped_mappings().items():
+        first = next((line.lstrip("# ").strip() for line in path.read_text(encoding="utf-8").splitlines()
+                      if line.lstrip("# ").strip() and "$schema" not in line and "Written by" not in line), "")
+        print(f"{name:16} {first[:90]}")
+    print(f"({mappings_folder()}; use a name with --mapping, or --copy NAME to edit one)")
+    return 0
 
 
 def _rig(args: argparse.Namespace) -> int:

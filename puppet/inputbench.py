@@ -19,7 +19,6 @@ import contextlib
 import threading
 import time
 from collections.abc import Callable, Iterator
-from pathlib import Path
 
 import numpy as np
 
@@ -27,8 +26,9 @@ from devices import open_device
 from devices.base import Device, State
 
 from .mapping import Mapping, load_mapping
+from .shipped import mappings_folder
 
-MAPPINGS = Path(__file__).resolve().parents[1] / "mappings"
+MAPPINGS = mappings_folder()
 
 
 def measure(device: Device, mapping: Mapping, seconds: float) -> dict:

@@ -19,7 +19,6 @@ from __future__ import annotations
 import os
 import tempfile
 import time
-from pathlib import Path
 
 import numpy as np
 
@@ -31,10 +30,11 @@ from .mapping import load_mapping
 from .render import Renderer
 from .runtime import Runtime
 from .session import LiveSession, measure_latency
+from .shipped import shipped_mapping
 from .takeclock import TakeClock, default_muscle_faps
 from .takes import TakeRecorder
 
-MAPPING = Path(__file__).resolve().parents[1] / "mappings" / "arduino_sliders.yaml"
+MAPPING = shipped_mapping("arduino_sliders")
 PAGE = os.sysconf("SC_PAGE_SIZE")
 
 
