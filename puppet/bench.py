@@ -42,6 +42,7 @@ import functools
 import json
 import os
 import statistics
+import sys
 import tempfile
 import time
 from collections.abc import Callable, Iterator
@@ -234,13 +235,14 @@ def _dense_baseline(runtime: Runtime) -> tuple[np.ndarray, np.ndarray, np.ndarra
     return deltas, rest, np.empty_like(rest)
 
 
-def bench_faces(ict: bool) -> list[tuple[Face, object, str]]:
+def bench_faces(ict: bool, subdivided: bool = True) -> list[tuple[Face, object, str]]:
     """The meshes to measure, with their rig and label: default (and on its coarse rig),
     subdivided twice over, and ICT when present."""
     face = load_face()
     coarse = build_rig(face, grid=False, calibrated=False)
     faces = [(face, None, "default"), (face, coarse, "default-coarse")]
-    faces += [(f, None, f.name) for f in (subdivide(face, 1), subdivide(face, 2))]
+    if subdivided:
+        faces += [(f, None, f.name) for f in (subdivide(face, 1), subdivide(face, 2))]
     if ict:
         from .ict import ict_face_and_rig
 
@@ -250,62 +252,151 @@ def bench_faces(ict: bool) -> list[tuple[Face, object, str]]:
     return faces
 
 
+SECTIONS = ("deform", "frames", "muscles", "inputs", "latency", "flood", "long_take")
+"""What ``puppet bench --only`` can pick, in the order they run and print."""
+
+
 def run_bench(frames: int = 300, as_json: bool = False, ict: bool = True, flood_seconds: float = 60.0,
-              take_seconds: float = 3600.0) -> int:
-    """Measure every mesh, the inputs and the live pipeline; print tables (or JSON); return the
-    process exit code."""
-    faces = bench_faces(ict)
-    rows = [bench_face(face, frames, rig, label) for face, rig, label in faces]
-    split = [bench_frame_split(face, min(frames, 120), rig, label=label) for face, rig, label in faces
-             if face.name in ("default", "ict")]
-    muscles = bench_muscles(faces[0][0], frames)
-    inputs = bench_inputs()
-    live = _bench_live(faces[0][0], flood_seconds, take_seconds)
+              take_seconds: float = 3600.0, only: tuple[str, ...] = SECTIONS, quick: bool = False) -> int:
+    """Measure the ``only`` sections (every mesh, the inputs, the live pipeline); print tables (or
+    JSON) and report progress on stderr; return the process exit code. ``quick``: a minute's
+    worth (30 frames, no subdivided meshes, a 3 s flood, a 1 minute take)."""
+    unknown = sorted(set(only) - set(SECTIONS))
+    if unknown:
+        raise ValueError(f"unknown bench sections {unknown}: expected some of {', '.join(SECTIONS)}")
+    if quick:
+        frames, flood_seconds, take_seconds = min(frames, 30), min(flood_seconds, 3.0), min(take_seconds, 60.0)
+    steps = _steps(frames, ict, flood_seconds, take_seconds, only, quick)
+    report: dict[str, object] = {}
+    with Steps(len(steps)) as progress:
+        for section, label, measure in steps:
+            progress.start(f"{section}: {label}")
+            result = measure()
+            if isinstance(result, list) and section in ("deform", "frames"):
+                report.setdefault(section, []).extend(result)
+            else:
+                report[section] = result
     if as_json:
-        print(json.dumps({"deform": rows, "frames": split, "muscles": muscles, "inputs": inputs, "live": live},
-                         indent=1))
-        return 0
-    _table(rows, ("face", "vertices", "control_points", "rig_s", "precompute_s", "load_s", "deform_ms",
-                  "deform_normals_ms", "realtime_ms", "dense_ms", "ratio"))
-    print()
-    _table(split, ("face", "input", "size", "controls_ms", "dffd_ms", "normals_ms", "draw_ms", "read_ms",
-                   "fps", "deform_share"))
-    print()
-    _table(muscles, ("face", "pose", "fap_only_ms", *(f"{mode}_ms" for mode in MUSCLE_MODES)))
-    print()
-    _table([r for r in inputs if "error" not in r],
-           ("adapter", "samples_s", "paced_samples_s", "latency_median_ms", "latency_p99_ms", "bad_frames"))
-    for row in inputs:
-        if "error" in row:
-            print(f"{row['adapter']}: not measured ({row['error']})")
-    print()
-    _print_live(live)
+        print(json.dumps(report, indent=1))
+    else:
+        _print_report(report)
     return 0
 
 
-def _bench_live(face: Face, flood_seconds: float, take_seconds: float) -> dict:
+def _steps(frames: int, ict: bool, flood_seconds: float, take_seconds: float, only: tuple[str, ...],
+           quick: bool) -> list[tuple[str, str, Callable[[], object]]]:
+    """(section, label, measurement) for each step of the run, faces made on first use."""
+    faces = functools.cache(lambda: bench_faces(ict and not quick, subdivided=not quick))
+    default = functools.cache(lambda: Runtime(faces()[0][0]))
+    steps: list[tuple[str, str, Callable[[], object]]] = []
+    if "deform" in only:
+        labels = ["default", "default-coarse"] + ([] if quick else ["default-sub1", "default-sub2"] + ["ict"] * ict)
+        for k, label in enumerate(labels):
+            steps.append(("deform", label, lambda k=k: [bench_face(f, frames, rig, name)
+                                                        for f, rig, name in faces()[k:k + 1]]))
+    if "frames" in only:
+        steps.append(("frames", "default", lambda: [bench_frame_split(faces()[0][0], min(frames, 120), label="default")]))
+        if ict and not quick:
+            steps.append(("frames", "ict", lambda: [bench_frame_split(face, min(frames, 120), rig, label=label)
+                                                    for face, rig, label in faces() if face.name == "ict"]))
+    if "muscles" in only:
+        steps.append(("muscles", "default", lambda: bench_muscles(faces()[0][0], frames)))
+    if "inputs" in only:
+        steps.append(("inputs", "every adapter", lambda: bench_inputs(0.5 if quick else 2.0)))
+    live = _live_sections(default, flood_seconds, take_seconds)
+    steps += [(name, label, fn) for name, (label, fn) in live.items() if name in only]
+    return steps
+
+
+def _live_sections(runtime: Callable[[], Runtime], flood_seconds: float,
+                   take_seconds: float) -> dict[str, tuple[str, Callable[[], dict]]]:
     """The live pipeline on the default face: latency, a flood of input, a long take."""
     from . import loadbench
 
-    runtime = Runtime(face)
-    return {"latency": loadbench.latency(runtime), "flood": loadbench.flood(runtime, flood_seconds),
-            "long_take": loadbench.long_take(take_seconds)}
+    return {"latency": ("sim slider box -> drawn frame", lambda: loadbench.latency(runtime())),
+            "flood": (f"{flood_seconds:g} s of 10,000 readings/s", lambda: loadbench.flood(runtime(), flood_seconds)),
+            "long_take": (f"a {take_seconds:g} s take", lambda: loadbench.long_take(take_seconds))}
 
 
-def _print_live(live: dict) -> None:
-    lat, flood, take = live["latency"], live["flood"], live["long_take"]
-    print(f"live latency (sim slider box -> default face, drawn and read back 640x480): "
-          f"frame work (samples in -> mesh) {lat['process_median_ms']:.2f} ms median / {lat['process_p99_ms']:.2f} p99; "
-          f"sample->mesh {lat['mesh_median_ms']:.2f} ms median / {lat['mesh_p99_ms']:.2f} p99; "
-          f"sample->frame {lat['latency_median_ms']:.2f} ms median / {lat['latency_p99_ms']:.2f} p99 "
-          f"at {lat['fps']:.0f} fps")
-    print(f"flood {flood['rate']:,.0f} readings/s for {flood['seconds']:g} s, recording: {flood['fps']:.1f} fps "
-          f"(baseline {flood['baseline_fps']:.1f}, ratio {flood['fps_ratio']:.2f}), {flood['samples_s']:,.0f} "
-          f"samples/s taken, memory {flood['rss_start_mb']:.1f} -> {flood['rss_end_mb']:.1f} MiB, "
-          f"longest backlog {flood['backlog_max']}, dropped {flood['dropped']}")
-    print(f"long take {take['take_seconds'] / 3600:g} h at an accelerated clock: {take['frames']:,} frames, "
-          f"{take['samples']:,} samples in {take['wall_s']:.1f} s, memory growth {take['rss_growth_mb']:.2f} MiB, "
-          f"take {take['take_mb']:.0f} MiB on disk")
+def _print_report(report: dict) -> None:
+    if "deform" in report:
+        _table(report["deform"], ("face", "vertices", "control_points", "rig_s", "precompute_s", "load_s",
+                                  "deform_ms", "deform_normals_ms", "realtime_ms", "dense_ms", "ratio"))
+        print()
+    if "frames" in report:
+        _table(report["frames"], ("face", "input", "size", "controls_ms", "dffd_ms", "normals_ms", "draw_ms",
+                                  "read_ms", "fps", "deform_share"))
+        print()
+    if "muscles" in report:
+        _table(report["muscles"], ("face", "pose", "fap_only_ms", *(f"{mode}_ms" for mode in MUSCLE_MODES)))
+        print()
+    if "inputs" in report:
+        inputs = report["inputs"]
+        _table([r for r in inputs if "error" not in r],
+               ("adapter", "samples_s", "paced_samples_s", "latency_median_ms", "latency_p99_ms", "bad_frames"))
+        for row in inputs:
+            if "error" in row:
+                print(f"{row['adapter']}: not measured ({row['error']})")
+        print()
+    _print_live(report)
+
+
+def _print_live(report: dict) -> None:
+    if "latency" in report:
+        lat = report["latency"]
+        print(f"live latency (sim slider box -> default face, drawn and read back 640x480): "
+              f"frame work (samples in -> mesh) {lat['process_median_ms']:.2f} ms median / {lat['process_p99_ms']:.2f} p99; "
+              f"sample->mesh {lat['mesh_median_ms']:.2f} ms median / {lat['mesh_p99_ms']:.2f} p99; "
+              f"sample->frame {lat['latency_median_ms']:.2f} ms median / {lat['latency_p99_ms']:.2f} p99 "
+              f"at {lat['fps']:.0f} fps")
+    if "flood" in report:
+        flood = report["flood"]
+        print(f"flood {flood['rate']:,.0f} readings/s for {flood['seconds']:g} s, recording: {flood['fps']:.1f} fps "
+              f"(baseline {flood['baseline_fps']:.1f}, ratio {flood['fps_ratio']:.2f}), {flood['samples_s']:,.0f} "
+              f"samples/s taken, memory {flood['rss_start_mb']:.1f} -> {flood['rss_end_mb']:.1f} MiB, "
+              f"longest backlog {flood['backlog_max']}, dropped {flood['dropped']}")
+    if "long_take" in report:
+        take = report["long_take"]
+        length = take["take_seconds"]
+        print(f"long take {f'{length / 3600:g} h' if length >= 3600 else f'{length:g} s'} at an accelerated clock: {take['frames']:,} frames, "
+              f"{take['samples']:,} samples in {take['wall_s']:.1f} s, memory growth {take['rss_growth_mb']:.2f} MiB, "
+              f"take {take['take_mb']:.0f} MiB on disk")
+
+
+class Steps:
+    """Progress of a bench run on stderr: a rich progress bar on a terminal, else one line a step
+    (stdout stays the report, so ``--json`` pipes cleanly)."""
+
+    def __init__(self, total: int) -> None:
+        self.total = total
+        self.done = 0
+        self._bar = None
+        if sys.stderr.isatty():
+            from rich.console import Console
+            from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+            self._bar = Progress(TextColumn("bench"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
+                                 TimeElapsedColumn(), TextColumn("{task.description}"),
+                                 console=Console(stderr=True), transient=True)
+            self._task = self._bar.add_task("", total=total)
+
+    def __enter__(self) -> Steps:
+        if self._bar is not None:
+            self._bar.start()
+        return self
+
+    def start(self, label: str) -> None:
+        """The next step begins (the previous one is done)."""
+        if self._bar is not None:
+            self._bar.update(self._task, completed=self.done, description=label)
+        else:
+            print(f"bench {self.done + 1}/{self.total}: {label}", file=sys.stderr, flush=True)
+        self.done += 1
+
+    def __exit__(self, *exc: object) -> None:
+        if self._bar is not None:
+            self._bar.update(self._task, completed=self.done)
+            self._bar.stop()
 
 
 def _table(rows: list[dict], header: tuple[str, ...]) -> None:

@@ -10,6 +10,8 @@ from .render import VIEW_DIRECTIONS
 from .shipped import MappingExists, MappingNotFound, copy_mapping, mapping_path, mappings_folder, shipped_mappings
 
 VIEWS = tuple(VIEW_DIRECTIONS)
+BENCH_SECTIONS = ("deform", "frames", "muscles", "inputs", "latency", "flood", "long_take")
+"""``puppet bench --only`` choices (``puppet.bench.SECTIONS``; the bench is imported only when run)."""
 FACE_HELP = "a face folder (puppet face-from-photo) or a mesh with feature points (default: the embedded face)"
 
 
@@ -95,6 +97,10 @@ def main(argv: list[str] | None = None) -> int:
                        help="how long the 10,000 readings/s flood runs (default 60)")
     bench.add_argument("--take-seconds", type=_positive_float, default=3600.0,
                        help="length of the accelerated long take (default 3600)")
+    bench.add_argument("--quick", action="store_true",
+                       help="a minute's worth: 30 frames, no subdivided meshes or ICT, a 3 s flood, a 1 minute take")
+    bench.add_argument("--only", type=_sections, default=None, metavar="A,B",
+                       help="measure only these sections: " + ", ".join(BENCH_SECTIONS))
 
     rig = commands.add_parser("rig", help="rig a face mesh from its landmarks and write the rig file")
     rig.add_argument("mesh", help="the face mesh (.obj or any format trimesh reads)")
@@ -169,7 +175,8 @@ def main(argv: list[str] | None = None) -> int:
         from .bench import run_bench
 
         return run_bench(frames=args.frames, as_json=args.json, ict=not args.no_ict,
-                         flood_seconds=args.flood_seconds, take_seconds=args.take_seconds)
+                         flood_seconds=args.flood_seconds, take_seconds=args.take_seconds,
+                         only=args.only or BENCH_SECTIONS, quick=args.quick)
     return 2
 
 
@@ -189,6 +196,15 @@ def _mappings(args: argparse.Namespace) -> int:
         print(f"{name:16} {first[:90]}")
     print(f"({mappings_folder()}; use a name with --mapping, or --copy NAME to edit one)")
     return 0
+
+
+def _sections(text: str) -> tuple[str, ...]:
+    """``--only``: bench sections, comma-separated."""
+    names = tuple(n.strip() for n in text.split(",") if n.strip())
+    unknown = [n for n in names if n not in BENCH_SECTIONS]
+    if unknown or not names:
+        raise argparse.ArgumentTypeError(f"expected some of {', '.join(BENCH_SECTIONS)}, found {text!r}")
+    return names
 
 
 def _rig(args: argparse.Namespace) -> int:

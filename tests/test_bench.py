@@ -2,10 +2,11 @@
 
 import json
 
+import numpy as np
+import pytest
+
 from puppet.bench import bench_face, performance, run_bench
 from puppet.face import load_face
-
-import numpy as np
 
 
 def test_bench_face_reports_every_figure():
@@ -24,11 +25,11 @@ def test_the_benchmark_take_is_smooth():
 
 
 def test_run_bench_prints_json(capsys, monkeypatch):
-    monkeypatch.setattr("puppet.bench.bench_faces", lambda ict: [(load_face(), None, "default")])
-    monkeypatch.setattr("puppet.bench.bench_inputs", lambda: [{"adapter": "x", "samples_s": 1.0}])
+    monkeypatch.setattr("puppet.bench.bench_faces", lambda ict, subdivided=True: [(load_face(), None, "default")])
+    monkeypatch.setattr("puppet.bench.bench_inputs", lambda seconds: [{"adapter": "x", "samples_s": 1.0}])
     assert run_bench(frames=2, as_json=True, ict=False, flood_seconds=1.0, take_seconds=30.0) == 0
     report = json.loads(capsys.readouterr().out)
-    assert report["live"]["latency"]["measured"] > 0 and report["live"]["long_take"]["frames"] == 30 * 30 + 1
+    assert report["latency"]["measured"] > 0 and report["long_take"]["frames"] == 30 * 30 + 1
     assert report["deform"][0]["face"] == "default"
     frame = report["frames"][0]
     assert frame["input"] == "FAP" and frame["fps"] > 0
@@ -44,3 +45,25 @@ def test_every_adapter_carries_samples_through_its_mapping():
         assert row["samples_s"] > 100 and row["paced_samples_s"] > 100, row["adapter"]
         assert row["bad_frames"] <= 2, row  # joining a stream mid-frame costs a frame per run, no more
         assert 0 < row["latency_median_ms"] <= row["latency_p99_ms"]
+
+
+def test_only_the_sections_asked_for_are_measured_with_progress_on_stderr(capsys):
+    assert run_bench(frames=2, as_json=True, only=("long_take",), take_seconds=10.0) == 0
+    out = capsys.readouterr()
+    assert list(json.loads(out.out)) == ["long_take"]
+    assert "bench 1/1: long_take" in out.err
+
+
+def test_the_cli_refuses_an_unknown_section_in_one_line(capsys):
+    from puppet.cli import main
+
+    with pytest.raises(SystemExit) as exit_:
+        main(["bench", "--only", "latency,speed"])
+    assert exit_.value.code == 2 and "expected some of deform" in capsys.readouterr().err
+
+
+def test_the_cli_sections_are_the_bench_sections():
+    from puppet.bench import SECTIONS
+    from puppet.cli import BENCH_SECTIONS
+
+    assert BENCH_SECTIONS == SECTIONS
