@@ -27,3 +27,35 @@ def test_puppet_devices_runs_on_this_machine(capsys):
     assert cli.main(["devices"]) == 0
     out = capsys.readouterr().out
     assert all(line.split(":")[0] in discovery.KINDS or line.startswith("  ") for line in out.splitlines())
+
+
+def _interface(net, name: str, kind: str, flags: str, bitrate: str | None = None) -> None:
+    folder = net / name
+    folder.mkdir(parents=True)
+    (folder / "type").write_text(kind + "\n")
+    (folder / "flags").write_text(flags + "\n")
+    if bitrate:
+        (folder / "can_bittiming").mkdir()
+        (folder / "can_bittiming" / "bitrate").write_text(bitrate + "\n")
+
+
+def test_can_lists_the_socketcan_interfaces_that_are_up_and_nothing_else(tmp_path):
+    _interface(tmp_path, "can0", "280", "0x40c1", "500000")
+    _interface(tmp_path, "can1", "280", "0x80")  # down
+    _interface(tmp_path, "eth0", "1", "0x1003")
+    assert discovery.can_interfaces(tmp_path) == [Found("can", "can://socketcan/can0", "SocketCAN, up, 500,000 bit/s")]
+
+
+def test_without_socketcan_the_reason_is_given(tmp_path):
+    import pytest
+
+    with pytest.raises(OSError, match="open a CAN adapter by URL"):
+        discovery.can_interfaces(tmp_path / "absent")
+
+
+def test_a_usb_serial_port_is_named_by_its_maker_and_usb_ids():
+    from serial.tools.list_ports_common import ListPortInfo
+
+    port = ListPortInfo("/dev/ttyACM0", skip_link_detection=True)
+    port.vid, port.pid, port.manufacturer, port.product = 0x2341, 0x0043, "Arduino (www.arduino.cc)", "Uno"
+    assert discovery._serial_description(port) == "Arduino (www.arduino.cc) Uno USB 2341:0043"
