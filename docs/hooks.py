@@ -1,14 +1,19 @@
-"""MkDocs hooks: the guide's two reference pages, generated at every build so they never drift.
+"""MkDocs hooks: the parts of the guide that are made from the code at every build, so they
+never drift from it.
 
 * ``reference/mapping.md`` is written from ``mappings/schema.json`` (every key, its type, allowed
   values, default and description, section by section as the schema's ``$defs`` go);
 * ``reference/commands.md`` is the ``puppet`` command's own ``--help`` and each subcommand's,
-  the subcommands read from the top-level help's choices (nothing is listed by hand). The help is
-  taken in a child Python with the checkout first on its path, so the page shows this checkout's
-  CLI, not an installed snapshot.
+  the subcommands read from the top-level help's choices (nothing is listed by hand);
+* on the device pages, a ``<!-- url-options: SCHEME -->`` line becomes the URL options that
+  backend declares (``Device.OPTIONS``), when it declares them.
 
-Both pages are added with ``File.generated`` (``on_files``): nothing is written into the tracked
-tree. ``mkdocs serve`` also watches the schema and the CLI module.
+The code is asked in a child Python with the checkout first on its path, so the pages show this
+checkout's code, not an installed snapshot.
+
+The reference pages are added with ``File.generated`` (``on_files``): nothing is written into
+the tracked tree. A ``--8<-- "samples/FILE"`` line puts that sample file inline. ``mkdocs
+serve`` also watches the schema, the CLI and the device backends.
 """
 
 from __future__ import annotations
@@ -29,12 +34,17 @@ MAPPING_PAGE = "reference/mapping.md"
 COMMANDS_PAGE = "reference/commands.md"
 HELP_COLUMNS = "100"
 INCLUDE = re.compile(r'^--8<-- "([^"]+)"$', re.M)
+OPTIONS = re.compile(r"^<!-- url-options: ([a-z]+) -->$", re.M)
+_CODE: dict = {"help": {}, "options": {}}  # what from_the_code() found, for on_page_markdown
 BOUNDS = (("minimum", "≥"), ("exclusiveMinimum", ">"), ("maximum", "≤"), ("exclusiveMaximum", "<"))
 
-# Runs in the child: every help text the CLI prints, as JSON {"": top level, command: its help}.
-_HELP_SCRIPT = r"""
+# Runs in the child: every help text the CLI prints ({"": top level, command: its help}) and the
+# URL options each device backend declares ({scheme: [options]}, null where it declares none).
+_CHILD_SCRIPT = r"""
 import contextlib, io, json, re, sys
 from puppet.cli import main
+from devices import BACKENDS
+from devices.base import table_class
 
 def help_of(argv):
     out = io.StringIO()
@@ -45,6 +55,13 @@ def help_of(argv):
             pass
     return out.getvalue()
 
+def options_of(entry):
+    try:
+        declared = getattr(table_class(entry), "OPTIONS", None)
+    except ImportError:
+        return None
+    return None if declared is None else sorted(declared)
+
 top = help_of(["--help"])
 found = re.search(r"^positional arguments:\s*\n\s*\{([^}]+)\}", top, re.M)
 if found is None:
@@ -52,46 +69,66 @@ if found is None:
 helps = {"": top}
 for command in found.group(1).split(","):
     helps[command] = help_of([command, "--help"])
-print(json.dumps(helps))
+options = {scheme: options_of(entry) for scheme, entry in BACKENDS.items()}
+print(json.dumps({"help": helps, "options": options}))
 """
 
 
 def on_files(files: Files, config) -> Files:
-    """Add the generated reference pages to the build."""
+    """Add the generated reference pages to the build (and keep what the code says for pages)."""
+    global _CODE
+    _CODE = from_the_code()
     files.append(File.generated(config, MAPPING_PAGE, content=mapping_reference(json.loads(SCHEMA.read_text("utf-8")))))
-    files.append(File.generated(config, COMMANDS_PAGE, content=command_reference(cli_help())))
+    files.append(File.generated(config, COMMANDS_PAGE, content=command_reference(_CODE["help"])))
     return files
 
 
 def on_page_markdown(markdown: str, page, config, files) -> str:
-    """``--8<-- "samples/x.ino"`` on a line of its own: that file of the guide, inline, so a
-    sample shown on a page and the file beside it are one."""
+    """Two markers, each on a line of its own: ``--8<-- "samples/x.ino"`` puts that file of the
+    guide inline (a sample shown on a page and the file beside it are one), and
+    ``<!-- url-options: SCHEME -->`` the list of URL options the backend declares (nothing when
+    it declares none)."""
     def include(match: re.Match) -> str:
         path = Path(config["docs_dir"]) / match.group(1)
         if not path.is_file():
             raise FileNotFoundError(f"{page.file.src_uri}: included file {match.group(1)!r} does not exist")
         return path.read_text("utf-8").rstrip("\n")
-    return INCLUDE.sub(include, markdown)
+
+    def options(match: re.Match) -> str:
+        scheme = match.group(1)
+        if scheme not in _CODE["options"]:
+            raise KeyError(f"{page.file.src_uri}: no device backend for the scheme {scheme!r}")
+        return url_options(scheme, _CODE["options"][scheme])
+    return OPTIONS.sub(options, INCLUDE.sub(include, markdown))
+
+
+def url_options(scheme: str, declared: list[str] | None) -> str:
+    """The sentence listing a backend's declared URL options."""
+    if declared is None:
+        return ""
+    names = ", ".join(f"`{o}`" for o in declared) or "none"
+    return f"Every option a `{scheme}://` URL accepts (read from the backend's code): {names}."
 
 
 def on_serve(server, config, builder):
-    """``mkdocs serve`` rebuilds when the schema or the CLI changes."""
+    """``mkdocs serve`` rebuilds when the schema, the CLI or a device backend changes."""
     server.watch(str(SCHEMA))
     server.watch(str(CLI))
+    server.watch(str(ROOT / "devices"))
     return server
 
 
 # -- commands -------------------------------------------------------------------------------------
 
-def cli_help() -> dict[str, str]:
-    """``{"": top-level help, command: help}`` from ``python -m puppet.cli ... --help``, run with
-    this checkout first on the path."""
+def from_the_code() -> dict:
+    """``{"help": {"": top-level help, command: help}, "options": {scheme: [options] or None}}``,
+    asked of this checkout's code in a child Python."""
     env = dict(os.environ, COLUMNS=HELP_COLUMNS, PYTHONPATH=os.pathsep.join(
         [str(ROOT)] + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]))
-    done = subprocess.run([sys.executable, "-c", _HELP_SCRIPT], cwd=ROOT, env=env, capture_output=True,
+    done = subprocess.run([sys.executable, "-c", _CHILD_SCRIPT], cwd=ROOT, env=env, capture_output=True,
                           text=True, timeout=120)
     if done.returncode != 0:
-        raise RuntimeError(f"collecting the CLI help failed ({done.returncode}): {done.stderr.strip()}")
+        raise RuntimeError(f"asking the code for its help and options failed ({done.returncode}): {done.stderr.strip()}")
     return json.loads(done.stdout)
 
 
