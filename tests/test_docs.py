@@ -73,7 +73,7 @@ def option_strings(parser: argparse.ArgumentParser) -> set[str]:
 
 def test_the_guide_builds_strictly(site):
     for page in ("getting-started", "devices/serial", "devices/hid", "devices/can", "devices/midi", "devices/osc",
-                 "devices/simulated", "mappings", "takes", "faces", "arkit", "reference/mapping",
+                 "devices/simulated", "mappings", "takes", "faces", "arkit", "troubleshooting", "reference/mapping",
                  "reference/commands"):
         assert (site / page / "index.html").is_file(), page
     for sample in ("livelink_sample.csv", "send_vmc.py", "slider_box.ino"):
