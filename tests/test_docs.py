@@ -120,7 +120,7 @@ def guide_commands() -> list[tuple[str, str]]:
                 line = line.split(" #", 1)[0].strip()
                 if line.startswith("puppet "):
                     found.append((page.name, line))
-        for span in re.findall(r"`(puppet [^`]+)`", text):
+        for span in re.findall(r"`(puppet [a-z][a-z-]*(?: [^`]*)?)`", text):  # not messages: `puppet live: ...`
             found.append((page.name, span))
     return found
 
