@@ -29,6 +29,7 @@ from pathlib import Path
 from devices.base import Sample
 from devices.samplelog import LogEvent
 
+from .errors import PuppetError
 from .mapping import load_mapping
 from .takeclock import TakeClock, default_muscle_faps
 from .takes import TakeRecorder
@@ -41,7 +42,7 @@ DAY_NS = 24 * 3600 * 1_000_000_000
 _TIMECODE = re.compile(r"(\d{1,2}):(\d{2}):(\d{2})[:;](\d{1,3})(?:\.(\d{1,9}))?\Z")
 
 
-class CsvError(ValueError):
+class CsvError(PuppetError, ValueError):
     """A CSV that cannot be read; the message starts with ``file:line:``."""
 
 

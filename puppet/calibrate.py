@@ -46,6 +46,7 @@ import numpy as np
 
 from devices import Device, open_device
 
+from .errors import PuppetError
 from .mapping import MappingError, load_mapping
 
 LOW_PCT, HIGH_PCT = 0.5, 99.5     # robust extremes of the sweep (and of the rest noise)
@@ -53,7 +54,7 @@ NOISE_FACTOR = 4.0                 # a sweep span within this many rest-noise sp
 POLL = 0.01                        # seconds between drains while recording
 
 
-class CalibrationError(RuntimeError):
+class CalibrationError(PuppetError, RuntimeError):
     """Calibration could not be written (the file would not load, or could not be replaced)."""
 
 

@@ -34,6 +34,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .errors import PuppetError
+
 __all__ = ["Face", "FaceFileError", "MissingFeaturePointsError", "load_face", "load_default_rig"]
 
 DEFAULT_NAME = "default"
@@ -53,11 +55,11 @@ FAPU_DEFINITIONS = {
 AU = 1e-5  # angle unit, radians
 
 
-class FaceFileError(ValueError):
+class FaceFileError(PuppetError, ValueError):
     """A mesh file that cannot be read as a face; the message names the file and the problem."""
 
 
-class MissingFeaturePointsError(LookupError):
+class MissingFeaturePointsError(PuppetError, LookupError):
     """The face lacks feature points that a computation needs; ``missing`` lists their ids."""
 
     def __init__(self, face_name: str, what: str, missing: list[str]) -> None:

@@ -64,6 +64,7 @@ from typing import IO, Iterator, Sequence
 
 import numpy as np
 
+from .errors import PuppetError
 from .faptable import N_FAPS, clamp_ranges, faps
 
 DEFAULT_FPS = 25.0
@@ -76,7 +77,7 @@ _EXPR_LOW, _EXPR_HIGH = np.array([0, 0, 0, 0, 0, 0]), np.array([6, 63, 6, 63, 1,
 _FLAGS = frozenset(("0", "1"))
 
 
-class FapError(ValueError):
+class FapError(PuppetError, ValueError):
     """A problem in a .fap file: ``"{file}:{line}: expected ..., found ..."``."""
 
 

@@ -18,6 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .errors import PuppetError
+
 N_FAPS = 68
 UNITS = {"MNS": "MNS0", "MW": "MW0", "ES": "ES0", "ENS": "ENS0", "IRISD": "IRISD0", "AU": "AU"}
 DIRECTIONS = {
@@ -27,7 +29,7 @@ DIRECTIONS = {
 }
 
 
-class UnknownFapError(KeyError):
+class UnknownFapError(PuppetError, KeyError):
     """A FAP number or name that does not exist; the message suggests the closest names."""
 
     def __str__(self) -> str:

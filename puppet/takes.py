@@ -33,13 +33,14 @@ import numpy as np
 from devices.base import Sample
 from devices.samplelog import LogEvent, SampleLogWriter, read_sample_log, read_take_log
 
+from .errors import PuppetError
 from .fapfile import FapStream, FapWriter, read_fap
 
 FPS_CHOICES = (25, 30, 50, 60)
 FAP_NAME, LOG_NAME, META_NAME = "take.fap", "samples.jsonl", "take.json"
 
 
-class TakeError(ValueError):
+class TakeError(PuppetError, ValueError):
     """A take that cannot be made or read; the message names the folder and the problem."""
 
 

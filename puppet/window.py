@@ -48,6 +48,7 @@ from typing import Any
 
 import numpy as np
 
+from .errors import PuppetError
 from .face import Face
 from .fapfile import FapError, FapReader, FapWarning, iter_fap
 from .faptable import N_FAPS
@@ -65,7 +66,7 @@ that where the backend can only handle events by swapping buffers, i.e. by drawi
 RENDER_HINT = "use 'puppet render TAKE -o take.mp4' instead"
 
 
-class WindowError(RuntimeError):
+class WindowError(PuppetError, RuntimeError):
     """No window could be opened (no display, no OpenGL 3.3, no window backend)."""
 
 
