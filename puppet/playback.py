@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from .face import Face, load_face
+from .fap import limit_fields
 from .fapfile import FapFrame, iter_fap
 from .render import VIEW_DIRECTIONS, Renderer, write_video
 from .runtime import Runtime
@@ -51,7 +52,7 @@ class HeldFaps:
         """The held state as 68 low-level FAPs (visemes and expressions expanded)."""
         values = self.values.copy()
         values[:2] = 0
-        return runtime.faps.low_level(values, self.viseme, self.expression)
+        return runtime.faps.low_level(values, *limit_fields(self.viseme, self.expression))
 
 
 def held_low_level(frames: Iterable[FapFrame], runtime: Runtime) -> Iterator[np.ndarray]:
