@@ -101,9 +101,12 @@ class Face:
         units["AU"] = AU
         return units
 
-    @functools.cached_property
+    @property
     def content_hash(self) -> str:
-        """sha256 (hex) of the rest vertices (float64) and triangles (int32): a cache key."""
+        """sha256 (hex) of the rest vertices (float64) and triangles (int32): a cache key.
+
+        Computed on every call (about 1 ms per 50,000 vertices), never cached: the arrays can be
+        edited in place, and a stale hash would key the coefficient cache on disk to another mesh."""
         h = hashlib.sha256()
         h.update(np.ascontiguousarray(self.vertices, dtype="<f8").tobytes())
         h.update(np.ascontiguousarray(self.triangles, dtype="<i4").tobytes())
