@@ -32,7 +32,9 @@ Decisions
 * **No header**: fps defaults to ``DEFAULT_FPS`` = 25 (the rate of every headed corpus file from a
   live system) with a warning; ``name`` and ``version`` are ``""``, ``declared_frames`` None.
 * **Declared vs present frames**: fewer present (how a crashed take looks) or more present both
-  warn and keep every frame there is.
+  warn and keep every frame there is. A last frame cut off mid-line (the file ends without its
+  newline, or a mask line without its value line) that the header's count leaves out is what a
+  killed ``FapWriter`` leaves: it is dropped with a warning. Anywhere else it is an error.
 * **No clamping**: every value is returned exactly as the file writes it, however far beyond the
   Greta editor's slider ranges of ``fap_coding_params.csv`` (those are an editor's convention, not
   the standard's limits: real files turn the head 30 degrees). What a face cannot follow is
@@ -165,6 +167,7 @@ class FapReader:
         self.label = str(path)
         self._file: IO[str] = open(path, encoding="utf-8", errors="replace")
         self._last_line = 0
+        self._line_ended = True
         self._lines = self._content_lines()
         try:
             self.header, self._pending = self._read_header()
@@ -193,6 +196,7 @@ class FapReader:
         number = 0
         while text := self._file.readline(CHUNK):
             number = self._last_line = number + 1
+            self._line_ended = text.endswith("\n")
             if text.endswith("\n") or len(text) < CHUNK:
                 tokens = self._checked(number, text.split(), "")
             else:
@@ -217,6 +221,7 @@ class FapReader:
                 return []
             tokens = self._checked(number, tokens + parts, carry)
             if done:
+                self._line_ended = text.endswith("\n")
                 return tokens
             text = self._file.readline(CHUNK)
 
@@ -268,15 +273,35 @@ class FapReader:
             if self._pending is not None:
                 lines = _chain(self._pending, lines)
             for mask_line, tokens in lines:
-                if parsed_mask is None or tokens != parsed_mask[0]:
-                    parsed_mask = (tokens, self._parse_mask(mask_line, tokens))
-                value_line = next(lines, None)
-                if value_line is None:
-                    raise _fail(self.label, self._eof(), f"expected the value line of the mask"
-                                f" line {mask_line}", "end of file")
-                yield self._parse_values(*value_line, parsed_mask[1], tally)
+                value_line = None
+                try:
+                    if parsed_mask is None or tokens != parsed_mask[0]:
+                        parsed_mask = (tokens, self._parse_mask(mask_line, tokens))
+                    value_line = next(lines, None)
+                    if value_line is None:
+                        raise _fail(self.label, self._eof(), f"expected the value line of the mask"
+                                    f" line {mask_line}", "end of file")
+                    frame = self._parse_values(*value_line, parsed_mask[1], tally)
+                    if self._cut_short(tally, False):
+                        raise _fail(self.label, value_line[0], "expected a value line ending in a"
+                                    " newline", "end of file")
+                except FapError as error:
+                    if not self._cut_short(tally, value_line is None):
+                        raise
+                    tally.cut = str(error)
+                    break
+                yield frame
                 tally.frames += 1
         self._summarise(tally)
+
+    def _cut_short(self, tally: _Tally, no_values: bool) -> bool:
+        """Whether this frame is a recorder's last, cut off by a kill: it ends the file without
+        its newline (only the file's last line can) or lacks its value line, and the header's
+        count leaves it out."""
+        declared = self.header.declared_frames
+        if declared is None or declared > tally.frames:
+            return False
+        return no_values or not self._line_ended
 
     def _parse_mask(self, number: int, tokens: list[str]) -> _Mask:
         if not _is_mask(tokens):
@@ -376,17 +401,22 @@ class _Tally:
         self.frames = 0
         self.empty_lines = 0
         self.first_empty = 0
+        self.cut = ""
 
     def note_empty(self, line: int) -> None:
         self.first_empty = self.first_empty or line
         self.empty_lines += 1
 
     def messages(self, label: str) -> list[str]:
-        if not self.empty_lines:
-            return []
-        return [f"{label}: {self.empty_lines} value line(s) hold only the frame number although"
-                f" their mask line sets FAPs (first at line {self.first_empty}); read as frames"
-                " that transmit no FAP"]
+        out = []
+        if self.empty_lines:
+            out.append(f"{label}: {self.empty_lines} value line(s) hold only the frame number although"
+                       f" their mask line sets FAPs (first at line {self.first_empty}); read as"
+                       " frames that transmit no FAP")
+        if self.cut:
+            out.append(f"{self.cut}: the last frame was cut off (a recorder killed mid-write);"
+                       f" keeping the {self.frames} complete frames before it")
+        return out
 
 
 def _chain(first: tuple[int, list[str]],

@@ -535,3 +535,30 @@ def test_streaming_a_long_take_in_bounded_memory(tmp_path):
         tracemalloc.stop()
     assert count == n and total == sum(frames[i % 50, 2] for i in range(n))
     assert peak < 1_000_000   # the values alone would take 12k x 68 x 8 = 6.5 MB
+
+
+def test_a_take_cut_off_mid_frame_reads_to_its_last_complete_frame(tmp_path):
+    """Every byte a killed FapWriter can stop at: the frames before it read back, with a warning."""
+    path = tmp_path / "whole.fap"
+    with FapWriter(path, 25, "cut") as writer:
+        for i in range(3):
+            writer.write_frame(np.full(68, float(i + 1)))
+    data = path.read_bytes()
+    head = data.index(b"\n") + 1
+    ends = [i + 1 for i in range(len(data)) if data[i:i + 1] == b"\n"]
+    for cut in range(head + 1, len(data)):
+        complete = sum(1 for e in ends[2::2] if e <= cut)  # frame k ends at the (2k + 3)-th newline
+        count = f"{complete}".ljust(COUNT_WIDTH).encode()
+        cut_file = tmp_path / "cut.fap"
+        cut_file.write_bytes(data[:head].replace(b"3".ljust(COUNT_WIDTH), count) + data[head:cut])
+        with warnings.catch_warnings(record=True):
+            warnings.simplefilter("always")
+            stream = read_fap(cut_file)
+        assert len(stream) == complete, cut
+        np.testing.assert_array_equal(stream.values[:, 2], np.arange(1, complete + 1))
+
+
+def test_a_cut_frame_the_header_counts_is_still_an_error(tmp_path):
+    path = write(tmp_path, "2.1 t 25 2\n" + mask_line({3}) + "\n0 1\n" + mask_line({3}) + "\n1 5 6", "bad.fap")
+    with pytest.raises(FapError, match=r"bad.fap:5: expected"):
+        read_fap(path)
