@@ -515,20 +515,21 @@ def play_take(path: str | os.PathLike, *, size: tuple[int, int] = (960, 720),
               view: str = "front", face: Face | None = None) -> None:
     """Play a .fap take in a window in real time, looping, until Q / Escape or closing it.
 
+    Everything is checked before the window opens (the take, its first frame, the display).
     Without a usable display this prints ``puppet play: <why>; use 'puppet render ...'`` on
     stderr and raises ``SystemExit(2)``.
     """
     if view not in VIEWS:
         raise ValueError(f"view {view!r}: expected one of {VIEWS}")
-    try:
-        check_display()
-    except NoDisplayError as error:
-        _exit(f"{error}; {RENDER_HINT}")
     playback = FapPlayback(path, face)
     table = HeldTable(playback.path, playback.runtime, playback.header.declared_frames)
     try:
         if not table.ensure(1):
             _exit(f"{playback.path}: the take holds no frames")
+        try:
+            check_display()
+        except NoDisplayError as error:
+            _exit(f"{error}; {RENDER_HINT}")
         title = window_title(playback.path.name, 0, table.total, playback.fps, False)
         try:
             window = open_window(title, size)
