@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+import warnings
 from pathlib import Path
 
 from devices.base import DeviceError
@@ -34,11 +35,21 @@ class _Parser(argparse.ArgumentParser):
 def main(argv: list[str] | None = None) -> int:
     parser = _parser()
     args = parser.parse_args(argv)
-    try:
-        return _run(parser, args)
-    except REFUSED as exc:
-        print(f"puppet {args.command}: {_one_line(exc)}", file=sys.stderr)
-        return 2
+    with warnings.catch_warnings():
+        warnings.showwarning = _warning_line(args.command)
+        try:
+            return _run(parser, args)
+        except REFUSED as exc:
+            print(f"puppet {args.command}: {_one_line(exc)}", file=sys.stderr)
+            return 2
+
+
+def _warning_line(command: str):
+    """``warnings.showwarning`` for a command: ``puppet COMMAND: warning: message``, one line."""
+    def show(message, category, filename, lineno, file=None, line=None) -> None:
+        print(f"puppet {command}: warning: {_one_line(Exception(str(message)))}", file=file or sys.stderr)
+
+    return show
 
 
 def _one_line(exc: BaseException) -> str:
@@ -52,6 +63,7 @@ def _one_line(exc: BaseException) -> str:
 
 def _parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="puppet", description="facepuppet: live facial puppeteering")
+    parser.add_argument("--version", action="version", version="puppet (facepuppet) 0.1.0")
     commands = parser.add_subparsers(dest="command", required=True)
 
     demo = commands.add_parser("demo", help="replay the shipped demo take on the default face to a video")
@@ -63,7 +75,7 @@ def _parser() -> argparse.ArgumentParser:
     render.add_argument("-o", "--output", required=True, help="the video to write (.mp4)")
     render.add_argument("--size", type=_size, default=(640, 480), help="video size WxH (default 640x480)")
     render.add_argument("--view", choices=VIEWS, default="front", help="camera (default front)")
-    render.add_argument("--fps", type=_seconds_or_rate("fps", 1000), default=None,
+    render.add_argument("--fps", type=_seconds_or_rate("fps", 0.1, 1000), default=None,
                         help="video fps (default: the take's)")
     render.add_argument("--face", default=None, help=FACE_HELP)
 
@@ -96,7 +108,7 @@ def _parser() -> argparse.ArgumentParser:
     arkit.add_argument("--name", default="arkit", help="take name (default arkit: folders arkit_001, ...)")
     arkit.add_argument("--takes", default="takes", help="folder for takes (default takes)")
     arkit.add_argument("--fps", type=int, choices=(25, 30, 50, 60), default=30, help="take fps (default 30)")
-    arkit.add_argument("--csv-fps", type=_seconds_or_rate("fps", 1000), default=60.0,
+    arkit.add_argument("--csv-fps", type=_seconds_or_rate("fps", 0.1, 1000), default=60.0,
                        help="the rate of the timecodes' frame field (default 60)")
 
     live = commands.add_parser("live", help="run a mapping's devices onto the face in a window, live")
@@ -117,18 +129,18 @@ def _parser() -> argparse.ArgumentParser:
 
     calibrate = commands.add_parser("calibrate", help="record rest and a sweep per channel; write them into the mapping")
     calibrate.add_argument("--mapping", required=True, help="the mapping YAML to calibrate (a .bak copy is kept)")
-    calibrate.add_argument("--rest", type=_seconds_or_rate("seconds", 600), default=2.0,
+    calibrate.add_argument("--rest", type=_seconds_or_rate("seconds", 0.1, 600), default=2.0,
                            help="seconds of rest to record (default 2)")
-    calibrate.add_argument("--sweep", type=_seconds_or_rate("seconds", 600), default=8.0,
+    calibrate.add_argument("--sweep", type=_seconds_or_rate("seconds", 0.1, 600), default=8.0,
                            help="seconds of sweep to record (default 8)")
 
     bench = commands.add_parser("bench", help="measure Sibson precompute, rig load and per-frame deform")
     bench.add_argument("--json", action="store_true", help="print the results as JSON")
     bench.add_argument("--frames", type=_positive, default=300, help="frames per measurement")
     bench.add_argument("--no-ict", action="store_true", help="skip the ICT face even when present")
-    bench.add_argument("--flood-seconds", type=_seconds_or_rate("seconds", 3600), default=60.0,
+    bench.add_argument("--flood-seconds", type=_seconds_or_rate("seconds", 0.1, 3600), default=60.0,
                        help="how long the 10,000 readings/s flood runs (default 60)")
-    bench.add_argument("--take-seconds", type=_seconds_or_rate("seconds", 86400), default=3600.0,
+    bench.add_argument("--take-seconds", type=_seconds_or_rate("seconds", 0.1, 86400), default=3600.0,
                        help="length of the accelerated long take (default 3600)")
 
     rig = commands.add_parser("rig", help="rig a face mesh from its landmarks and write the rig file")
@@ -182,9 +194,10 @@ def _run(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
         return _import_arkit(args)
     if args.command == "live":
         from .live import run_live
+        from .takes import TakeError
 
         if args.layer_over and not args.arm:
-            parser.error("--layer-over needs --arm: what the pass replaces")
+            raise TakeError("--layer-over needs --arm: what the pass replaces (e.g. --arm box.ch0)")
         run_live(args.mapping, record=args.record, fps=args.fps, size=args.size, view=args.view,
                  devices=dict(args.device) or None, face=_face(args.face), layer_over=args.layer_over,
                  arm=[a for a in args.arm.split(",") if a])
@@ -337,15 +350,15 @@ def _device_override(text: str) -> tuple[str, str]:
     return name, url
 
 
-def _seconds_or_rate(unit: str, most: float):
-    """An argparse type: a number above 0 and at most ``most`` (``unit`` names it in messages)."""
+def _seconds_or_rate(unit: str, least: float, most: float):
+    """An argparse type: a number from ``least`` to ``most`` (``unit`` names it in messages)."""
     def parse(text: str) -> float:
         try:
             value = float(text)
         except ValueError:
             value = math.nan
-        if not 0 < value <= most:
-            raise argparse.ArgumentTypeError(f"expected {unit} as a number above 0 and at most {most:g},"
+        if not least <= value <= most:
+            raise argparse.ArgumentTypeError(f"expected {unit} as a number from {least:g} to {most:g},"
                                              f" got {text!r}")
         return value
 
