@@ -214,7 +214,7 @@ class HeldTable:
     """The held FAP state of every frame of a take, read lazily, for deforming any frame.
 
     Row *k* is the state a player holds at frame *k* (FAP 1 / 2 expanded), as 68 low-level FAP
-    values in float32 (272 bytes a frame), kept in fixed-size chunks. The file is read forward
+    values limited to what the face can follow (``FapEngine.limit``) in float32 (272 bytes a frame), kept in fixed-size chunks. The file is read forward
     only as far as asked (``ensure``, ``read_ahead``); ``pose(k)`` deforms frame *k* as
     ``FapPlayback`` does on its way through (up to the float32 rounding of the FAP values).
     """
@@ -296,7 +296,7 @@ class HeldTable:
         row, column = divmod(self._count, self.CHUNK)
         if row == len(self._chunks):
             self._chunks.append(np.empty((self.CHUNK, N_FAPS), dtype=np.float32))
-        self._chunks[row][column] = values
+        self._chunks[row][column] = self.runtime.faps.limit(values)  # float32 holds what a face shows
         self._count += 1
         return True
 

@@ -189,3 +189,21 @@ def test_a_take_with_values_beyond_every_range_plays_and_replays_unchanged(good,
 
 def test_every_take_error_is_a_puppet_error():
     assert issubclass(TakeError, PuppetError) and issubclass(TakeError, ValueError)
+
+
+def test_the_window_table_holds_extreme_takes_without_overflow(tmp_path, face):
+    """The player's float32 table keeps what the face can show: 1e300 neither overflows nor warns."""
+    from puppet.runtime import Runtime
+    from puppet.window import HeldTable
+
+    fap = tmp_path / "huge.fap"
+    values = np.zeros((3, 68))
+    values[:, 2], values[:, 48], values[:, 18] = 1e300, -1e300, 1e20
+    write_fap(fap, values)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        table = HeldTable(fap, Runtime(face))
+        assert table.ensure(3)
+        vertices, normals = table.pose(2)
+    assert np.isfinite(vertices).all() and np.isfinite(normals).all()
+    assert read_fap(fap).values[0, 2] == 1e300
