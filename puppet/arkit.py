@@ -162,6 +162,8 @@ def import_csv(csv_path: str | os.PathLike, root: str | os.PathLike, name: str =
     timecodes' frame field. The CSV is read through before the take is made, so a bad file
     leaves no half take behind."""
     rows = list(read_live_link_csv(csv_path, csv_fps))
+    if not rows:
+        raise CsvError(f"{csv_path}: the CSV holds no rows after its header: nothing to import")
     mapping = load_mapping(mapping_path)
     extra = {"source": str(csv_path), "t0_ns": 0, "hold_ns": None, "mapping_state": mapping.snapshot(),
              "wire": {}, "layer": None}

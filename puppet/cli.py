@@ -198,6 +198,8 @@ def _run(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
 
         if args.layer_over and not args.arm:
             raise TakeError("--layer-over needs --arm: what the pass replaces (e.g. --arm box.ch0)")
+        if args.arm and not args.layer_over:
+            raise TakeError("--arm needs --layer-over: the take the pass is recorded over")
         run_live(args.mapping, record=args.record, fps=args.fps, size=args.size, view=args.view,
                  devices=dict(args.device) or None, face=_face(args.face), layer_over=args.layer_over,
                  arm=[a for a in args.arm.split(",") if a])

@@ -33,7 +33,7 @@ from typing import Any, TextIO
 from .mapping import load_mapping
 from .playback import VIEWS, frame_head
 from .render import Renderer
-from .takes import TakeError
+from .takes import TakeError, check_take_name
 from .window import NoDisplayError, WindowError, check_display, open_window
 
 MONITOR_PERIOD = 0.25
@@ -241,6 +241,7 @@ def run_live(mapping_path: str | os.PathLike, *, record: str | None = None, fps:
     if view not in VIEWS:
         raise ValueError(f"view {view!r}: expected one of {VIEWS}")
     load_mapping(mapping_path)
+    check_take_name(record or "take")
     try:
         check_display()
     except NoDisplayError as error:

@@ -51,10 +51,16 @@ class TakeError(PuppetError, ValueError):
     """A take that cannot be made or read; the message names the folder and the problem."""
 
 
-def next_take_folder(root: str | os.PathLike, name: str) -> Path:
-    """Create and return ``root/NAME_NNN`` with the next free number (never an existing one)."""
+def check_take_name(name: str) -> str:
+    """``name`` if it can name takes (``NAME_001``, ...); a TakeError saying what it may hold."""
     if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9_.-]*", name):
         raise TakeError(f"take name {name!r}: use letters, digits, '.', '_' and '-'")
+    return name
+
+
+def next_take_folder(root: str | os.PathLike, name: str) -> Path:
+    """Create and return ``root/NAME_NNN`` with the next free number (never an existing one)."""
+    check_take_name(name)
     root = Path(root)
     root.mkdir(parents=True, exist_ok=True)
     taken = [int(m.group(1)) for p in root.iterdir() if (m := re.fullmatch(rf"{re.escape(name)}_(\d+)", p.name))]

@@ -33,9 +33,11 @@ def place(tmp_path_factory) -> dict[str, str]:
     (root / "photo.png").write_bytes(b"not a png")
     (root / "mesh.obj").write_text("v 0 0 0\nf 1 2 3\n")
     (root / "folder").mkdir()
+    (root / "header_only.csv").write_text("Timecode,BlendShapeCount,JawOpen\n")
     return {"take": str(take), "listed": str(listed), "tmp": str(root), "csv": str(csv),
             "binary": str(root / "binary.fap"), "bad_yaml": str(root / "bad.yaml"),
-            "photo": str(root / "photo.png"), "mesh": str(root / "mesh.obj"), "folder": str(root / "folder")}
+            "photo": str(root / "photo.png"), "mesh": str(root / "mesh.obj"), "folder": str(root / "folder"),
+            "header_only": str(root / "header_only.csv")}
 
 
 BAD = [
@@ -70,6 +72,8 @@ BAD = [
     "live", "live --mapping /nonexistent.yaml", "live --mapping {bad_yaml}", "live --mapping {mapping} --fps 24",
     "live --mapping {mapping} --device nonsense", "live --mapping {mapping} --layer-over {take}",
     "play /nonexistent.fap", "play {binary}", "play {listed}", "play {take} --size 99999x99999",
+    "live --mapping {mapping} --arm box.ch0", "live --mapping {mapping} --record 'bad name!'",
+    "import-arkit {header_only} --takes {tmp}/t", "replay {take} --mapping {folder} --no-window",
 ]
 
 WITH_A_DISPLAY = [
@@ -82,6 +86,7 @@ WITH_A_DISPLAY = [
     "live --mapping {mapping} --device box=sim://joystick --layer-over /nonexistent.fap --arm box.ch0",
     "live --mapping {mapping} --device box=sim://joystick --layer-over {take} --arm box.ch9",
     "live --mapping {mapping} --device box=sim://joystick --layer-over {take} --arm nothing",
+    "live --mapping {mapping} --device box=sim://joystick --record 'bad name!'",
 ]
 
 

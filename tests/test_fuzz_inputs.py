@@ -1,11 +1,13 @@
 """Fuzzing what users and other programs hand us: arbitrary bytes and near-valid .fap files, and
 take folders with a part garbled. Only documented errors may come out (``PuppetError`` and its
 subclasses; ``MappingError`` and ``DeviceError`` for a take's mapping and devices), each input in
-bounded time (hypothesis's deadline) and bounded memory (tracemalloc's peak)."""
+bounded time (hypothesis's deadline) and bounded memory (tracemalloc's peak). Set
+PUPPET_FUZZ_SCALE (default 1) to multiply the examples, for a longer run; ``-s`` prints the tally."""
 
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import tempfile
 import tracemalloc
@@ -29,6 +31,7 @@ from puppet.takes import open_take
 
 DOCUMENTED = (PuppetError, MappingError, DeviceError)
 MEMORY_BOUND = 32_000_000
+SCALE = int(os.environ.get("PUPPET_FUZZ_SCALE", "1"))
 TALLY: Counter = Counter()
 
 
@@ -59,7 +62,7 @@ def _bounded(kind: str, action) -> object:
 
 # -- .fap files -------------------------------------------------------------------------------------
 
-@settings(max_examples=150, deadline=3000, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=150 * SCALE, deadline=3000, suppress_health_check=[HealthCheck.too_slow])
 @given(data=st.binary(max_size=3000))
 def test_arbitrary_bytes_as_a_fap_file(data):
     with tempfile.TemporaryDirectory() as folder:
@@ -109,7 +112,7 @@ def near_valid_fap(draw) -> bytes:
     return "\n".join(lines).encode("utf-8", "surrogatepass")
 
 
-@settings(max_examples=150, deadline=3000, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=150 * SCALE, deadline=3000, suppress_health_check=[HealthCheck.too_slow])
 @given(data=near_valid_fap())
 def test_near_valid_fap_files(data):
     with tempfile.TemporaryDirectory() as folder:
@@ -198,7 +201,7 @@ def _spoil(folder: Path, part: str, how: str, arg) -> None:
         path.unlink()
 
 
-@settings(max_examples=40, deadline=10_000, suppress_health_check=[HealthCheck.too_slow,
+@settings(max_examples=40 * SCALE, deadline=10_000, suppress_health_check=[HealthCheck.too_slow,
                                                                    HealthCheck.function_scoped_fixture])
 @given(spoilt=st.lists(damage(), min_size=1, max_size=2))
 def test_garbled_take_folders(good_take, shared, spoilt):
