@@ -207,3 +207,45 @@ def test_the_window_table_holds_extreme_takes_without_overflow(tmp_path, face):
         vertices, normals = table.pose(2)
     assert np.isfinite(vertices).all() and np.isfinite(normals).all()
     assert read_fap(fap).values[0, 2] == 1e300
+
+
+KILLED_RECORDER = """
+import os, signal, sys
+from devices.base import Sample
+from puppet.mapping import load_mapping
+from puppet.takeclock import TakeClock, default_muscle_faps
+from puppet.takes import TakeRecorder
+mapping = load_mapping({mapping!r})
+rec = TakeRecorder({root!r}, "fast", 25, mapping_path={mapping!r}, devices={{"box": "sim://joystick"}},
+                   extra={{"t0_ns": 0, "hold_ns": None, "mapping_state": mapping.snapshot()}})
+clock = TakeClock(mapping, rec.frame, 0, 25, encode_muscles=default_muscle_faps)
+print(rec.folder, flush=True)
+for i in range(100_000):  # 5,000 samples/s, as the session records them: log, then the frames due
+    sample = Sample(i * 200_000, "box", {{"ch0": float(i % 1024), "ch1": 512.0}})
+    rec.sample(sample)
+    if clock.due(sample.t_ns - 1) and clock.frames == {kill_at}:
+        os.kill(os.getpid(), signal.SIGKILL)  # logged, its frame not yet written
+    clock.apply(sample)
+"""
+
+
+def test_a_5000_hz_take_killed_between_its_log_and_its_frame_replays_what_it_recorded(tmp_path):
+    """The reproducer: the log held the sample that made frame 10 due, the .fap had 10 frames;
+    the replay used to write 11."""
+    import os
+    import signal
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[1]
+    script = KILLED_RECORDER.format(mapping=str(root / "mappings" / "arduino_sliders.yaml"),
+                                    root=str(tmp_path / "takes"), kill_at=10)
+    run = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                         env={**os.environ, "PYTHONPATH": str(root)}, timeout=120)
+    assert run.returncode == -signal.SIGKILL, run.stderr
+    folder = Path(run.stdout.strip())
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert len(read_fap(folder / "take.fap")) == 10
+        result = retake(folder, tmp_path / "again.fap")
+    assert result.frames == 10 and result.identical
