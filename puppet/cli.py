@@ -1,8 +1,9 @@
 """The ``puppet`` command.
 
 Every refusal is one line on stderr and exit code 2: argparse's own (``puppet render: argument
---fps: ...``), and every ``PuppetError``, ``DeviceError`` or ``OSError`` a command raises, caught
-once in ``main`` as ``puppet COMMAND: message``. A traceback is a bug.
+--fps: ...``), and every ``PuppetError``, ``DeviceError``, ``MappingError`` or ``OSError`` a command
+raises, caught once in ``main`` as ``puppet COMMAND: message``; warnings are one line too. A
+traceback is a bug.
 """
 
 from __future__ import annotations
@@ -38,7 +39,7 @@ def main(argv: list[str] | None = None) -> int:
     with warnings.catch_warnings():
         warnings.showwarning = _warning_line(args.command)
         try:
-            return _run(parser, args)
+            return _run(args)
         except REFUSED as exc:
             print(f"puppet {args.command}: {_one_line(exc)}", file=sys.stderr)
             return 2
@@ -165,7 +166,7 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _run(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
+def _run(args: argparse.Namespace) -> int:
     """Run the command ``args`` names; a refusal propagates to ``main`` as an exception."""
     if args.command == "face-from-photo":
         return _face_from_photo(args)
