@@ -1,5 +1,6 @@
 """facepuppet: live facial puppeteering on an MPEG-4 face rig."""
 
+from .errors import PuppetError
 from .face import Face, load_face
 from .fapfile import FapError, FapStream, FapWarning, FapWriter, iter_fap, read_fap, write_fap
 from .mapping import MappingError, load_mapping
@@ -8,7 +9,7 @@ from .runtime import Runtime
 from .sibson import SibsonError, sibson_coordinates
 
 __all__ = [
-    "Face", "load_face", "Rig", "RigError", "load_rig", "save_rig", "Runtime", "SibsonError",
+    "PuppetError", "Face", "load_face", "Rig", "RigError", "load_rig", "save_rig", "Runtime", "SibsonError",
     "sibson_coordinates",
     "FapError", "FapStream", "FapWarning", "FapWriter", "iter_fap", "read_fap", "write_fap",
     "MappingError", "load_mapping",

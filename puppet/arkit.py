@@ -29,6 +29,7 @@ from pathlib import Path
 from devices.base import Sample
 from devices.samplelog import LogEvent
 
+from .errors import PuppetError
 from .mapping import load_mapping
 from .shipped import shipped_mapping
 from .takeclock import TakeClock, default_muscle_faps
@@ -42,7 +43,7 @@ DAY_NS = 24 * 3600 * 1_000_000_000
 _TIMECODE = re.compile(r"(\d{1,2}):(\d{2}):(\d{2})[:;](\d{1,3})(?:\.(\d{1,9}))?\Z")
 
 
-class CsvError(ValueError):
+class CsvError(PuppetError, ValueError):
     """A CSV that cannot be read; the message starts with ``file:line:``."""
 
 
@@ -162,6 +163,8 @@ def import_csv(csv_path: str | os.PathLike, root: str | os.PathLike, name: str =
     timecodes' frame field. The CSV is read through before the take is made, so a bad file
     leaves no half take behind."""
     rows = list(read_live_link_csv(csv_path, csv_fps))
+    if not rows:
+        raise CsvError(f"{csv_path}: the CSV holds no rows after its header: nothing to import")
     mapping = load_mapping(mapping_path)
     extra = {"source": str(csv_path), "t0_ns": 0, "hold_ns": None, "mapping_state": mapping.snapshot(),
              "wire": {}, "layer": None}

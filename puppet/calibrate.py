@@ -46,6 +46,7 @@ import numpy as np
 
 from devices import Device, open_device
 
+from .errors import PuppetError
 from .mapping import MappingError, load_mapping
 
 LOW_PCT, HIGH_PCT = 0.5, 99.5     # robust extremes of the sweep (and of the rest noise)
@@ -53,8 +54,18 @@ NOISE_FACTOR = 4.0                 # a sweep span within this many rest-noise sp
 POLL = 0.01                        # seconds between drains while recording
 
 
-class CalibrationError(RuntimeError):
+class CalibrationError(PuppetError, RuntimeError):
     """Calibration could not be written (the file would not load, or could not be replaced)."""
+
+
+def _ask(prompt: Callable[[str], object], text: str) -> None:
+    """Wait for Enter; a stdin that ends or is gone is a CalibrationError, not a traceback."""
+    try:
+        prompt(text)
+    except EOFError:
+        raise CalibrationError("stdin ended before Enter was pressed: calibrate needs a terminal") from None
+    except RuntimeError as error:  # input(): lost sys.stdin
+        raise CalibrationError(f"calibrate needs a terminal on stdin ({error})") from None
 
 
 def calibrate(mapping_path: str | os.PathLike, *, rest_seconds: float = 2.0, sweep_seconds: float = 8.0,
@@ -70,6 +81,9 @@ def calibrate(mapping_path: str | os.PathLike, *, rest_seconds: float = 2.0, swe
     """
     path = Path(mapping_path)
     mapping = load_mapping(path)
+    if prompt is input and (sys.stdin is None or sys.stdin.closed):
+        raise CalibrationError("calibrate asks you to press Enter before each step: it needs a terminal"
+                               " on stdin, which is closed")
     channels = {name: ch.bipolar for name, ch in mapping._channels.items()}  # name -> bipolar
     wanted: dict[str, dict[str, str]] = {}  # device -> {channel key in Sample.values: channel name}
     for name in channels:
@@ -92,10 +106,10 @@ def calibrate(mapping_path: str | os.PathLike, *, rest_seconds: float = 2.0, swe
 
         print(f"Calibrating {path} ({len(channels)} channels on {len(live)} device(s)).", file=out)
         print("Step 1/2: leave every control at rest.", file=out)
-        prompt(f"Press Enter, then keep still for {rest_seconds:g} s... ")
+        _ask(prompt, f"Press Enter, then keep still for {rest_seconds:g} s... ")
         rest = _record(live, wanted, rest_seconds)
         print("Step 2/2: move every control through its full range, end to end, a few times.", file=out)
-        prompt(f"Press Enter, then sweep for {sweep_seconds:g} s... ")
+        _ask(prompt, f"Press Enter, then sweep for {sweep_seconds:g} s... ")
         sweep = _record(live, wanted, sweep_seconds)
     finally:
         for device in opened.values():

@@ -1,22 +1,73 @@
-"""The ``puppet`` command."""
+"""The ``puppet`` command.
+
+Every refusal is one line on stderr and exit code 2: argparse's own (``puppet render: argument
+--fps: ...``), and every ``PuppetError``, ``DeviceError``, ``MappingError`` or ``OSError`` a command
+raises, caught once in ``main`` as ``puppet COMMAND: message``; warnings are one line too. A
+traceback is a bug.
+"""
 
 from __future__ import annotations
 
 import argparse
+import math
 import sys
+import warnings
 from pathlib import Path
 
+from devices.base import DeviceError
+
+from .errors import PuppetError
+from .mapping import MappingError
 from .render import VIEW_DIRECTIONS
-from .shipped import MappingExists, MappingNotFound, copy_mapping, mapping_path, mappings_folder, shipped_mappings
+from .shipped import copy_mapping, mapping_path, mappings_folder, shipped_mappings
 
 VIEWS = tuple(VIEW_DIRECTIONS)
 BENCH_SECTIONS = ("deform", "frames", "muscles", "inputs", "latency", "flood", "long_take")
 """``puppet bench --only`` choices (``puppet.bench.SECTIONS``; the bench is imported only when run)."""
 FACE_HELP = "a face folder (puppet face-from-photo) or a mesh with feature points (default: the embedded face)"
+MAX_SIDE = 8192
+REFUSED = (PuppetError, DeviceError, MappingError, OSError)
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse, with its refusals on one line (``puppet render: argument --fps: ...``)."""
+
+    def error(self, message: str) -> None:
+        self.exit(2, f"{self.prog}: {message} (see {self.prog} --help)\n")
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="puppet", description="facepuppet: live facial puppeteering")
+    parser = _parser()
+    args = parser.parse_args(argv)
+    with warnings.catch_warnings():
+        warnings.showwarning = _warning_line(args.command)
+        try:
+            return _run(args)
+        except REFUSED as exc:
+            print(f"puppet {args.command}: {_one_line(exc)}", file=sys.stderr)
+            return 2
+
+
+def _warning_line(command: str):
+    """``warnings.showwarning`` for a command: ``puppet COMMAND: warning: message``, one line."""
+    def show(message, category, filename, lineno, file=None, line=None) -> None:
+        print(f"puppet {command}: warning: {_one_line(Exception(str(message)))}", file=file or sys.stderr)
+
+    return show
+
+
+def _one_line(exc: BaseException) -> str:
+    """An error as one line: an OSError as ``file: reason``, any message's lines joined."""
+    if isinstance(exc, OSError) and not isinstance(exc, PuppetError) and exc.strerror:
+        text = f"{exc.filename}: {exc.strerror}" if exc.filename else exc.strerror
+    else:
+        text = str(exc) or type(exc).__name__
+    return "; ".join(line.strip() for line in text.splitlines() if line.strip())
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="puppet", description="facepuppet: live facial puppeteering")
+    parser.add_argument("--version", action="version", version="puppet (facepuppet) 0.1.0")
     commands = parser.add_subparsers(dest="command", required=True)
 
     demo = commands.add_parser("demo", help="replay the shipped demo take on the default face to a video")
@@ -28,7 +79,8 @@ def main(argv: list[str] | None = None) -> int:
     render.add_argument("-o", "--output", required=True, help="the video to write (.mp4)")
     render.add_argument("--size", type=_size, default=(640, 480), help="video size WxH (default 640x480)")
     render.add_argument("--view", choices=VIEWS, default="front", help="camera (default front)")
-    render.add_argument("--fps", type=_positive_float, default=None, help="video fps (default: the take's)")
+    render.add_argument("--fps", type=_seconds_or_rate("fps", 0.1, 1000), default=None,
+                        help="video fps (default: the take's)")
     render.add_argument("--face", default=None, help=FACE_HELP)
 
     for command, help_text in (("play", "play a take (a .fap or a take folder) in a window, in real time"),
@@ -60,13 +112,13 @@ def main(argv: list[str] | None = None) -> int:
     arkit.add_argument("--name", default="arkit", help="take name (default arkit: folders arkit_001, ...)")
     arkit.add_argument("--takes", default="takes", help="folder for takes (default takes)")
     arkit.add_argument("--fps", type=int, choices=(25, 30, 50, 60), default=30, help="take fps (default 30)")
-    arkit.add_argument("--csv-fps", type=_positive_float, default=60.0,
+    arkit.add_argument("--csv-fps", type=_seconds_or_rate("fps", 0.1, 1000), default=60.0,
                        help="the rate of the timecodes' frame field (default 60)")
 
     live = commands.add_parser("live", help="run a mapping's devices onto the face in a window, live")
     live.add_argument("--mapping", required=True, help="the mapping: a YAML file or a shipped name (puppet mappings)")
     live.add_argument("--record", default=None, metavar="NAME", help="take name for R (default: take)")
-    live.add_argument("--fps", type=_positive, default=30, help="recorded take fps (default 30)")
+    live.add_argument("--fps", type=int, choices=(25, 30, 50, 60), default=30, help="recorded take fps (default 30)")
     live.add_argument("--size", type=_size, default=(960, 720), help="window size WxH (default 960x720)")
     live.add_argument("--view", choices=VIEWS, default="front", help="camera (default front)")
     live.add_argument("--device", action="append", type=_device_override, default=[], metavar="NAME=URL",
@@ -86,16 +138,18 @@ def main(argv: list[str] | None = None) -> int:
     calibrate = commands.add_parser("calibrate", help="record rest and a sweep per channel; write them into the mapping")
     calibrate.add_argument("--mapping", required=True,
                            help="the mapping YAML to calibrate (a .bak copy is kept; copy a shipped one first)")
-    calibrate.add_argument("--rest", type=_positive_float, default=2.0, help="seconds of rest to record (default 2)")
-    calibrate.add_argument("--sweep", type=_positive_float, default=8.0, help="seconds of sweep to record (default 8)")
+    calibrate.add_argument("--rest", type=_seconds_or_rate("seconds", 0.1, 600), default=2.0,
+                           help="seconds of rest to record (default 2)")
+    calibrate.add_argument("--sweep", type=_seconds_or_rate("seconds", 0.1, 600), default=8.0,
+                           help="seconds of sweep to record (default 8)")
 
     bench = commands.add_parser("bench", help="measure Sibson precompute, rig load and per-frame deform")
     bench.add_argument("--json", action="store_true", help="print the results as JSON")
     bench.add_argument("--frames", type=_positive, default=300, help="frames per measurement")
     bench.add_argument("--no-ict", action="store_true", help="skip the ICT face even when present")
-    bench.add_argument("--flood-seconds", type=_positive_float, default=60.0,
+    bench.add_argument("--flood-seconds", type=_seconds_or_rate("seconds", 0.1, 3600), default=60.0,
                        help="how long the 10,000 readings/s flood runs (default 60)")
-    bench.add_argument("--take-seconds", type=_positive_float, default=3600.0,
+    bench.add_argument("--take-seconds", type=_seconds_or_rate("seconds", 0.1, 86400), default=3600.0,
                        help="length of the accelerated long take (default 3600)")
     bench.add_argument("--quick", action="store_true",
                        help="a minute's worth: 30 frames, no subdivided meshes or ICT, a 3 s flood, a 1 minute take")
@@ -118,16 +172,16 @@ def main(argv: list[str] | None = None) -> int:
     pick.add_argument("photo", help="the photo")
     pick.add_argument("--layout", choices=("fdp11", "ibug68"), default="fdp11", help="points to click (default fdp11)")
     pick.add_argument("-o", "--output", required=True, help="the landmark JSON to write")
-    pick.add_argument("--port", type=int, default=0, help="port (default: a free one)")
+    pick.add_argument("--port", type=_port, default=0, help="port 1-65535 (default: a free one)")
     pick.add_argument("--no-browser", action="store_true", help="print the address only")
 
-    args = parser.parse_args(argv)
+    return parser
+
+
+def _run(args: argparse.Namespace) -> int:
+    """Run the command ``args`` names; a refusal propagates to ``main`` as an exception."""
     if getattr(args, "mapping", None):
-        try:
-            args.mapping = str(mapping_path(args.mapping))
-        except MappingNotFound as exc:
-            print(f"puppet {args.command}: {exc}", file=sys.stderr)
-            return 2
+        args.mapping = str(mapping_path(args.mapping))
     if args.command == "mappings":
         return _mappings(args)
     if args.command == "face-from-photo":
@@ -157,9 +211,12 @@ def main(argv: list[str] | None = None) -> int:
         return _import_arkit(args)
     if args.command == "live":
         from .live import run_live
+        from .takes import TakeError
 
         if args.layer_over and not args.arm:
-            parser.error("--layer-over needs --arm: what the pass replaces")
+            raise TakeError("--layer-over needs --arm: what the pass replaces (e.g. --arm box.ch0)")
+        if args.arm and not args.layer_over:
+            raise TakeError("--arm needs --layer-over: the take the pass is recorded over")
         run_live(args.mapping, record=args.record, fps=args.fps, size=args.size, view=args.view,
                  devices=dict(args.device) or None, face=_face(args.face), layer_over=args.layer_over,
                  arm=[a for a in args.arm.split(",") if a])
@@ -184,11 +241,7 @@ def _mappings(args: argparse.Namespace) -> int:
     """``puppet mappings``: the shipped mappings by name with the start of their description, or
     ``--copy NAME``: an editable copy (never over an existing file)."""
     if args.copy:
-        try:
-            print(copy_mapping(args.copy, args.output))
-        except (MappingNotFound, MappingExists) as exc:
-            print(f"puppet mappings: {exc}", file=sys.stderr)
-            return 2
+        print(copy_mapping(args.copy, args.output))
         return 0
     for name, path in shipped_mappings().items():
         first = next((line.lstrip("# ").strip() for line in path.read_text(encoding="utf-8").splitlines()
@@ -209,24 +262,20 @@ def _sections(text: str) -> tuple[str, ...]:
 
 def _rig(args: argparse.Namespace) -> int:
     """``puppet rig``: landmarks -> feature points -> rig file, with the time and a summary; load
-    it with ``Runtime(load_face(mesh, landmarks=...), rig.load_rig(path))``. Bad input is one line
-    on stderr and exit code 2."""
+    it with ``Runtime(load_face(mesh, landmarks=...), rig.load_rig(path))``."""
     import time
 
     from .autorig import build_rig
-    from .face import FaceFileError, load_face
-    from .landmarks import LandmarkError
-    from .rig import RigError, save_rig
+    from .face import load_face
+    from .outputs import writable
+    from .rig import save_rig
 
+    output = writable(args.output, "rig file")
     start = time.perf_counter()
-    try:
-        face = load_face(args.mesh, landmarks=args.landmarks)
-        rig = build_rig(face)
-    except (OSError, FaceFileError, LandmarkError, RigError) as exc:
-        print(f"puppet rig: {exc}", file=sys.stderr)
-        return 2
+    face = load_face(args.mesh, landmarks=args.landmarks)
+    rig = build_rig(face)
     seconds = time.perf_counter() - start
-    save_rig(rig, args.output)
+    save_rig(rig, output)
     counts = {role: sum(p.role == role for p in rig.control_points) for role in ("active", "fixed", "passive", "interpolated")}
     print(f"rigged {args.mesh} ({len(face.vertices)} vertices) in {seconds:.2f} s -> {args.output}")
     print(f"  regions: {', '.join(f'{r.name} ({len(r.vertices)})' for r in rig.regions)}")
@@ -236,51 +285,36 @@ def _rig(args: argparse.Namespace) -> int:
 
 
 def _render(args: argparse.Namespace) -> int:
-    """``puppet render``: a bad take, face or path is one line on stderr and exit code 2."""
-    from .face import FaceFileError, MissingFeaturePointsError
-    from .fapfile import FapError
+    """``puppet render``: the take (file or folder) and the output are checked before any frame."""
     from .playback import render_take
-    from .rig import RigError
-    from .takes import TakeError
 
-    try:
-        face = _face(args.face)
-        count = render_take(args.take, args.output, face=face, size=args.size, view=args.view, fps=args.fps,
-                            progress=sys.stderr.isatty())
-    except (FapError, TakeError, FaceFileError, MissingFeaturePointsError, RigError) as exc:
-        print(f"puppet render: {exc}", file=sys.stderr)
-        return 2
-    except OSError as exc:
-        print(f"puppet render: {exc.filename or args.take}: {exc.strerror or exc}", file=sys.stderr)
-        return 2
+    face = _face(args.face)
+    count = render_take(args.take, args.output, face=face, size=args.size, view=args.view, fps=args.fps,
+                        progress=sys.stderr.isatty())
     print(f"{args.output}: {count} frames")
     return 0
 
 
 def _replay(args: argparse.Namespace) -> int:
-    """``puppet replay``: a window on the take, or its log replayed into a new .fap (then shown)."""
-    from devices import DeviceError
-
-    from .fapfile import FapError
-    from .mapping import MappingError
+    """``puppet replay``: a window on the take, or its log replayed into a new .fap (then shown).
+    Exit code 1 when the new .fap differs from the recorded one or that one cannot be read."""
     from .replay import retake
-    from .takes import TakeError, open_take
+    from .takes import open_take
     from .window import play_take
 
     path = args.take
     if args.through_devices or args.mapping or args.output:
-        try:
-            take = open_take(args.take)
-            name = "replay.fap" if args.mapping is None else f"remap-{Path(args.mapping).stem}.fap"
-            result = retake(take, args.output or take.folder / name, mapping=args.mapping,
-                            through_devices=args.through_devices)
-        except (TakeError, FapError, MappingError, DeviceError, ValueError) as exc:
-            print(f"puppet replay: {exc}", file=sys.stderr)
-            return 2
-        same = {True: "identical to the recorded take.fap",
-                False: "DIFFERS from the recorded take.fap", None: "re-mapped"}[result.identical]
+        take = open_take(args.take)
+        name = "replay.fap" if args.mapping is None else f"remap-{Path(args.mapping).stem}.fap"
+        result = retake(take, args.output or take.folder / name, mapping=args.mapping,
+                        through_devices=args.through_devices)
+        if result.unreadable:
+            same = f"not compared: {result.unreadable}"
+        else:
+            same = {True: "identical to the recorded take.fap",
+                    False: "DIFFERS from the recorded take.fap", None: "re-mapped"}[result.identical]
         print(f"{result.path}: {result.frames} frames, {same}")
-        if result.identical is False:
+        if result.identical is False or result.unreadable:
             return 1
         path = result.path
     if not args.no_window:
@@ -298,65 +332,38 @@ def _face(path: str | None):
 
 
 def _export(args: argparse.Namespace) -> int:
-    """``puppet export``: a take to .glb; a bad take is one line on stderr and exit code 2."""
-    from .fapfile import FapError
+    """``puppet export``: a take to .glb."""
     from .gltf import export_glb
-    from .takes import TakeError
 
-    try:
-        info = export_glb(args.take, args.output, mode=args.mode, max_frames=args.max_frames)
-    except (FapError, TakeError, ValueError, OSError) as exc:
-        print(f"puppet export: {exc}", file=sys.stderr)
-        return 2
+    info = export_glb(args.take, args.output, mode=args.mode, max_frames=args.max_frames)
     print(f"{args.output}: {info['frames']} frames, {info['targets']} morph targets, "
           f"largest vertex error {info['max_error']:.2g}, {info['bytes']:,} bytes")
     return 0
 
 
 def _import_arkit(args: argparse.Namespace) -> int:
-    """``puppet import-arkit``: a Live Link Face CSV to a take; a bad file is one line, exit code 2."""
-    from .arkit import DEFAULT_MAPPING, CsvError, import_csv
-    from .mapping import MappingError
+    """``puppet import-arkit``: a Live Link Face CSV to a take."""
+    from .arkit import DEFAULT_MAPPING, import_csv
 
-    try:
-        folder = import_csv(args.csv, args.takes, args.name, args.fps, args.mapping or DEFAULT_MAPPING,
-                            args.csv_fps)
-    except (CsvError, MappingError, OSError) as exc:
-        print(f"puppet import-arkit: {exc}", file=sys.stderr)
-        return 2
+    folder = import_csv(args.csv, args.takes, args.name, args.fps, args.mapping or DEFAULT_MAPPING,
+                        args.csv_fps)
     print(folder)
     return 0
 
 
 def _calibrate(args: argparse.Namespace) -> int:
-    """``puppet calibrate``: a bad mapping or device is one line on stderr and exit code 1."""
-    from devices import DeviceError
+    """``puppet calibrate``: record, then write the ranges into the mapping."""
+    from .calibrate import calibrate
 
-    from .calibrate import CalibrationError, calibrate
-    from .mapping import MappingError
-
-    try:
-        calibrate(args.mapping, rest_seconds=args.rest, sweep_seconds=args.sweep)
-    except (MappingError, DeviceError, CalibrationError) as exc:
-        print(f"puppet calibrate: {exc}", file=sys.stderr)
-        return 1
+    calibrate(args.mapping, rest_seconds=args.rest, sweep_seconds=args.sweep)
     return 0
 
 
 def _face_from_photo(args: argparse.Namespace) -> int:
-    """``puppet face-from-photo``: bad landmarks or photo are one line on stderr, exit code 2."""
-    from .photoface import PhotoFaceError, build_face_folder
-    from .rig import RigError
+    """``puppet face-from-photo``: a face folder from a photo and its landmarks."""
+    from .photoface import build_face_folder
 
-    try:
-        folder = build_face_folder(args.photo, args.landmarks, args.output)
-    except (PhotoFaceError, RigError) as exc:
-        print(f"puppet face-from-photo: {exc}", file=sys.stderr)
-        return 2
-    except OSError as exc:
-        print(f"puppet face-from-photo: {exc.filename or args.output}: {exc.strerror or exc}", file=sys.stderr)
-        return 2
-    print(folder)
+    print(build_face_folder(args.photo, args.landmarks, args.output))
     return 0
 
 
@@ -364,14 +371,10 @@ def _pick_landmarks(args: argparse.Namespace) -> int:
     """``puppet pick-landmarks``: serve the picker until the points are saved."""
     import webbrowser
 
-    from .photoface import PhotoFaceError
+    from .outputs import writable
     from .picker import PickerServer
 
-    try:
-        picker = PickerServer(args.photo, args.layout, args.output, port=args.port)
-    except (PhotoFaceError, OSError) as exc:
-        print(f"puppet pick-landmarks: {exc}", file=sys.stderr)
-        return 2
+    picker = PickerServer(args.photo, args.layout, writable(args.output, "landmark file"), port=args.port)
     print(f"click the points at {picker.url} (Ctrl-C to give up)")
     if not args.no_browser:
         webbrowser.open(picker.url)
@@ -390,11 +393,19 @@ def _device_override(text: str) -> tuple[str, str]:
     return name, url
 
 
-def _positive_float(text: str) -> float:
-    value = float(text)
-    if not value > 0:
-        raise argparse.ArgumentTypeError(f"must be above 0, got {text}")
-    return value
+def _seconds_or_rate(unit: str, least: float, most: float):
+    """An argparse type: a number from ``least`` to ``most`` (``unit`` names it in messages)."""
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if not least <= value <= most:
+            raise argparse.ArgumentTypeError(f"expected {unit} as a number from {least:g} to {most:g},"
+                                             f" got {text!r}")
+        return value
+
+    return parse
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -402,15 +413,28 @@ def _size(text: str) -> tuple[int, int]:
         width, height = (int(v) for v in text.lower().split("x"))
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT such as 640x480, got {text!r}") from None
-    if width < 16 or height < 16:
-        raise argparse.ArgumentTypeError(f"too small: {text}")
+    if not (16 <= width <= MAX_SIDE and 16 <= height <= MAX_SIDE):
+        raise argparse.ArgumentTypeError(f"expected each side from 16 to {MAX_SIDE} pixels, got {text!r}")
     return width, height
 
 
 def _positive(text: str) -> int:
-    value = int(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number of at least 1, got {text!r}") from None
+    if not 1 <= value <= 10**9:
+        raise argparse.ArgumentTypeError(f"expected a whole number from 1 to 10^9, got {text!r}")
+    return value
+
+
+def _port(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if not 0 <= value <= 65535:
+        raise argparse.ArgumentTypeError(f"expected a port from 1 to 65535 (0: any free one), got {text!r}")
     return value
 
 

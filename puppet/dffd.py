@@ -29,10 +29,11 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from .errors import PuppetError
 from .sibson import SibsonError, natural_neighbour_mask, sibson_coordinates
 
 
-class DffdError(ValueError):
+class DffdError(PuppetError, ValueError):
     """A region whose coefficients cannot be computed; the message names the region and the row."""
 
 

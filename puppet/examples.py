@@ -19,8 +19,10 @@ from pathlib import Path
 
 import numpy as np
 
+from .errors import PuppetError
 
-class ExampleError(ValueError):
+
+class ExampleError(PuppetError, ValueError):
     """A target file or folder that cannot be applied to a face; the message names file and line."""
 
 

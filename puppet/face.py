@@ -34,6 +34,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .errors import PuppetError
+
 __all__ = ["Face", "FaceFileError", "MissingFeaturePointsError", "load_face", "load_default_rig"]
 
 DEFAULT_NAME = "default"
@@ -53,11 +55,11 @@ FAPU_DEFINITIONS = {
 AU = 1e-5  # angle unit, radians
 
 
-class FaceFileError(ValueError):
+class FaceFileError(PuppetError, ValueError):
     """A mesh file that cannot be read as a face; the message names the file and the problem."""
 
 
-class MissingFeaturePointsError(LookupError):
+class MissingFeaturePointsError(PuppetError, LookupError):
     """The face lacks feature points that a computation needs; ``missing`` lists their ids."""
 
     def __init__(self, face_name: str, what: str, missing: list[str]) -> None:
@@ -99,9 +101,12 @@ class Face:
         units["AU"] = AU
         return units
 
-    @functools.cached_property
+    @property
     def content_hash(self) -> str:
-        """sha256 (hex) of the rest vertices (float64) and triangles (int32): a cache key."""
+        """sha256 (hex) of the rest vertices (float64) and triangles (int32): a cache key.
+
+        Computed on every call (about 1 ms per 50,000 vertices), never cached: the arrays can be
+        edited in place, and a stale hash would key the coefficient cache on disk to another mesh."""
         h = hashlib.sha256()
         h.update(np.ascontiguousarray(self.vertices, dtype="<f8").tobytes())
         h.update(np.ascontiguousarray(self.triangles, dtype="<i4").tobytes())

@@ -19,8 +19,20 @@ file; index 0 = FAP 1) into the runtime's inputs: control point displacements an
 * Head: pitch (48), yaw (49), roll (50) about 7.1, as yaw * pitch * roll.
 * Tongue (43-46): the default face's tongue is rigid on the jaw, so tip and body FAPs translate
   it whole (44 and 46 both raise it).
-* Reach (the rig's ``fap_reach``): a FAP beyond the values this face can show without a fold is
-  limited to them here, after the high-level FAPs are expanded; what a file says is never changed.
+* Limits at pose time (``FapEngine.limit``), after the high-level FAPs are expanded; what a file
+  says is never changed (the reader returns any finite value as written):
+
+  - what no face can follow: a translation beyond ``TRANSLATION_LIMIT`` FAPU (twice its unit's
+    reference distance, past every Greta editor range), a turn beyond half a turn (``HALF_TURN``);
+  - the jaw solver's reach: open_jaw beyond the drop at which 2.1 is lowest (highest) on its arc
+    about the hinge (on the default face about 46 degrees open);
+  - the lids' solver reach likewise, and lids crossing: an upper lid's drop plus its lower lid's
+    rise is at most 1024 IRISD (IRISD0 is the rest opening / 1024: the margins meet there); past
+    that, the closing parts are scaled back in proportion;
+  - the rig's ``fap_reach``: the values this face shows without a fold, where a rig carries them.
+
+  ``limit_fields`` does the same for FAP 1 / 2 fields read from a file: a select that names no
+  viseme or expression shows none (0), blends and intensities are held to 0-63.
 * High-level FAPs 1 and 2 expand into low-level FAPs from ``data/high_level_faps.yaml`` (blends as
   the standard says) and add to the frame's low-level values.
 
@@ -55,6 +67,9 @@ TONGUE_FAPS = (43, 44, 45, 46)
 NOT_ON_ANY_FACE = {29: "the pupil is painted on the eyeball", 30: "the pupil is painted on the eyeball",
                    47: "the tongue is rigid: it cannot roll"}
 X, Y, Z = np.eye(3)
+TRANSLATION_LIMIT = 2048.0
+HALF_TURN = math.pi / 1e-5
+LIDS_MEET = 1024.0
 
 
 class FapEngine:
@@ -70,10 +85,35 @@ class FapEngine:
         self._own = self._translation_matrix()
         self._translations = self._own + self._calibrated_matrix()
         self._high = high_level_faps()
-        self.reach = np.full((2, N_FAPS), np.inf)
-        self.reach[0] = -np.inf
+        self.reach = self._face_limits()
         for number, (low, high) in self.rig.fap_reach.items():
-            self.reach[:, number - 1] = low, high
+            self.reach[0, number - 1] = max(self.reach[0, number - 1], low)
+            self.reach[1, number - 1] = min(self.reach[1, number - 1], high)
+
+    def _face_limits(self) -> np.ndarray:
+        """(2, 68) low / high: what this face can follow at all (see the module docstring)."""
+        turns = np.array([f.unit == "AU" for f in faps()])
+        limit = np.where(turns, HALF_TURN, TRANSLATION_LIMIT)
+        reach = np.stack([-limit, limit])
+        parts = self.rig.rigid_parts
+        solved = [(3, "jaw", "2.1", 1, "MNS0")]
+        solved += [(n, part, point, sign, "IRISD0") for n, (part, point, sign) in LID_FAPS.items()]
+        for number, part, point, sign, unit in solved:
+            if part in parts:
+                drops = _drop_reach(self.face.feature_points[point] - parts[part].pivot, parts[part].axis)
+                low, high = np.sort(sign * drops / self.fapu[unit])
+                reach[:, number - 1] = max(low, -TRANSLATION_LIMIT), min(high, TRANSLATION_LIMIT)
+        return reach
+
+    def limit(self, values: np.ndarray) -> np.ndarray:
+        """68 low-level FAP values held to what this face can follow (a new array)."""
+        v = np.clip(np.asarray(values, dtype=float), self.reach[0], self.reach[1])
+        for upper, lower in ((19, 21), (20, 22)):
+            excess = v[upper - 1] + v[lower - 1] - LIDS_MEET
+            if excess > 0:
+                closing = np.maximum(v[[upper - 1, lower - 1]], 0.0)
+                v[[upper - 1, lower - 1]] -= excess * closing / closing.sum()
+        return v
 
     # -- decoding ------------------------------------------------------------------------
 
@@ -152,7 +192,7 @@ class FapEngine:
     def controls(self, values: np.ndarray) -> tuple[np.ndarray, dict[str, np.ndarray]]:
         """Control point displacements (K, 3) and rigid motions for 68 low-level FAP values,
         each within the face's reach."""
-        v = np.clip(np.asarray(values, dtype=float), self.reach[0], self.reach[1])
+        v = self.limit(values)
         d = (self._translations @ v).reshape(-1, 3)
         motions = {"jaw": self._jaw(v), "head": self._head(v)}
         for part, (yaw, pitch, thrust) in EYE_FAPS.items():
@@ -299,6 +339,32 @@ def _angle_for_drop(offset: np.ndarray, axis: np.ndarray, drop: float) -> float:
     psi = math.atan2(C, A)
     target = min(1.0, max(-1.0, (A - drop) / radius))
     return psi - math.copysign(math.acos(target), psi) if psi else math.acos(target)
+
+
+def _drop_reach(offset: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    """(lowest, highest) drop ``_angle_for_drop`` can reach for a point at ``offset``: its arc's
+    top and bottom."""
+    a = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
+    r = offset - (offset @ a) * a
+    A, C = float(r[1]), float(a[2] * r[0] - a[0] * r[2])
+    radius = math.hypot(A, C)
+    return np.array([A - radius, A + radius])
+
+
+def limit_fields(viseme: np.ndarray | None, expression: np.ndarray | None) -> tuple:
+    """FAP 1 / 2 fields as read from a file, held to what they can mean: a select naming no
+    viseme (0-14) or expression (0-6) selects none, blends and intensities are held to 0-63."""
+    if viseme is not None:
+        s1, s2, blend = (float(x) for x in viseme[:3])
+        viseme = (_select(s1, 14), _select(s2, 14), min(max(blend, 0.0), 63.0))
+    if expression is not None:
+        s1, i1, s2, i2 = (float(x) for x in expression[:4])
+        expression = (_select(s1, 6), min(max(i1, 0.0), 63.0), _select(s2, 6), min(max(i2, 0.0), 63.0))
+    return viseme, expression
+
+
+def _select(value: float, top: int) -> int:
+    return int(value) if 0 <= value <= top else 0
 
 
 def _yaw_pitch_roll(R: np.ndarray) -> np.ndarray:

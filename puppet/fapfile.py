@@ -32,17 +32,30 @@ Decisions
 * **No header**: fps defaults to ``DEFAULT_FPS`` = 25 (the rate of every headed corpus file from a
   live system) with a warning; ``name`` and ``version`` are ``""``, ``declared_frames`` None.
 * **Declared vs present frames**: fewer present (how a crashed take looks) or more present both
-  warn and keep every frame there is.
-* **Clamping**: masked values beyond ``faptable.clamp_ranges()`` (and FAP 1/2 fields beyond their
-  ranges: selects 0-14 / 0-6, blend and intensities 0-63, flags 0-1) are clamped, with one
-  ``FapWarning`` per file naming the file, the FAPs and the count. Streaming readers emit the
-  warnings that summarise a file when they reach its end.
+  warn and keep every frame there is. A last frame cut off mid-line (the file ends without its
+  newline, or a mask line without its value line) that the header's count leaves out is what a
+  killed ``FapWriter`` leaves: it is dropped with a warning. Anywhere else it is an error.
+* **No clamping**: every value is returned exactly as the file writes it, however far beyond the
+  Greta editor's slider ranges of ``fap_coding_params.csv`` (those are an editor's convention, not
+  the standard's limits: real files turn the head 30 degrees). What a face cannot follow is
+  limited when it is posed (``puppet.fap``), never in the stream. FAP 1/2 fields are whole
+  numbers (selects beyond 0-14 / 0-6 are kept as written too).
+* **Numbers** are ASCII decimals (``-12``, ``3.5``, ``1e3``); Python's extras (``1_000``,
+  ``inf``, ``nan``, non-ASCII digits) are errors, and so is anything a sane file never holds:
+  a frame number or FAP 1/2 field of more than ``MAX_DIGITS`` digits, an fps outside
+  ``MIN_FPS``-``MAX_FPS``, a declared count of more than ``COUNT_WIDTH`` digits.
+* **Bounded work**: lines are read in pieces of ``CHUNK`` characters; a line of more than
+  ``MAX_FIELDS`` fields or a field of more than ``MAX_FIELD_CHARS`` characters is an error as soon
+  as it is seen, and a comment line of any length is skipped piece by piece, so no input makes the
+  reader hold more than a few pieces at once. Streaming readers emit the warnings that summarise a
+  file when they reach its end.
 * **API**: ``read_fap`` (whole file, ``FapStream``) is built on ``iter_fap`` (a ``FapReader``:
   ``.header`` as soon as it is opened, then ``FapFrame``s one line pair at a time);
   ``write_fap`` (a whole take) is built on ``FapWriter`` (frame by frame, live).
 * **Errors**: every problem is a ``FapError`` ``"{file}:{line}: expected ..., found ..."``.
 * **Writing** (``write_fap``, ``FapWriter``): ``2.1 <name, whitespace -> _> <integer fps> <n>``,
-  68 flags, frames numbered from 0, values rounded to integers, LF. FAP 1/2 are masked only in
+  68 flags, frames numbered from 0, values rounded to integers (written out in full, so any
+  finite value reads back as written), LF. FAP 1/2 are masked only in
   frames that use them and then carry their full 4/6 fields. A non-integer fps is rounded, with a
   warning, because the portable header carries an integer.
 * **Header count while recording**: ``FapWriter`` reserves the count as a fixed-width field
@@ -58,30 +71,37 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import warnings
 from dataclasses import dataclass
 from typing import IO, Iterator, Sequence
 
 import numpy as np
 
-from .faptable import N_FAPS, clamp_ranges, faps
+from .errors import PuppetError
+from .faptable import N_FAPS
 
 DEFAULT_FPS = 25.0
 VERSION = "2.1"
 COUNT_WIDTH = 10
 VISEME_FIELDS = ("select1", "select2", "blend", "def")
 EXPRESSION_FIELDS = ("select1", "intensity1", "select2", "intensity2", "init_face", "def")
-_VISEME_LOW, _VISEME_HIGH = np.array([0, 0, 0, 0]), np.array([14, 14, 63, 1])
-_EXPR_LOW, _EXPR_HIGH = np.array([0, 0, 0, 0, 0, 0]), np.array([6, 63, 6, 63, 1, 1])
+MIN_FPS, MAX_FPS = 0.1, 10_000.0
+MAX_DIGITS = 15                 # frame numbers and FAP 1/2 fields
+MAX_FIELDS = 256                # a valid line has at most 78 (a header's name can add a few)
+MAX_FIELD_CHARS = 400           # the largest double written out in full has 309 digits
+CHUNK = 1 << 16                 # characters read at once from a line
 _FLAGS = frozenset(("0", "1"))
+_NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
+_INTEGER = re.compile(r"[+-]?[0-9]+")
 
 
-class FapError(ValueError):
+class FapError(PuppetError, ValueError):
     """A problem in a .fap file: ``"{file}:{line}: expected ..., found ..."``."""
 
 
 class FapWarning(UserWarning):
-    """Something in a .fap file was read leniently (clamped, missing header, count mismatch...)."""
+    """Something in a .fap file was read leniently (missing header, count mismatch...)."""
 
 
 @dataclass(frozen=True)
@@ -147,6 +167,7 @@ class FapReader:
         self.label = str(path)
         self._file: IO[str] = open(path, encoding="utf-8", errors="replace")
         self._last_line = 0
+        self._line_ended = True
         self._lines = self._content_lines()
         try:
             self.header, self._pending = self._read_header()
@@ -172,11 +193,50 @@ class FapReader:
 
     def _content_lines(self) -> Iterator[tuple[int, list[str]]]:
         """(line number, tokens) of every line that is neither blank nor a # comment."""
-        for number, text in enumerate(self._file, 1):
-            self._last_line = number
-            tokens = text.split()
+        number = 0
+        while text := self._file.readline(CHUNK):
+            number = self._last_line = number + 1
+            self._line_ended = text.endswith("\n")
+            if text.endswith("\n") or len(text) < CHUNK:
+                tokens = self._checked(number, text.split(), "")
+            else:
+                tokens = self._long_line(number, text)
             if tokens and not tokens[0].startswith("#"):
                 yield number, tokens
+
+    def _long_line(self, number: int, text: str) -> list[str]:
+        """The tokens of a line longer than ``CHUNK``, read piece by piece (a comment: skipped)."""
+        tokens: list[str] = []
+        carry = ""
+        while True:
+            done = text.endswith("\n") or len(text) < CHUNK
+            text = carry + text
+            parts = text.split()
+            carry = "" if done or not parts or text[-1].isspace() else parts.pop()
+            first = (tokens or parts or [carry])[0]
+            if first.startswith("#"):
+                while not done:
+                    text = self._file.readline(CHUNK)
+                    done = text.endswith("\n") or len(text) < CHUNK
+                return []
+            tokens = self._checked(number, tokens + parts, carry)
+            if done:
+                self._line_ended = text.endswith("\n")
+                return tokens
+            text = self._file.readline(CHUNK)
+
+    def _checked(self, number: int, tokens: list[str], carry: str) -> list[str]:
+        """``tokens``, if neither they nor the field still being read exceed the bounds."""
+        if tokens and tokens[0].startswith("#"):
+            return tokens
+        if len(tokens) > MAX_FIELDS:
+            raise _fail(self.label, number, f"expected a line of at most {MAX_FIELDS} fields",
+                        f"{len(tokens)} or more")
+        longest = max([carry, *tokens], key=len)
+        if len(longest) > MAX_FIELD_CHARS:
+            raise _fail(self.label, number, f"expected fields of at most {MAX_FIELD_CHARS}"
+                        " characters", f"one of {len(longest)} or more starting {longest[:20]!r}")
+        return tokens
 
     def _eof(self) -> int:
         return self._last_line + 1
@@ -197,12 +257,12 @@ class FapReader:
             raise _fail(self.label, number, "expected a header '<version> <name> <fps> <nframes>'"
                         " or a mask line of 68 flags", _show(tokens))
         fps = float(tokens[-2]) if _is_number(tokens[-2]) else 0.0
-        if not 0.0 < fps < math.inf:
-            raise _fail(self.label, number, "expected the fps (a positive number) as the"
-                        " second-last header field", repr(tokens[-2]))
-        if not (_is_int(tokens[-1]) and int(tokens[-1]) >= 0):
-            raise _fail(self.label, number, "expected the frame count (an integer >= 0) as the"
-                        " last header field", repr(tokens[-1]))
+        if not MIN_FPS <= fps <= MAX_FPS:
+            raise _fail(self.label, number, f"expected the fps (a number from {MIN_FPS:g} to"
+                        f" {MAX_FPS:g}) as the second-last header field", repr(tokens[-2]))
+        if not (_is_int(tokens[-1], COUNT_WIDTH) and int(tokens[-1]) >= 0):
+            raise _fail(self.label, number, f"expected the frame count (an integer >= 0 of at most"
+                        f" {COUNT_WIDTH} digits) as the last header field", repr(tokens[-1]))
         return FapHeader(tokens[0], " ".join(tokens[1:-2]), fps, int(tokens[-1]))
 
     def _read_frames(self) -> Iterator[FapFrame]:
@@ -213,15 +273,35 @@ class FapReader:
             if self._pending is not None:
                 lines = _chain(self._pending, lines)
             for mask_line, tokens in lines:
-                if parsed_mask is None or tokens != parsed_mask[0]:
-                    parsed_mask = (tokens, self._parse_mask(mask_line, tokens))
-                value_line = next(lines, None)
-                if value_line is None:
-                    raise _fail(self.label, self._eof(), f"expected the value line of the mask"
-                                f" line {mask_line}", "end of file")
-                yield self._parse_values(*value_line, parsed_mask[1], tally)
+                value_line = None
+                try:
+                    if parsed_mask is None or tokens != parsed_mask[0]:
+                        parsed_mask = (tokens, self._parse_mask(mask_line, tokens))
+                    value_line = next(lines, None)
+                    if value_line is None:
+                        raise _fail(self.label, self._eof(), f"expected the value line of the mask"
+                                    f" line {mask_line}", "end of file")
+                    frame = self._parse_values(*value_line, parsed_mask[1], tally)
+                    if self._cut_short(tally, False):
+                        raise _fail(self.label, value_line[0], "expected a value line ending in a"
+                                    " newline", "end of file")
+                except FapError as error:
+                    if not self._cut_short(tally, value_line is None):
+                        raise
+                    tally.cut = str(error)
+                    break
+                yield frame
                 tally.frames += 1
         self._summarise(tally)
+
+    def _cut_short(self, tally: _Tally, no_values: bool) -> bool:
+        """Whether this frame is a recorder's last, cut off by a kill: it ends the file without
+        its newline (only the file's last line can) or lacks its value line, and the header's
+        count leaves it out."""
+        declared = self.header.declared_frames
+        if declared is None or declared > tally.frames:
+            return False
+        return no_values or not self._line_ended
 
     def _parse_mask(self, number: int, tokens: list[str]) -> _Mask:
         if not _is_mask(tokens):
@@ -240,9 +320,9 @@ class FapReader:
         return tokens[1:] if last else tokens[:N_FAPS]
 
     def _parse_values(self, number: int, tokens: list[str], mask: _Mask, tally: _Tally) -> FapFrame:
-        if not _is_int(tokens[0]):
-            raise _fail(self.label, number, "expected a frame number (an integer) starting the"
-                        " value line", repr(tokens[0]))
+        if not _is_int(tokens[0], MAX_DIGITS):
+            raise _fail(self.label, number, f"expected a frame number (an integer of at most"
+                        f" {MAX_DIGITS} digits) starting the value line", repr(tokens[0]))
         numbers = self._numbers(number, tokens[1:], mask)
         if not len(numbers) and mask.count:
             tally.note_empty(number)
@@ -251,22 +331,31 @@ class FapReader:
         values = np.zeros(N_FAPS)
         values[mask.low] = numbers[len(numbers) - mask.n_low:]
         viseme, expression, rest = np.zeros(4, int), np.zeros(6, int), numbers
-        if mask.mask[0]:
-            viseme[:], rest = _fields(rest, full, (0, 63, 0))
-        if mask.mask[1]:
-            expression[:], rest = _fields(rest, full, (63, 0, 0, 0, 0))
-        tally.clamp(values, viseme, expression, mask.mask)
+        for column, fields, defaults in ((0, viseme, (0, 63, 0)), (1, expression, (63, 0, 0, 0, 0))):
+            if mask.mask[column]:
+                taken = _fields(rest, full, defaults)
+                self._check_fields(number, column, taken)
+                fields[:], rest = taken, rest[len(taken) if full else 1:]
         values[0], values[1] = viseme[0], expression[0]
         return FapFrame(int(tokens[0]), values, mask.mask.copy(), viseme, expression)
+
+    def _check_fields(self, number: int, column: int, fields: np.ndarray) -> None:
+        whole = (fields == np.round(fields)) & (np.abs(fields) < 10.0 ** MAX_DIGITS)
+        if not whole.all():
+            names = VISEME_FIELDS if column == 0 else EXPRESSION_FIELDS
+            bad = int(np.argmin(whole))
+            raise _fail(self.label, number, f"expected FAP {column + 1}'s {names[bad]} as a whole"
+                        f" number of at most {MAX_DIGITS} digits", f"{fields[bad]:g}")
 
     def _numbers(self, number: int, tokens: list[str], mask: _Mask) -> np.ndarray:
         if tokens and len(tokens) - mask.n_low not in mask.extras:
             raise _fail(self.label, number, f"expected {mask.describe()}", f"{len(tokens)} values")
+        text = "".join(tokens)
         try:
             numbers = np.array(list(map(float, tokens)))
         except ValueError:
             numbers = np.array([math.nan])
-        if not np.isfinite(numbers).all():
+        if "_" in text or not text.isascii() or not np.isfinite(numbers).all():
             position, token = next((i, t) for i, t in enumerate(tokens, 1) if not _is_number(t))
             raise _fail(self.label, number, f"expected a number as value {position} of the"
                         " value line", repr(token))
@@ -310,40 +399,23 @@ class _Tally:
 
     def __init__(self) -> None:
         self.frames = 0
-        self.clamped = np.zeros(N_FAPS, int)
-        self.empty_lines: list[int] = []
-        self.low, self.high = clamp_ranges()
+        self.empty_lines = 0
+        self.first_empty = 0
+        self.cut = ""
 
     def note_empty(self, line: int) -> None:
-        self.empty_lines.append(line)
-
-    def clamp(self, values: np.ndarray, viseme: np.ndarray, expression: np.ndarray,
-              mask: np.ndarray) -> None:
-        out = mask & ((values < self.low) | (values > self.high))
-        if out.any():
-            self.clamped += out
-            np.clip(values, self.low, self.high, out=values)
-        for column, fields, low, high in ((0, viseme, _VISEME_LOW, _VISEME_HIGH),
-                                          (1, expression, _EXPR_LOW, _EXPR_HIGH)):
-            if not mask[column]:
-                continue
-            beyond = int(((fields < low) | (fields > high)).sum())
-            if beyond:
-                self.clamped[column] += beyond
-                np.clip(fields, low, high, out=fields)
+        self.first_empty = self.first_empty or line
+        self.empty_lines += 1
 
     def messages(self, label: str) -> list[str]:
         out = []
         if self.empty_lines:
-            out.append(f"{label}: {len(self.empty_lines)} value line(s) hold only the frame number"
-                       f" although their mask line sets FAPs (first at line {self.empty_lines[0]});"
-                       " read as frames that transmit no FAP")
-        if self.clamped.any():
-            table = faps()
-            named = ", ".join(f"FAP {i + 1} {table[i].name} ({n})"
-                              for i, n in enumerate(self.clamped) if n)
-            out.append(f"{label}: {int(self.clamped.sum())} values beyond the FAP ranges clamped:"
-                       f" {named}")
+            out.append(f"{label}: {self.empty_lines} value line(s) hold only the frame number although"
+                       f" their mask line sets FAPs (first at line {self.first_empty}); read as"
+                       " frames that transmit no FAP")
+        if self.cut:
+            out.append(f"{self.cut}: the last frame was cut off (a recorder killed mid-write);"
+                       f" keeping the {self.frames} complete frames before it")
         return out
 
 
@@ -353,28 +425,19 @@ def _chain(first: tuple[int, list[str]],
     yield from rest
 
 
-def _fields(numbers: np.ndarray, full: bool,
-            defaults: tuple[int, ...]) -> tuple[list[int], np.ndarray]:
-    """Take one FAP 1/2 from the front of ``numbers``: all its fields, or a select + defaults."""
-    size = len(defaults) + 1
+def _fields(numbers: np.ndarray, full: bool, defaults: tuple[int, ...]) -> np.ndarray:
+    """One FAP 1/2 from the front of ``numbers``: all its fields, or a select + defaults."""
     if full:
-        return [round(v) for v in numbers[:size]], numbers[size:]
-    return [round(numbers[0]), *defaults], numbers[1:]
+        return numbers[:len(defaults) + 1]
+    return np.array([numbers[0], *defaults], dtype=float)
 
 
 def _is_number(token: str) -> bool:
-    try:
-        return math.isfinite(float(token))
-    except ValueError:
-        return False
+    return bool(_NUMBER.fullmatch(token)) and math.isfinite(float(token))
 
 
-def _is_int(token: str) -> bool:
-    try:
-        int(token)
-    except ValueError:
-        return False
-    return True
+def _is_int(token: str, digits: int = MAX_DIGITS) -> bool:
+    return bool(_INTEGER.fullmatch(token)) and len(token.lstrip("+-")) <= digits
 
 
 def iter_fap(path: str | os.PathLike[str]) -> FapReader:
@@ -502,7 +565,7 @@ def _format_frame(number: int, values: Sequence[float] | np.ndarray,
         tokens += _field_tokens(viseme, values[0], 4, (0, 63, 0))
     if flags[1]:
         tokens += _field_tokens(expression, values[1], 6, (63, 0, 0, 0, 0))
-    tokens += map(str, np.rint(values[2:][flags[2:]]).astype(np.int64).tolist())
+    tokens += _whole(values[2:][flags[2:]])
     mask_line = " ".join(map(str, flags.view(np.uint8).tolist()))
     return f"{mask_line}\n{' '.join(tokens)}\n".encode()
 
@@ -512,9 +575,15 @@ def _field_tokens(fields: Sequence[int] | np.ndarray | None, select: float, size
     if fields is None:
         fields = [select, *defaults]
     array = np.asarray(fields, dtype=float)
-    if array.shape != (size,) or not np.isfinite(array).all():
-        raise ValueError(f"FAP 1 takes 4 fields and FAP 2 takes 6, got {array.shape}")
-    return list(map(str, np.rint(array).astype(np.int64).tolist()))
+    if array.shape != (size,) or not (np.abs(array) < 10.0 ** MAX_DIGITS).all():
+        raise ValueError(f"FAP 1 takes 4 fields and FAP 2 takes 6, each a whole number of at most"
+                         f" {MAX_DIGITS} digits, got {array.tolist()}")
+    return _whole(array)
+
+
+def _whole(values: np.ndarray) -> list[str]:
+    """Finite values rounded to integers and written out in full (no exponent, no -0)."""
+    return [f"{v:.0f}" for v in (np.rint(values) + 0.0).tolist()]
 
 
 def write_fap(path: str | os.PathLike[str],

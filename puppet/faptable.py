@@ -2,8 +2,9 @@
 
 The facts live in ``puppet/data/fap_table.csv`` (number, name, unit, uni/bidirectional, positive
 direction, group, feature point) and ``fap_coding_params.csv`` (the reference encoder's
-quantisation step and the Greta editor's range, used as clamps), copied from the project's
-reference folder. Directions are in the MPEG-4 face frame: +x the face's own left, +y up, +z
+quantisation step and the Greta editor's slider range: an editing convention, not a limit, so
+nothing clamps a file's values to it; ``puppet.fapcalibration`` searches it), copied from the
+project's reference folder. Directions are in the MPEG-4 face frame: +x the face's own left, +y up, +z
 forward.
 """
 
@@ -18,6 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .errors import PuppetError
+
 N_FAPS = 68
 UNITS = {"MNS": "MNS0", "MW": "MW0", "ES": "ES0", "ENS": "ENS0", "IRISD": "IRISD0", "AU": "AU"}
 DIRECTIONS = {
@@ -27,7 +30,7 @@ DIRECTIONS = {
 }
 
 
-class UnknownFapError(KeyError):
+class UnknownFapError(PuppetError, KeyError):
     """A FAP number or name that does not exist; the message suggests the closest names."""
 
     def __str__(self) -> str:
@@ -46,7 +49,7 @@ class Fap:
     group: int
     feature_points: tuple[str, ...]
     quant_step: int
-    low: float | None  # clamp range (Greta editor), None where the table gives none
+    low: float | None  # Greta editor's slider range (not a limit), None where the table gives none
     high: float | None
 
     @property
@@ -104,7 +107,8 @@ def fap(key: int | str) -> Fap:
 
 @functools.lru_cache(maxsize=1)
 def clamp_ranges() -> tuple[np.ndarray, np.ndarray]:
-    """(low, high) arrays over the 68 FAPs, -inf/+inf where the table gives no range."""
+    """(low, high) arrays over the 68 FAPs, -inf/+inf where the table gives no range: the Greta
+    editor's sliders (a file may go past them; the face's own limits are ``FapEngine.limit``)."""
     low = np.array([-np.inf if f.low is None else f.low for f in faps()])
     high = np.array([np.inf if f.high is None else f.high for f in faps()])
     return low, high

@@ -15,7 +15,8 @@ glTF cannot animate vertex positions directly; it animates morph-target ``weight
 
 Normals are the rest normals (morph targets carry POSITION only). ``max_frames`` exports only the
 first ``max_frames`` frames of the take in either mode. The playback (and so the SVD input) is
-held in memory as float32: frames x 3N x 4 bytes.
+held in memory as float32: frames x 3N x 4 bytes, so a take longer than ``MORPH_FRAMES_LIMIT``
+frames is refused unless ``max_frames`` is given.
 """
 
 from __future__ import annotations
@@ -23,12 +24,13 @@ from __future__ import annotations
 import json
 import os
 import struct
-from pathlib import Path
 
 import numpy as np
 
 from .face import Face
+from .outputs import writable
 from .playback import FapPlayback
+from .takes import TakeError
 
 GLB_MAGIC, GLB_VERSION = 0x46546C67, 2
 CHUNK_JSON, CHUNK_BIN = 0x4E4F534A, 0x004E4942
@@ -36,6 +38,7 @@ FLOAT, UINT32 = 5126, 5125
 ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER = 34962, 34963
 MAX_TARGETS, EXPLAINED = 32, 0.999
 FRAMES_LIMIT = 256
+MORPH_FRAMES_LIMIT = 18_000  # 10 minutes at 30 fps; about 2.2 GB of float32 frames on the default face
 _EXACT_SVD_LIMIT = 1500
 
 
@@ -123,21 +126,25 @@ def export_glb(take_or_fap_path: str | os.PathLike, out_path: str | os.PathLike,
         raise ValueError(f"mode {mode!r}: expected 'morph' or 'frames'")
     if max_frames is not None and max_frames < 1:
         raise ValueError(f"max_frames must be at least 1, got {max_frames}")
+    out_path = writable(out_path, ".glb")
     playback = FapPlayback(take_or_fap_path, face)
     runtime, face = playback.runtime, playback.face
     rest = np.asarray(runtime.rest, dtype=np.float64)
     rest32 = rest.astype(np.float32)
-    limit = max_frames if max_frames is not None else (FRAMES_LIMIT + 1 if mode == "frames" else None)
+    limit = max_frames if max_frames is not None else (FRAMES_LIMIT if mode == "frames" else MORPH_FRAMES_LIMIT) + 1
     played = []
     for vertices, _normals in playback:
         if limit is not None and len(played) >= limit:
             break
         played.append(np.asarray(vertices, dtype=np.float32))
     if not played:
-        raise ValueError(f"{take_or_fap_path}: the take holds no frames")
+        raise TakeError(f"{take_or_fap_path}: the take holds no frames")
     if mode == "frames" and max_frames is None and len(played) > FRAMES_LIMIT:
-        raise ValueError(f"{take_or_fap_path}: more than {FRAMES_LIMIT} frames; mode='frames' "
-                         "makes one morph target per frame -- pass max_frames or use mode='morph'")
+        raise TakeError(f"{take_or_fap_path}: more than {FRAMES_LIMIT} frames; mode='frames' "
+                        "makes one morph target per frame -- pass max_frames or use mode='morph'")
+    if max_frames is None and len(played) > MORPH_FRAMES_LIMIT:
+        raise TakeError(f"{take_or_fap_path}: more than {MORPH_FRAMES_LIMIT} frames, which the export"
+                        " holds in memory at once -- pass max_frames (or export it in parts)")
     frames, n = len(played), len(rest)
     D = (np.stack(played) - rest32).reshape(frames, 3 * n)
     del played
@@ -188,7 +195,6 @@ def export_glb(take_or_fap_path: str | os.PathLike, out_path: str | os.PathLike,
     text = json.dumps(gltf, separators=(",", ":")).encode("utf-8")
     text += b" " * (-len(text) % 4)
     total = 12 + 8 + len(text) + 8 + len(b.blob)
-    out_path = Path(out_path)
     with open(out_path, "wb") as out:
         out.write(struct.pack("<III", GLB_MAGIC, GLB_VERSION, total))
         out.write(struct.pack("<II", len(text), CHUNK_JSON) + text)

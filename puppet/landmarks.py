@@ -44,6 +44,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components, dijkstra
 
+from .errors import PuppetError
 from .muscles import frame_coefficients, place
 
 __all__ = ["LandmarkError", "read_landmarks", "ibug_to_fdp", "apply_landmarks"]
@@ -76,7 +77,7 @@ PUPILS = ("3.5", "3.6")  # coordinates when the face has no eyeball to put them 
 EYES = {"eye_l": ("3.7", "3.11", "3.5"), "eye_r": ("3.12", "3.8", "3.6")}
 
 
-class LandmarkError(ValueError):
+class LandmarkError(PuppetError, ValueError):
     """Landmarks that cannot be used; the message names the source and the problem."""
 
 

@@ -30,9 +30,10 @@ from collections import deque
 from pathlib import Path
 from typing import Any, TextIO
 
+from .mapping import load_mapping
 from .playback import VIEWS, frame_head
 from .render import Renderer
-from .takes import TakeError
+from .takes import TakeError, check_take_name
 from .window import NoDisplayError, WindowError, check_display, open_window
 
 MONITOR_PERIOD = 0.25
@@ -232,25 +233,27 @@ def run_live(mapping_path: str | os.PathLike, *, record: str | None = None, fps:
     ``devices`` overrides device URLs by name (e.g. ``{"box": "sim://joystick?..."}``); takes go
     under ``record_root`` (default ``takes/``); ``face`` is the face to perform (default the
     embedded one; ``load_face`` of a face folder or mesh); ``layer_over`` and ``arm`` record layered passes
-    over an earlier take (``puppet.takeclock.Layer``). Without a usable display this prints
+    over an earlier take (``puppet.takeclock.Layer``). The mapping is checked first, then the
+    display, then the session opens (devices, face, base take), and only then the window: a bad
+    input is one error, never a window that closes again. Without a usable display this prints
     ``puppet live: <why>`` on stderr and raises ``SystemExit(2)``.
     """
     if view not in VIEWS:
         raise ValueError(f"view {view!r}: expected one of {VIEWS}")
+    load_mapping(mapping_path)
+    check_take_name(record or "take")
     try:
         check_display()
     except NoDisplayError as error:
         _exit(str(error))
+    session = open_session(mapping_path, record=record, fps=fps, devices=devices,
+                           record_root=record_root, face=face, layer_over=layer_over, arm=arm)
     try:
         window = open_window(Path(mapping_path).stem, size)
-    except WindowError as error:
-        _exit(str(error))
-    try:
-        session = open_session(mapping_path, record=record, fps=fps, devices=devices,
-                               record_root=record_root, face=face, layer_over=layer_over, arm=arm)
-    except BaseException:
-        window.close()
-        window.destroy()
+    except BaseException as error:
+        session.close()
+        if isinstance(error, WindowError):
+            _exit(str(error))
         raise
     print("keys: R record/stop, N neutral, C re-centre sticks, M channel monitor, Q/Esc quit "
           "(calibrate ranges with 'puppet calibrate')", file=sys.stderr)

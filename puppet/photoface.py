@@ -56,6 +56,7 @@ from pathlib import Path
 import numpy as np
 from scipy.interpolate import RBFInterpolator
 
+from .errors import PuppetError
 from .face import Face, load_face
 from .facefolder import TexturedFace
 from .normals import VertexNormals
@@ -108,7 +109,7 @@ OVAL_BAND = 0.08  # texture fade-out band inside the face oval, fraction of its 
 FACING = (0.15, 0.45)  # normal z over which the photo fades in (grazing -> facing the camera)
 
 
-class PhotoFaceError(ValueError):
+class PhotoFaceError(PuppetError, ValueError):
     """Landmarks or a photo that cannot make a face; the message says what and where."""
 
 

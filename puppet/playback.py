@@ -18,7 +18,9 @@ from pathlib import Path
 import numpy as np
 
 from .face import Face, load_face
+from .fap import limit_fields
 from .fapfile import FapFrame, iter_fap
+from .outputs import writable
 from .render import VIEW_DIRECTIONS, Renderer, write_video
 from .runtime import Runtime
 from .takes import TakeError, take_fap
@@ -51,7 +53,7 @@ class HeldFaps:
         """The held state as 68 low-level FAPs (visemes and expressions expanded)."""
         values = self.values.copy()
         values[:2] = 0
-        return runtime.faps.low_level(values, self.viseme, self.expression)
+        return runtime.faps.low_level(values, *limit_fields(self.viseme, self.expression))
 
 
 def held_low_level(frames: Iterable[FapFrame], runtime: Runtime) -> Iterator[np.ndarray]:
@@ -89,10 +91,11 @@ def render_take(path: str | os.PathLike, out: str | os.PathLike, *, face: Face |
     """Render a .fap take to an MP4 at the take's fps (or ``fps``); return the frame count.
 
     The video is written beside ``out`` and renamed into place only when every frame has been
-    rendered, so a bad take never leaves a broken video behind.
+    rendered, so a bad take never leaves a broken video behind. The take, its folder and ``out``
+    are checked before the first frame (an ``OutputError`` for a path that cannot be written).
     """
+    out = writable(out, "video")
     playback = FapPlayback(path, face)
-    out = Path(out)
     partial = out.with_name(f".{out.stem}.partial{out.suffix}")
     try:
         with Renderer.for_face(playback.face, width=size[0], height=size[1]) as renderer:

@@ -44,6 +44,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .errors import PuppetError
 from .muscles import Muscle, muscles_from_json, muscles_to_json
 
 ROLES = ("active", "fixed", "passive", "interpolated")
@@ -53,7 +54,7 @@ VERSION = 3
 READABLE_VERSIONS = (1, 2, 3)  # version 1: no muscles; before 3: no FAP motions
 
 
-class RigError(ValueError):
+class RigError(PuppetError, ValueError):
     """A rig file or rig object that cannot drive its face; the message names what and where."""
 
 

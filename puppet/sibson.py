@@ -48,6 +48,8 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import ConvexHull, Delaunay, QhullError, cKDTree
 
+from .errors import PuppetError
+
 FLAT_TOL = 1e-10
 """A tetrahedron is flat when ``|6V| < FLAT_TOL * (longest edge)**3``."""
 SNAP_TOL = 1e-8
@@ -66,7 +68,7 @@ _CHUNK = 512
 _FACETS = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
 
 
-class SibsonError(ValueError):
+class SibsonError(PuppetError, ValueError):
     """Invalid input for Sibson coordinates (bad sites, or queries outside their hull)."""
 
 

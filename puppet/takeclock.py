@@ -39,6 +39,7 @@ from .fapfile import iter_fap
 from .faptable import faps
 from .mapping import Mapping, Pose
 from .playback import HeldFaps
+from .takes import TakeError
 
 WriteFrame = Callable[[np.ndarray, "tuple | np.ndarray | None", "tuple | np.ndarray | None"], None]
 """Writes one frame: 68 FAP values (FAPU; FAP 1/2 slots unused), viseme and expression fields."""
@@ -117,7 +118,10 @@ class Layer:
         kinds: set[str] = set()
         for item in arm:
             if "." in item:
-                channel_slots, channel_kinds = mapping.drives(item)
+                try:
+                    channel_slots, channel_kinds = mapping.drives(item)
+                except KeyError as error:
+                    raise TakeError(f"arm {item!r}: {error.args[0]}") from None
                 slots |= channel_slots
                 kinds |= channel_kinds
             elif item in ("viseme", "expression"):
@@ -127,10 +131,10 @@ class Layer:
             elif item in names:
                 slots.add(names[item] - 1)
             else:
-                raise ValueError(f"arm {item!r}: expected a channel (device.channel), a FAP number 3..68 "
+                raise TakeError(f"arm {item!r}: expected a channel (device.channel), a FAP number 3..68 "
                                  "or name (e.g. open_jaw), 'viseme' or 'expression'")
         if not slots and not kinds & {"viseme", "expression"}:
-            raise ValueError(f"arm {list(arm)}: these drive no FAP, viseme or expression, so the pass "
+            raise TakeError(f"arm {list(arm)}: these drive no FAP, viseme or expression, so the pass "
                              "would only copy the base take")
         return cls(base_fap, slots, viseme="viseme" in kinds, expression="expression" in kinds)
 

@@ -48,6 +48,7 @@ from typing import Any
 
 import numpy as np
 
+from .errors import PuppetError
 from .face import Face
 from .fapfile import FapError, FapReader, FapWarning, iter_fap
 from .faptable import N_FAPS
@@ -65,7 +66,7 @@ that where the backend can only handle events by swapping buffers, i.e. by drawi
 RENDER_HINT = "use 'puppet render TAKE -o take.mp4' instead"
 
 
-class WindowError(RuntimeError):
+class WindowError(PuppetError, RuntimeError):
     """No window could be opened (no display, no OpenGL 3.3, no window backend)."""
 
 
@@ -213,7 +214,7 @@ class HeldTable:
     """The held FAP state of every frame of a take, read lazily, for deforming any frame.
 
     Row *k* is the state a player holds at frame *k* (FAP 1 / 2 expanded), as 68 low-level FAP
-    values in float32 (272 bytes a frame), kept in fixed-size chunks. The file is read forward
+    values limited to what the face can follow (``FapEngine.limit``) in float32 (272 bytes a frame), kept in fixed-size chunks. The file is read forward
     only as far as asked (``ensure``, ``read_ahead``); ``pose(k)`` deforms frame *k* as
     ``FapPlayback`` does on its way through (up to the float32 rounding of the FAP values).
     """
@@ -295,7 +296,7 @@ class HeldTable:
         row, column = divmod(self._count, self.CHUNK)
         if row == len(self._chunks):
             self._chunks.append(np.empty((self.CHUNK, N_FAPS), dtype=np.float32))
-        self._chunks[row][column] = values
+        self._chunks[row][column] = self.runtime.faps.limit(values)  # float32 holds what a face shows
         self._count += 1
         return True
 
@@ -514,20 +515,21 @@ def play_take(path: str | os.PathLike, *, size: tuple[int, int] = (960, 720),
               view: str = "front", face: Face | None = None) -> None:
     """Play a .fap take in a window in real time, looping, until Q / Escape or closing it.
 
+    Everything is checked before the window opens (the take, its first frame, the display).
     Without a usable display this prints ``puppet play: <why>; use 'puppet render ...'`` on
     stderr and raises ``SystemExit(2)``.
     """
     if view not in VIEWS:
         raise ValueError(f"view {view!r}: expected one of {VIEWS}")
-    try:
-        check_display()
-    except NoDisplayError as error:
-        _exit(f"{error}; {RENDER_HINT}")
     playback = FapPlayback(path, face)
     table = HeldTable(playback.path, playback.runtime, playback.header.declared_frames)
     try:
         if not table.ensure(1):
             _exit(f"{playback.path}: the take holds no frames")
+        try:
+            check_display()
+        except NoDisplayError as error:
+            _exit(f"{error}; {RENDER_HINT}")
         title = window_title(playback.path.name, 0, table.total, playback.fps, False)
         try:
             window = open_window(title, size)

@@ -128,8 +128,7 @@ def test_import_makes_a_take(tmp_path):
     assert np.all(np.diff(jaw[15:]) > 0)
     assert jaw[-1] > 700
     assert stream.values[:, 11].min() > 0                   # raise_l_cornerlip: the smile holds
-    # head yaw 0.01 rad -> 1000 AU (1e-5 rad), with FAP 49's own sign; small, since .fap files
-    # clamp head rotations to +-1860 AU
+    # head yaw 0.01 rad -> 1000 AU (1e-5 rad), with FAP 49's own sign
     assert stream.values[5, HEAD_YAW] == pytest.approx(0.01 / AU, rel=0.01)
 
 

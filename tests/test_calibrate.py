@@ -164,6 +164,6 @@ def test_bad_mapping_fails_before_any_device_opens(tmp_path, monkeypatch, conten
 def test_puppet_calibrate_reports_a_bad_mapping_in_one_line(tmp_path, capsys):
     from puppet import cli
 
-    assert cli.main(["calibrate", "--mapping", str(tmp_path / "missing.yaml")]) == 1
+    assert cli.main(["calibrate", "--mapping", str(tmp_path / "missing.yaml")]) == 2
     err = capsys.readouterr().err
     assert err.startswith("puppet calibrate: ") and "missing.yaml" in err

@@ -297,6 +297,19 @@ def test_content_hash(face):
     assert moved.content_hash != face.content_hash
 
 
+def test_content_hash_follows_edits_made_after_it_was_asked():
+    """The hash keys the coefficient cache on disk: an edited mesh must never get the old key."""
+    edited = load_face()
+    before = edited.content_hash
+    rest = edited.vertices[0].copy()
+    edited.vertices[0] += 1
+    assert edited.content_hash != before
+    edited.vertices[0] = rest
+    assert edited.content_hash == before
+    edited.triangles[0] = edited.triangles[0][::-1].copy()
+    assert edited.content_hash != before
+
+
 # -- load_face(path) ----------------------------------------------------------------------------
 
 CUBE_V = [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0), (0, 0, 1), (1, 0, 1), (1, 1, 1), (0, 1, 1)]

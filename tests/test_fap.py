@@ -153,3 +153,47 @@ def test_encoding_a_decoded_frame_gives_the_frame_back(runtime, face):
     x[[47, 48, 49]] = rng.uniform(-15000, 15000, 3)
     encoded = runtime.faps.encode(runtime.pose(x))
     np.testing.assert_allclose(encoded, x, atol=1e-6)
+
+
+def _sane(runtime, face, vertices, times=2) -> bool:
+    """Finite, and no vertex further from the head's pivot than ``times`` the farthest rest vertex."""
+    pivot = runtime.rig.rigid_parts["head"].pivot
+    reach = np.linalg.norm(face.vertices - pivot, axis=1).max()
+    return bool(np.isfinite(vertices).all() and (np.linalg.norm(vertices - pivot, axis=1) <= times * reach).all())
+
+
+@pytest.mark.parametrize("value", [1e20, -1e20, 1e300, -1e300, 56298.0])
+def test_an_extreme_value_of_any_fap_poses_a_finite_sane_face(runtime, face, value):
+    for number in range(3, 69):
+        values = np.zeros(68)
+        values[number - 1] = value
+        given = values.copy()
+        assert _sane(runtime, face, runtime.pose(values)), f"FAP {number} = {value:g}"
+        assert np.array_equal(values, given)  # the caller's values are never changed
+    assert _sane(runtime, face, runtime.pose(np.full(68, value) * (np.arange(68) > 1)), times=3)  # all at once
+
+
+def test_the_jaw_stops_at_the_solvers_reach_and_the_skin_with_it(runtime, face):
+    reach = runtime.faps.reach[1, 2]
+    at_reach = runtime.pose({"open_jaw": reach})
+    np.testing.assert_array_equal(runtime.pose({"open_jaw": 40 * reach}), at_reach)
+    assert 500 < reach < 2048  # well past what takes ask (the corpus opens to 573) and finite
+
+
+@pytest.mark.parametrize("upper, lower, point_up, point_low",
+                         [(19, 21, "3.1", "3.3"), (20, 22, "3.2", "3.4")])
+def test_eyelids_never_cross(runtime, face, upper, lower, point_up, point_low):
+    top, bottom = face.feature_vertices[point_up], face.feature_vertices[point_low]
+    for u, d in ((2000, 2000), (5000, -100), (1024, 0), (900, 900), (1e20, 1e20)):
+        moved = runtime.pose({upper: u, lower: d})
+        assert moved[top, 1] >= moved[bottom, 1] - 1e-9, (u, d)
+    meet = runtime.pose({upper: 1024, lower: 0})
+    assert meet[top, 1] == pytest.approx(meet[bottom, 1], abs=1e-6)  # 1024 IRISD closes the lids exactly
+
+
+def test_fap_1_and_2_fields_a_face_cannot_show_pose_as_none_or_held(runtime):
+    from puppet.fap import limit_fields
+
+    viseme, expression = limit_fields(np.array([20, -3, 900, 0]), np.array([9, -5, 2, 1e12, 0, 0]))
+    assert viseme == (0, 0, 63.0) and expression == (0, 0.0, 2, 63.0)
+    assert np.isfinite(runtime.pose({}, viseme=viseme, expression=expression)).all()

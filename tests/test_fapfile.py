@@ -113,19 +113,27 @@ def test_corpus_masks_and_values_match_the_raw_text(name):
     if len(lines[0]) < 68:
         lines = lines[1:]
     masks = np.array([[t == "1" for t in m] for m in lines[0::2]])
-    low, high = clamp_ranges()
     stream, messages = read_recording(path)
     np.testing.assert_array_equal(stream.mask, masks)
-    beyond = False
     for i, tokens in enumerate(lines[1::2]):
         raw = np.array(tokens[1:], dtype=float)
         assert stream.frame_numbers[i] == int(tokens[0])
-        np.testing.assert_array_equal(stream.values[i][masks[i]],
-                                      np.clip(raw, low[masks[i]], high[masks[i]]))
+        np.testing.assert_array_equal(stream.values[i][masks[i]], raw)  # exactly, never clamped
         assert not stream.values[i][~masks[i]].any()
-        beyond |= bool(((raw < low[masks[i]]) | (raw > high[masks[i]])).any())
-    clamp_warnings = [m for m in messages if "clamped" in m]
-    assert len(clamp_warnings) == int(beyond)
+    assert not any("clamp" in m for m in messages)
+
+
+def test_corpus_values_beyond_the_editor_ranges_read_as_written():
+    """1,408 values in 4 corpus files lie beyond the Greta editor's sliders; none is changed."""
+    low, high = clamp_ranges()
+    beyond = {}
+    for name in CORPUS_FACTS:
+        stream = read_recording(corpus_file(name))[0]
+        out = stream.mask[:, 2:] & ((stream.values[:, 2:] < low[2:]) | (stream.values[:, 2:] > high[2:]))
+        beyond[name] = int(out.sum())
+    assert sum(beyond.values()) == 1408 and sum(n > 0 for n in beyond.values()) == 4
+    jag = read_recording(corpus_file("vreng_jag.fap"))[0]
+    assert jag.values[:, 48].max() == 56298 and jag.values[:, 13].min() == -1242
 
 
 def test_corpus_java_greta_69_flag_masks_drop_the_trailing_slot():
@@ -256,21 +264,23 @@ def test_float_values_are_accepted(tmp_path):
     np.testing.assert_array_equal(stream.values[0, 2:4], [12.5, -30])
 
 
-def test_clamping_warns_once_naming_the_file_faps_and_count(tmp_path):
+def test_values_beyond_every_range_read_and_write_back_unchanged(tmp_path):
+    """No clamping, no warning: the reader returns what the file says, the writer writes it back."""
     low, high = clamp_ranges()
     body = "".join(mask_line({3, 19, 1}) + f"\n{i} 20 0 99 0 {high[2] + 5} {low[18] - i - 1}\n"
                    for i in range(3))
-    path = write(tmp_path, "2.1 take 25 3\n" + body, "loud.fap")
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        stream = read_fap(path)
-    messages = [str(w.message) for w in caught]
-    assert len(messages) == 1
-    assert "loud.fap" in messages[0] and "12 values" in messages[0]
-    for needle in ("FAP 1 viseme (6)", "FAP 3 open_jaw (3)", "FAP 19 close_t_l_eyelid (3)"):
-        assert needle in messages[0]
-    assert (stream.values[:, 2] == high[2]).all() and (stream.values[:, 18] == low[18]).all()
-    np.testing.assert_array_equal(stream.viseme, [[14, 0, 63, 0]] * 3)
+    body += mask_line({49, 50}) + "\n3 56298 -100000000000000000000\n"
+    path = write(tmp_path, "2.1 take 25 4\n" + body, "loud.fap")
+    stream = read_strict(path)
+    assert (stream.values[:3, 2] == high[2] + 5).all()
+    np.testing.assert_array_equal(stream.values[:3, 18], low[18] - np.arange(1, 4))
+    np.testing.assert_array_equal(stream.viseme[:3], [[20, 0, 99, 0]] * 3)
+    assert stream.values[3, 48] == 56298 and stream.values[3, 49] == -1e20
+    again = tmp_path / "again.fap"
+    write_fap(again, stream)
+    back = read_strict(again)
+    for key in ("values", "mask", "viseme", "expression"):
+        np.testing.assert_array_equal(getattr(back, key), getattr(stream, key))
 
 
 # --- bad files: file:line: expected ..., found ... ---------------------------------------------
@@ -290,6 +300,23 @@ BAD_FILES = {
     "bad fps": ("2.1 t fast 1\n" + mask_line({3}) + "\n0 1\n", 1, "'fast'"),
     "bad count": ("2.1 t 25 -3\n" + mask_line({3}) + "\n0 1\n", 1, "'-3'"),
     "not a header": ("hello world\n" + mask_line({3}) + "\n0 1\n", 1, "'hello world'"),
+    "underscored number": ("2.1 t 25 1\n" + mask_line({3, 4}) + "\n0 1 1_000\n", 3, "'1_000'"),
+    "non-ASCII digits": ("2.1 t 25 1\n" + mask_line({3}) + "\n0 \u0661\u0662\n", 3, "'\u0661\u0662'"),
+    "infinity": ("2.1 t 25 1\n" + mask_line({3}) + "\n0 -inf\n", 3, "'-inf'"),
+    "fps 1e-300": ("2.1 t 1e-300 1\n" + mask_line({3}) + "\n0 1\n", 1, "'1e-300'"),
+    "fps 1e300": ("2.1 t 1e300 1\n" + mask_line({3}) + "\n0 1\n", 1, "'1e300'"),
+    "underscored fps": ("2.1 t 2_5 1\n" + mask_line({3}) + "\n0 1\n", 1, "'2_5'"),
+    "count 1e100": ("2.1 t 25 1e100\n" + mask_line({3}) + "\n0 1\n", 1, "'1e100'"),
+    "count 10^100": ("2.1 t 25 1" + "0" * 100 + "\n" + mask_line({3}) + "\n0 1\n", 1, "'1000"),
+    "underscored count": ("2.1 t 25 1_0\n" + mask_line({3}) + "\n0 1\n", 1, "'1_0'"),
+    "frame number 10^20": ("2.1 t 25 1\n" + mask_line({3}) + "\n100000000000000000000 1\n", 3,
+                           "'100000000000000000000'"),
+    "FAP 1 field 1e20": ("2.1 t 25 1\n" + mask_line({1}) + "\n0 1e20 0 63 0\n", 3, "1e+20"),
+    "FAP 2 field 2.5": ("2.1 t 25 1\n" + mask_line({2}) + "\n0 2.5\n", 3, "2.5"),
+    "a line of 1000 fields": ("2.1 t 25 1\n" + mask_line({3}) + "\n0" + " 1" * 1000 + "\n", 3,
+                              "or more"),
+    "a field of 1000 digits": ("2.1 t 25 1\n" + mask_line({3}) + "\n0 " + "9" * 1000 + "\n", 3,
+                               "'99999999999999999999'"),
 }
 
 
@@ -302,6 +329,32 @@ def test_bad_files_name_the_file_and_line(tmp_path, case):
     message = str(info.value)
     assert re.match(rf"^{re.escape(str(path))}:{line}: expected .+, found ", message), message
     assert found in message.rsplit("found", 1)[1]
+
+
+@pytest.mark.parametrize("line", ["1 " * 25_000_000, "9" * 50_000_000, " " * 50_000_000 + "x"])
+def test_a_50_mb_line_is_refused_in_bounded_memory(tmp_path, line):
+    path = tmp_path / "long.fap"
+    path.write_text("2.1 t 25 1\n" + mask_line({3}) + "\n" + line + "\n")
+    tracemalloc.start()
+    try:
+        with pytest.raises(FapError, match=r"long.fap:3: expected"):
+            read_fap(path)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 8_000_000
+
+
+def test_a_50_mb_comment_line_is_skipped_in_bounded_memory(tmp_path):
+    path = tmp_path / "comment.fap"
+    path.write_text("2.1 t 25 1\n#" + "x " * 25_000_000 + "\n" + mask_line({3}) + "\n0 7\n")
+    tracemalloc.start()
+    try:
+        stream = read_strict(path)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert stream.values[0, 2] == 7 and peak < 8_000_000
 
 
 def test_fap_error_is_a_value_error():
@@ -482,3 +535,30 @@ def test_streaming_a_long_take_in_bounded_memory(tmp_path):
         tracemalloc.stop()
     assert count == n and total == sum(frames[i % 50, 2] for i in range(n))
     assert peak < 1_000_000   # the values alone would take 12k x 68 x 8 = 6.5 MB
+
+
+def test_a_take_cut_off_mid_frame_reads_to_its_last_complete_frame(tmp_path):
+    """Every byte a killed FapWriter can stop at: the frames before it read back, with a warning."""
+    path = tmp_path / "whole.fap"
+    with FapWriter(path, 25, "cut") as writer:
+        for i in range(3):
+            writer.write_frame(np.full(68, float(i + 1)))
+    data = path.read_bytes()
+    head = data.index(b"\n") + 1
+    ends = [i + 1 for i in range(len(data)) if data[i:i + 1] == b"\n"]
+    for cut in range(head + 1, len(data)):
+        complete = sum(1 for e in ends[2::2] if e <= cut)  # frame k ends at the (2k + 3)-th newline
+        count = f"{complete}".ljust(COUNT_WIDTH).encode()
+        cut_file = tmp_path / "cut.fap"
+        cut_file.write_bytes(data[:head].replace(b"3".ljust(COUNT_WIDTH), count) + data[head:cut])
+        with warnings.catch_warnings(record=True):
+            warnings.simplefilter("always")
+            stream = read_fap(cut_file)
+        assert len(stream) == complete, cut
+        np.testing.assert_array_equal(stream.values[:, 2], np.arange(1, complete + 1))
+
+
+def test_a_cut_frame_the_header_counts_is_still_an_error(tmp_path):
+    path = write(tmp_path, "2.1 t 25 2\n" + mask_line({3}) + "\n0 1\n" + mask_line({3}) + "\n1 5 6", "bad.fap")
+    with pytest.raises(FapError, match=r"bad.fap:5: expected"):
+        read_fap(path)

@@ -132,7 +132,7 @@ def test_a_layered_pass_replaces_only_its_armed_faps(live_take, shared_runtime, 
 
 
 def test_arming_something_that_drives_nothing_is_refused(live_take, shared_runtime, tmp_path):
-    with pytest.raises(KeyError, match="no channel 'box.ch9'"):
+    with pytest.raises(TakeError, match="no channel 'box.ch9'"):  # one line in the CLI, not a KeyError
         _session(shared_runtime, tmp_path, layer_over=live_take.folder, arm=["box.ch9"])
     with pytest.raises(ValueError, match="FAP number"):
         _session(shared_runtime, tmp_path, layer_over=live_take.folder, arm=["jaw please"])
