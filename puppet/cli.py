@@ -24,7 +24,7 @@ from .shipped import copy_mapping, mapping_path, mappings_folder, shipped_mappin
 VIEWS = tuple(VIEW_DIRECTIONS)
 BENCH_SECTIONS = ("deform", "frames", "muscles", "inputs", "latency", "flood", "long_take")
 """``puppet bench --only`` choices (``puppet.bench.SECTIONS``; the bench is imported only when run)."""
-FACE_HELP = "a face folder (puppet face-from-photo) or a mesh with feature points (default: the embedded face)"
+FACE_HELP = "a face folder (puppet rig ... -o FOLDER/, puppet face-from-photo) (default: the embedded face)"
 MAX_SIDE = 8192
 REFUSED = (PuppetError, DeviceError, MappingError, OSError)
 
@@ -105,6 +105,7 @@ def _parser() -> argparse.ArgumentParser:
     export.add_argument("--mode", choices=("morph", "frames"), default="morph",
                         help="morph: a compressed morph-target basis (default); frames: one target per frame")
     export.add_argument("--max-frames", type=_positive, default=None, help="export only the first N frames")
+    export.add_argument("--face", default=None, help=FACE_HELP)
 
     arkit = commands.add_parser("import-arkit", help="import a Live Link Face / ARKit blendshape CSV as a take")
     arkit.add_argument("csv", help="the CSV file")
@@ -156,11 +157,12 @@ def _parser() -> argparse.ArgumentParser:
     bench.add_argument("--only", type=_sections, default=None, metavar="A,B",
                        help="measure only these sections: " + ", ".join(BENCH_SECTIONS))
 
-    rig = commands.add_parser("rig", help="rig a face mesh from its landmarks and write the rig file")
+    rig = commands.add_parser("rig", help="rig a face mesh from its landmarks into a face folder for --face")
     rig.add_argument("mesh", help="the face mesh (.obj or any format trimesh reads)")
     rig.add_argument("--landmarks", required=True,
                      help="JSON: {FDP id: vertex index} or a list of the 68 iBUG landmark vertex indices")
-    rig.add_argument("-o", "--output", required=True, help="the rig file to write (JSON)")
+    rig.add_argument("-o", "--output", required=True,
+                     help="the face folder to write (mesh, feature points, rig); a name ending .rig writes the rig alone")
 
     from_photo = commands.add_parser("face-from-photo", help="build a rigged, textured face from one frontal photo")
     from_photo.add_argument("photo", help="the frontal photo")
@@ -261,27 +263,47 @@ def _sections(text: str) -> tuple[str, ...]:
 
 
 def _rig(args: argparse.Namespace) -> int:
-    """``puppet rig``: landmarks -> feature points -> rig file, with the time and a summary; load
-    it with ``Runtime(load_face(mesh, landmarks=...), rig.load_rig(path))``."""
+    """``puppet rig``: landmarks -> feature points -> rig, with the time and a summary, written as a
+    face folder (mesh, feature points, rig: ``--face FOLDER`` everywhere) or, for ``-o X.rig``, the
+    rig file alone (``Runtime(load_face(mesh, landmarks=...), rig.load_rig(path))``)."""
     import time
 
     from .autorig import build_rig
     from .face import load_face
+    from .facefolder import write_rigged_folder
     from .outputs import writable
     from .rig import save_rig
 
-    output = writable(args.output, "rig file")
+    rig_file = Path(args.output).suffix.lower() in (".rig", ".json")
+    output = writable(args.output, "rig file") if rig_file else _folder_output(args.output)
     start = time.perf_counter()
     face = load_face(args.mesh, landmarks=args.landmarks)
     rig = build_rig(face)
     seconds = time.perf_counter() - start
-    save_rig(rig, output)
+    if rig_file:
+        save_rig(rig, output)
+    else:
+        write_rigged_folder(face, rig, output, source_mesh=str(args.mesh))
     counts = {role: sum(p.role == role for p in rig.control_points) for role in ("active", "fixed", "passive", "interpolated")}
     print(f"rigged {args.mesh} ({len(face.vertices)} vertices) in {seconds:.2f} s -> {args.output}")
     print(f"  regions: {', '.join(f'{r.name} ({len(r.vertices)})' for r in rig.regions)}")
     print(f"  control points: {len(rig.control_points)} ({', '.join(f'{n} {k}' for k, n in counts.items())})")
     print(f"  muscles: {len(getattr(rig, 'muscles', []))}")
+    if not rig_file:
+        print(f"  use it with --face {args.output} (play, render, replay, live, export)")
     return 0
+
+
+def _folder_output(path: str) -> Path:
+    """A face folder to write: new, or an existing folder (never a file)."""
+    from .outputs import OutputError, writable
+
+    folder = Path(path)
+    if folder.is_dir():
+        return folder
+    if folder.exists():
+        raise OutputError(f"{folder}: expected a folder for the face (or a .rig file name), found a file")
+    return writable(folder, "face folder")
 
 
 def _render(args: argparse.Namespace) -> int:
@@ -323,19 +345,24 @@ def _replay(args: argparse.Namespace) -> int:
 
 
 def _face(path: str | None):
-    """``--face``: the face at ``path`` (a face folder or a mesh), or None for the embedded one."""
+    """``--face``: the face at ``path`` (a face folder or a rigged mesh), or None for the embedded one."""
     if path is None:
         return None
-    from .face import load_face
+    from .face import FaceFileError, load_face
 
-    return load_face(path)
+    face = load_face(path)
+    if not face.feature_points:
+        stem = Path(path).stem or "myface"
+        raise FaceFileError(f"{path}: a bare mesh has no feature points to rig it by; rig it once with "
+                            f"`puppet rig {path} --landmarks POINTS.json -o {stem}/`, then use --face {stem}/")
+    return face
 
 
 def _export(args: argparse.Namespace) -> int:
     """``puppet export``: a take to .glb."""
     from .gltf import export_glb
 
-    info = export_glb(args.take, args.output, mode=args.mode, max_frames=args.max_frames)
+    info = export_glb(args.take, args.output, mode=args.mode, max_frames=args.max_frames, face=_face(args.face))
     print(f"{args.output}: {info['frames']} frames, {info['targets']} morph targets, "
           f"largest vertex error {info['max_error']:.2g}, {info['bytes']:,} bytes")
     return 0

@@ -1,0 +1,65 @@
+"""A face rigged by ``puppet rig ... -o FOLDER/`` works everywhere ``--face`` is taken, and a bare
+mesh says how to rig it."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from puppet.cli import main
+from puppet.face import load_face
+from puppet.fapfile import write_fap
+from puppet.runtime import Runtime
+
+
+@pytest.fixture(scope="module")
+def rigged(tmp_path_factory):
+    """The default face's skin and teeth written as a bare OBJ, its landmarks as JSON, rigged into a folder."""
+    root = tmp_path_factory.mktemp("rigged")
+    face = load_face()
+    mesh = root / "head.obj"
+    lines = [f"v {x!r} {y!r} {z!r}" for x, y, z in face.vertices.tolist()]
+    lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in face.triangles.tolist()]
+    mesh.write_text("\n".join(lines) + "\n")
+    points = root / "points.json"
+    points.write_text(json.dumps(face.feature_vertices))
+    assert main(["rig", str(mesh), "--landmarks", str(points), "-o", str(root / "head")]) == 0
+    take = root / "take.fap"
+    frames = np.zeros((10, 68))
+    frames[:, 2] = np.linspace(0, 300, 10)  # open_jaw
+    write_fap(take, frames, fps=25)
+    return root
+
+
+def test_the_folder_holds_mesh_feature_points_and_rig_and_loads_with_its_own_rig(rigged):
+    folder = rigged / "head"
+    assert {p.name for p in folder.iterdir()} == {"face.obj", "face.json", "face.rig"}
+    face = load_face(folder)
+    assert set(face.feature_points) == set(load_face().feature_points)
+    runtime = Runtime(face)
+    assert runtime.rig.face_hash == face.content_hash  # the saved rig, not a new one
+    moved = runtime.pose({"open_jaw": 300}) - face.vertices
+    assert np.abs(moved).max() > 0
+
+
+def test_render_and_export_take_the_folder(rigged, capsys):
+    assert main(["render", str(rigged / "take.fap"), "-o", str(rigged / "take.mp4"), "--size", "160x120",
+                 "--face", str(rigged / "head")]) == 0
+    assert (rigged / "take.mp4").stat().st_size > 0
+    assert main(["export", str(rigged / "take.fap"), "-o", str(rigged / "take.glb"), "--face", str(rigged / "head")]) == 0
+    assert (rigged / "take.glb").stat().st_size > 0
+
+
+def test_a_bare_mesh_as_face_says_how_to_rig_it(rigged, capsys):
+    assert main(["export", str(rigged / "take.fap"), "-o", str(rigged / "x.glb"), "--face", str(rigged / "head.obj")]) == 2
+    err = capsys.readouterr().err
+    assert "puppet rig" in err and "--landmarks" in err and len(err.strip().splitlines()) == 1
+    assert not (rigged / "x.glb").exists()
+
+
+def test_a_rig_file_name_still_writes_the_rig_alone(rigged):
+    out = rigged / "alone.rig"
+    assert main(["rig", str(rigged / "head.obj"), "--landmarks", str(rigged / "points.json"), "-o", str(out)]) == 0
+    assert out.is_file()
