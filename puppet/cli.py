@@ -119,6 +119,8 @@ def _parser() -> argparse.ArgumentParser:
     live = commands.add_parser("live", help="run a mapping's devices onto the face in a window, live")
     live.add_argument("--mapping", required=True, help="the mapping: a YAML file or a shipped name (puppet mappings)")
     live.add_argument("--record", default=None, metavar="NAME", help="take name for R (default: take)")
+    live.add_argument("--takes", default="takes", metavar="DIR",
+                      help="folder the takes go to (default: ./takes; printed when recording starts)")
     live.add_argument("--fps", type=int, choices=(25, 30, 50, 60), default=30, help="recorded take fps (default 30)")
     live.add_argument("--size", type=_size, default=(960, 720), help="window size WxH (default 960x720)")
     live.add_argument("--view", choices=VIEWS, default="front", help="camera (default front)")
@@ -221,7 +223,7 @@ def _run(args: argparse.Namespace) -> int:
             raise TakeError("--arm needs --layer-over: the take the pass is recorded over")
         run_live(args.mapping, record=args.record, fps=args.fps, size=args.size, view=args.view,
                  devices=dict(args.device) or None, face=_face(args.face), layer_over=args.layer_over,
-                 arm=[a for a in args.arm.split(",") if a])
+                 arm=[a for a in args.arm.split(",") if a], record_root=args.takes)
         return 0
     if args.command == "calibrate":
         return _calibrate(args)

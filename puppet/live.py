@@ -169,7 +169,7 @@ class LiveView:
                 except TakeError as error:  # an unwritable folder: say so, keep performing
                     print(f"not recording: {error}", file=sys.stderr)
                 else:
-                    print(f"recording {self.take}", file=sys.stderr)
+                    print(f"recording {self.take.resolve()}", file=sys.stderr)
         elif key == keys.N:
             self.session.neutral()
         elif key == keys.C:
@@ -257,6 +257,7 @@ def run_live(mapping_path: str | os.PathLike, *, record: str | None = None, fps:
         raise
     print("keys: R record/stop, N neutral, C re-centre sticks, M channel monitor, Q/Esc quit "
           "(calibrate ranges with 'puppet calibrate')", file=sys.stderr)
+    print(f"takes go to {session.record_root.resolve()}", file=sys.stderr)
     live = LiveView(session, window, view)
     try:
         live.run()

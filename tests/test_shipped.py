@@ -78,3 +78,13 @@ def test_puppet_mappings_lists_and_copies_and_a_wrong_name_is_one_line(tmp_path,
     assert main(["calibrate", "--mapping", "midi_fader"]) == 2
     err = capsys.readouterr().err
     assert "did you mean 'midi_faders'" in err and "Traceback" not in err
+
+
+def test_live_takes_go_where_takes_says(monkeypatch, tmp_path):
+    import puppet.live
+    from puppet.cli import main
+
+    seen = {}
+    monkeypatch.setattr(puppet.live, "run_live", lambda mapping, **kw: seen.update(kw, mapping=mapping))
+    assert main(["live", "--mapping", "arduino_sliders", "--takes", str(tmp_path)]) == 0
+    assert seen["record_root"] == str(tmp_path) and seen["mapping"] == str(shipped_mappings()["arduino_sliders"])
