@@ -310,12 +310,16 @@ def _folder_output(path: str) -> Path:
 
 def _render(args: argparse.Namespace) -> int:
     """``puppet render``: the take (file or folder) and the output are checked before any frame."""
+    import time
+
     from .playback import render_take
 
     face = _face(args.face)
+    start = time.perf_counter()
     count = render_take(args.take, args.output, face=face, size=args.size, view=args.view, fps=args.fps,
                         progress=sys.stderr.isatty())
-    print(f"{args.output}: {count} frames")
+    seconds = time.perf_counter() - start
+    print(f"{args.output}: {count} frames in {seconds:.1f} s ({count / max(seconds, 1e-9):.1f} frames/s)")
     return 0
 
 

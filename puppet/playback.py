@@ -9,11 +9,8 @@ and normals to whatever draws them.
 from __future__ import annotations
 
 import os
-import sys
-import time
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
@@ -130,13 +127,16 @@ def frame_head(renderer: Renderer, face: Face, view: str) -> None:
 
 
 def _progress(frames: Iterator[np.ndarray], total: int | None, show: bool) -> Iterator[np.ndarray]:
-    """Pass frames through, drawing a progress line on stderr (when it is a terminal or asked)."""
-    start = time.perf_counter()
-    for i, frame in enumerate(frames, 1):
-        if show:
-            rate = i / max(time.perf_counter() - start, 1e-9)
-            of = f"/{total}" if total else ""
-            print(f"\rrendering frame {i}{of} ({rate:.1f} frames/s)", end="", file=sys.stderr, flush=True)
-        yield frame
-    if show:
-        print(file=sys.stderr)
+    """Pass frames through, with a progress bar on stderr (rich's; when ``show``: a terminal)."""
+    if not show:
+        yield from frames
+        return
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+    columns = (TextColumn("rendering"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())
+    with Progress(*columns, console=Console(stderr=True), transient=True) as bar:
+        task = bar.add_task("render", total=total or None)
+        for frame in frames:
+            yield frame
+            bar.advance(task)

@@ -114,3 +114,13 @@ def test_the_shipped_demo_take_is_what_the_tool_makes_today(tmp_path):
     subprocess.run([sys.executable, str(root / "tools" / "make_demo_take.py"), "--out", str(out)],
                    check=True, capture_output=True, env={"PYTHONPATH": str(root), "PATH": ""})
     assert out.read_bytes() == demo_take().read_bytes(), "run tools/make_demo_take.py"
+
+
+def test_render_shows_a_bar_when_asked_and_always_ends_with_a_summary_line(tmp_path, egl, capsys):
+    frames = np.zeros((6, 68))
+    frames[:, 2] = np.linspace(0, 400, 6)
+    write_fap(tmp_path / "t.fap", frames, fps=25)
+    assert render_take(tmp_path / "t.fap", tmp_path / "bar.mp4", size=(64, 48), progress=True) == 6
+    assert cli.main(["render", str(tmp_path / "t.fap"), "-o", str(tmp_path / "t.mp4"), "--size", "64x48"]) == 0
+    out = capsys.readouterr().out.strip().splitlines()
+    assert len(out) == 1 and out[0].startswith(f"{tmp_path / 't.mp4'}: 6 frames in ") and "frames/s" in out[0]
