@@ -45,13 +45,15 @@ from typing import TextIO
 import numpy as np
 
 from devices import Device, open_device
+from devices.base import State
 
 from .errors import PuppetError
-from .mapping import MappingError, load_mapping
+from .mapping import MappingError, Problem, load_mapping
 
 LOW_PCT, HIGH_PCT = 0.5, 99.5     # robust extremes of the sweep (and of the rest noise)
 NOISE_FACTOR = 4.0                 # a sweep span within this many rest-noise spans "never moved"
 POLL = 0.01                        # seconds between drains while recording
+ANSWER_SECONDS = 3.0               # every device must be open this long after it starts
 
 
 class CalibrationError(PuppetError, RuntimeError):
@@ -69,18 +71,21 @@ def _ask(prompt: Callable[[str], object], text: str) -> None:
 
 
 def calibrate(mapping_path: str | os.PathLike, *, rest_seconds: float = 2.0, sweep_seconds: float = 8.0,
-              devices: MappingABC[str, Device] | None = None, prompt: Callable[[str], object] = input,
-              out: TextIO = sys.stdout) -> dict[str, dict]:
+              devices: MappingABC[str, Device] | None = None, urls: MappingABC[str, str] | None = None,
+              prompt: Callable[[str], object] = input, out: TextIO = sys.stdout) -> dict[str, dict]:
     """Record rest and sweep, report, write min/centre/max into ``mapping_path``.
 
+    ``urls`` opens the mapping's device NAME at another URL (``puppet calibrate --device``).
     Returns ``{channel: {"min", "centre", "max", "samples"}}`` for every channel of the mapping
     (raw units; None where the channel never reported; ``samples`` counts both phases). Raises
-    ``MappingError`` for a mapping that does not load (before any device opens),
-    ``DeviceError`` for a device that cannot be opened, ``CalibrationError`` when the written
-    file would not load (the original is restored).
+    ``MappingError`` for a mapping that does not load or a ``urls`` name it has no device for
+    (before any device opens), ``DeviceError`` for a device that cannot be opened,
+    ``CalibrationError`` for a device that is not open within ``ANSWER_SECONDS`` (with the
+    reason) or when the written file would not load (the original is restored).
     """
     path = Path(mapping_path)
     mapping = load_mapping(path)
+    device_urls = device_overrides(path, mapping.devices, urls or {})
     if prompt is input and (sys.stdin is None or sys.stdin.closed):
         raise CalibrationError("calibrate asks you to press Enter before each step: it needs a terminal"
                                " on stdin, which is closed")
@@ -93,7 +98,7 @@ def calibrate(mapping_path: str | os.PathLike, *, rest_seconds: float = 2.0, swe
     opened: dict[str, Device] = {}
     try:
         if devices is None:
-            for name, url in mapping.devices.items():
+            for name, url in device_urls.items():
                 opened[name] = open_device(url, name)
             live = dict(opened)
         else:
@@ -103,6 +108,7 @@ def calibrate(mapping_path: str | os.PathLike, *, rest_seconds: float = 2.0, swe
             raise CalibrationError(f"{path}: no device given for {', '.join(missing)}")
         for device in live.values():
             device.start()
+        _wait_answering(live, device_urls)
 
         print(f"Calibrating {path} ({len(channels)} channels on {len(live)} device(s)).", file=out)
         print("Step 1/2: leave every control at rest.", file=out)
@@ -123,6 +129,33 @@ def calibrate(mapping_path: str | os.PathLike, *, rest_seconds: float = 2.0, swe
     else:
         print(f"Nothing calibrated; {path} left unchanged.", file=out)
     return result
+
+
+def device_overrides(path: str | os.PathLike, devices: MappingABC[str, str],
+                     urls: MappingABC[str, str]) -> dict[str, str]:
+    """The mapping's ``devices`` (name -> URL) with ``urls`` put in by name; a name the mapping has
+    no device for is a ``MappingError`` naming the ones it has."""
+    unknown = sorted(set(urls) - set(devices))
+    if unknown:
+        raise MappingError(str(path), [Problem("devices", None, f"no device named {', '.join(map(repr, unknown))} "
+                                               f"to open elsewhere (--device); this mapping's devices: "
+                                               f"{', '.join(devices) or 'none'}")])
+    return {**devices, **urls}
+
+
+def _wait_answering(live: MappingABC[str, Device], urls: MappingABC[str, str]) -> None:
+    """Wait up to ``ANSWER_SECONDS`` for every device to be open (a MIDI box at rest sends nothing,
+    so readings are not asked for); a CalibrationError naming each one that is not, and why (port
+    missing, permission denied, unplugged)."""
+    deadline = time.monotonic() + ANSWER_SECONDS
+    while time.monotonic() < deadline:
+        if all(d.state is State.OPEN for d in live.values()):
+            return
+        time.sleep(POLL)
+    closed = [f"{name} ({urls.get(name, 'given')}): {device.state.value}"
+              f"{f' ({device.counters.last_error})' if device.counters.last_error else ''}"
+              for name, device in live.items() if device.state is not State.OPEN]
+    raise CalibrationError(f"not calibrating: not open after {ANSWER_SECONDS:g} s: {'; '.join(closed)}")
 
 
 def _record(live: dict[str, Device], wanted: dict[str, dict[str, str]], seconds: float) -> dict[str, list[float]]:

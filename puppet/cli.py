@@ -141,6 +141,8 @@ def _parser() -> argparse.ArgumentParser:
     calibrate = commands.add_parser("calibrate", help="record rest and a sweep per channel; write them into the mapping")
     calibrate.add_argument("--mapping", required=True,
                            help="the mapping YAML to calibrate (a .bak copy is kept; copy a shipped one first)")
+    calibrate.add_argument("--device", action="append", type=_device_override, default=[], metavar="NAME=URL",
+                           help="open the mapping's device NAME at URL instead (e.g. box=sim://joystick); repeatable")
     calibrate.add_argument("--rest", type=_seconds_or_rate("seconds", 0.1, 600), default=2.0,
                            help="seconds of rest to record (default 2)")
     calibrate.add_argument("--sweep", type=_seconds_or_rate("seconds", 0.1, 600), default=8.0,
@@ -185,6 +187,7 @@ def _parser() -> argparse.ArgumentParser:
 def _run(args: argparse.Namespace) -> int:
     """Run the command ``args`` names; a refusal propagates to ``main`` as an exception."""
     if getattr(args, "mapping", None):
+        args.shipped_mapping = not Path(args.mapping).exists()
         args.mapping = str(mapping_path(args.mapping))
     if args.command == "mappings":
         return _mappings(args)
@@ -386,9 +389,13 @@ def _import_arkit(args: argparse.Namespace) -> int:
 
 def _calibrate(args: argparse.Namespace) -> int:
     """``puppet calibrate``: record, then write the ranges into the mapping."""
-    from .calibrate import calibrate
+    from .calibrate import CalibrationError, calibrate
 
-    calibrate(args.mapping, rest_seconds=args.rest, sweep_seconds=args.sweep)
+    if args.shipped_mapping:
+        name = Path(args.mapping).stem
+        raise CalibrationError(f"{name} is a shipped mapping: calibrate your own copy (puppet mappings --copy "
+                               f"{name}, then puppet calibrate --mapping {name}.yaml)")
+    calibrate(args.mapping, rest_seconds=args.rest, sweep_seconds=args.sweep, urls=dict(args.device))
     return 0
 
 

@@ -30,6 +30,7 @@ from collections import deque
 from pathlib import Path
 from typing import Any, TextIO
 
+from .calibrate import device_overrides
 from .mapping import load_mapping
 from .playback import VIEWS, frame_head
 from .render import Renderer
@@ -240,7 +241,7 @@ def run_live(mapping_path: str | os.PathLike, *, record: str | None = None, fps:
     """
     if view not in VIEWS:
         raise ValueError(f"view {view!r}: expected one of {VIEWS}")
-    load_mapping(mapping_path)
+    device_overrides(mapping_path, load_mapping(mapping_path).devices, devices or {})
     check_take_name(record or "take")
     try:
         check_display()

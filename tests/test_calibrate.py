@@ -10,7 +10,9 @@ import pytest
 import puppet.calibrate as cal
 from devices.base import Device
 from puppet.calibrate import CalibrationError, calibrate, write_calibration
+from puppet.cli import main
 from puppet.mapping import MappingError, load_mapping
+from puppet.shipped import shipped_mappings
 
 MAPPING = """\
 # A test box: the first comment line must survive calibration.
@@ -167,3 +169,25 @@ def test_puppet_calibrate_reports_a_bad_mapping_in_one_line(tmp_path, capsys):
     assert cli.main(["calibrate", "--mapping", str(tmp_path / "missing.yaml")]) == 2
     err = capsys.readouterr().err
     assert err.startswith("puppet calibrate: ") and "missing.yaml" in err
+
+
+def test_a_device_name_the_mapping_does_not_have_is_refused_naming_the_ones_it_has(tmp_path):
+    mapping = tmp_path / "m.yaml"
+    mapping.write_bytes(shipped_mappings()["arduino_sliders"].read_bytes())
+    with pytest.raises(MappingError, match="no device named 'pad'.*devices: box"):
+        calibrate(mapping, urls={"pad": "sim://joystick"}, prompt=lambda _: None, out=io.StringIO())
+
+
+def test_an_absent_port_is_refused_with_the_reason_and_the_mapping_is_untouched(tmp_path, capsys):
+    mapping = tmp_path / "m.yaml"
+    mapping.write_bytes(shipped_mappings()["arduino_sliders"].read_bytes())
+    before = mapping.read_bytes()
+    assert main(["calibrate", "--mapping", str(mapping), "--device", "box=serial:///dev/no-such-port"]) == 2
+    err = capsys.readouterr().err
+    assert "not open" in err and "/dev/no-such-port" in err and "No such file" in err
+    assert mapping.read_bytes() == before and not (tmp_path / "m.yaml.bak").exists()
+
+
+def test_a_shipped_mapping_is_not_calibrated_in_place(capsys):
+    assert main(["calibrate", "--mapping", "gamepad_hid"]) == 2
+    assert "puppet mappings --copy gamepad_hid" in capsys.readouterr().err
