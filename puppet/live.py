@@ -4,14 +4,17 @@
 ``puppet play`` does) and a ``LiveSession`` for the mapping, and draws ``session.frame()`` every
 display frame (paced by the window's vsync).
 
-Title: ``<mapping> | 60 fps | 12.3 ms | box: open | REC take_001`` -- the measured frame rate,
-the latency from the newest Sample to the frame drawn (median over the last second; "-- ms"
-until samples arrive) and each device's state; ``REC`` and the take's folder while recording.
+The window is the cockpit (``puppet.overlay``, drawn over the face with Dear ImGui): fps and
+input-to-photon latency with rolling graphs, each device's state and why it is LOST, REC with the
+take's name and time, the channel monitor (M) and the keys; H hides it. The title says the same in
+short for window managers' task bars: ``<mapping> | 60 fps | 12.3 ms | box: open | REC take_001``
+-- the measured frame rate, the latency from the newest Sample to the frame drawn (median over the
+last second; "-- ms" until samples arrive), each device's state, and the take while recording.
 
 Keys: R starts a take (named ``--record NAME``, default "take": folders ``NAME_001``...) and
-stops it; N neutral pose (``session.neutral()``: every channel back to rest, in the take too); M toggles a
-channel monitor printed to the terminal (channel, raw, shaped, targets; a few times a second);
-Q or Escape quits, finishing any take first so it is complete.
+stops it; N neutral pose (``session.neutral()``: every channel back to rest, in the take too); M
+toggles the channel monitor (raw and shaped bars per channel, and their targets); H the whole
+overlay; Q or Escape quits, finishing any take first so it is complete.
 
 C re-centres the bipolar channels (sticks) where they rest now, undoing drift
 (``session.recentre()``, logged in the take); a full calibration of a channel's range is
@@ -28,17 +31,16 @@ import sys
 import time
 from collections import deque
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Any
 
 from .calibrate import device_overrides
 from .mapping import load_mapping
+from .overlay import Cockpit, device_lines
 from .playback import VIEWS, frame_head
 from .render import Renderer
 from .takes import TakeError, check_take_name
 from .window import NoDisplayError, WindowError, check_display, open_window
 
-MONITOR_PERIOD = 0.25
-"""Seconds between two prints of the channel monitor."""
 
 WINDOW_S = 1.0
 """The span, in seconds, of the measured fps and the latency median."""
@@ -83,35 +85,24 @@ def live_title(name: str, fps: float, latency_ms: float | None, states: dict[str
     return " | ".join(parts)
 
 
-def monitor_table(channels) -> str:
-    """The channel monitor: one line per channel (``ChannelState``s)."""
-    rows = [f"{'channel':<16} {'raw':>9} {'shaped':>7}  targets"]
-    for c in channels:
-        raw = "-" if c.raw is None else f"{c.raw:.4g}"
-        rows.append(f"{c.name:<16} {raw:>9} {c.value:>7.3f}  {', '.join(c.targets)}")
-    return "\n".join(rows)
-
-
 class LiveView:
     """A LiveSession in a window: the loop, keys and title. ``run()`` returns when closed.
 
     ``step()`` is one turn of the loop (tests call it directly on a headless window).
     """
 
-    def __init__(self, session: Any, window: Any, view: str = "front",
-                 out: TextIO | None = None) -> None:
+    def __init__(self, session: Any, window: Any, view: str = "front") -> None:
         self.session = session
         self.window = window
         self.view = view
-        self.out = sys.stdout if out is None else out
         self.name = Path(session.mapping_path).stem
         self.stats = LiveStats()
         self.renderer: Renderer | None = None
-        self.monitor = False
+        self.cockpit = Cockpit(window)
         self.take: Path | None = None       # the folder being recorded
         self.takes: list[Path] = []         # finished takes
         self._quit = False
-        self._monitor_at = -1.0
+        self._take_started = 0.0
         self._title = ""
         window.exit_key = None  # Escape is ours: the take is finished before the window goes
         window.key_event_func = self._on_key
@@ -131,16 +122,13 @@ class LiveView:
             if self.renderer is None or self.renderer.size != size:
                 self._make_renderer(size)
             self.renderer.draw(frame.vertices, frame.normals, framebuffer=window.fbo)
+            self._draw_cockpit(frame.states)
         window.swap_buffers()  # handles the window's events too (keys)
         if self.take is not None and not self.session.recording:  # the take stopped on its own
             print(f"take not complete: {self.session.record_error}", file=sys.stderr)
             self.take = None
         self.stats.drawn(time.monotonic_ns(), frame.newest_sample_ns, frame.n_samples > 0)
         self._set_title(frame.states)
-        now = time.perf_counter()
-        if self.monitor and now - self._monitor_at >= MONITOR_PERIOD:
-            self._monitor_at = now
-            print(monitor_table(self.session.mapping.channels()) + "\n", file=self.out, flush=True)
 
     def close(self) -> None:
         try:
@@ -149,6 +137,9 @@ class LiveView:
             if self.renderer is not None:
                 self.renderer.release()
                 self.renderer = None
+            if self.cockpit is not None:
+                self.cockpit.release()
+                self.cockpit = None
             self.window.close()
             self.window.destroy()
 
@@ -170,6 +161,7 @@ class LiveView:
                 except TakeError as error:  # an unwritable folder: say so, keep performing
                     print(f"not recording: {error}", file=sys.stderr)
                 else:
+                    self._take_started = time.monotonic()
                     print(f"recording {self.take.resolve()}", file=sys.stderr)
         elif key == keys.N:
             self.session.neutral()
@@ -177,8 +169,9 @@ class LiveView:
             self.session.recentre()
             print("sticks re-centred where they rest", file=sys.stderr)
         elif key == keys.M:
-            self.monitor = not self.monitor
-            self._monitor_at = -1.0
+            self.cockpit.monitor = not self.cockpit.monitor
+        elif key == keys.H:
+            self.cockpit.toggle()
 
     def _stop_recording(self) -> None:
         if self.session.recording:
@@ -196,6 +189,14 @@ class LiveView:
         self.renderer = Renderer.for_face(face, width=size[0], height=size[1], samples=0, ctx=self.window.ctx)
         frame_head(self.renderer, face, self.view)
         self.window.fbo.viewport = (0, 0, *size)
+
+    def _draw_cockpit(self, states: dict[str, Any]) -> None:
+        recording = None
+        if self.take is not None and self.session.recording:
+            recording = (self.take.name, time.monotonic() - self._take_started)
+        channels = self.session.mapping.channels() if self.cockpit.monitor else ()
+        self.cockpit.draw(self.stats.fps, self.stats.latency_ms, device_lines(states, self.session.devices),
+                          recording, channels)
 
     def _set_title(self, states: dict[str, Any]) -> None:
         recording = self.take.name if self.take is not None and self.session.recording else None
@@ -256,8 +257,8 @@ def run_live(mapping_path: str | os.PathLike, *, record: str | None = None, fps:
         if isinstance(error, WindowError):
             _exit(str(error))
         raise
-    print("keys: R record/stop, N neutral, C re-centre sticks, M channel monitor, Q/Esc quit "
-          "(calibrate ranges with 'puppet calibrate')", file=sys.stderr)
+    print("keys: R record/stop, N neutral, C re-centre sticks, M channel monitor, H hide the overlay, "
+          "Q/Esc quit (calibrate ranges with 'puppet calibrate')", file=sys.stderr)
     print(f"takes go to {session.record_root.resolve()}", file=sys.stderr)
     live = LiveView(session, window, view)
     try:

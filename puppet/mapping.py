@@ -734,12 +734,14 @@ class Pose:
 @dataclass(frozen=True)
 class ChannelState:
     """What a monitor shows for one channel: the last raw value (None before any), the shaped
-    value, and the targets it drives."""
+    value, the targets it drives, and where the raw value sits in the channel's calibrated range
+    (0 at ``min``, 1 at ``max``; None before any)."""
 
     name: str
     raw: float | None
     value: float
     targets: tuple[str, ...]
+    raw_fraction: float | None = None
 
 
 def _curve_function(curve: tuple | None):
@@ -1064,7 +1066,8 @@ class Mapping:
 
     def channels(self) -> list[ChannelState]:
         """Every channel: raw value, shaped value and the targets it drives (for a monitor)."""
-        return [ChannelState(c.name, c.raw, c.value, tuple(c.targets)) for c in self._channels.values()]
+        return [ChannelState(c.name, c.raw, c.value, tuple(c.targets), None if c.raw is None else (c.raw - c.low) * c.k)
+                for c in self._channels.values()]
 
     def drives(self, channel: str) -> tuple[set[int], set[str]]:
         """What a channel (``device.channel``) moves: its FAP slots (0-based) and the high-level

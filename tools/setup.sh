@@ -20,6 +20,12 @@ if need_egl; then
   fi
 fi
 
+# Xvfb lets the tests open the real live window (and take its screenshot) with no screen.
+if ! command -v xvfb-run >/dev/null && [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
+  echo "setup: installing Xvfb (xvfb xauth) so the live window can be tested without a screen"
+  apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq xvfb xauth >/dev/null
+fi
+
 if [ ! -x .venv/bin/python ]; then
   echo "setup: creating .venv"
   "$PYTHON" -m venv .venv

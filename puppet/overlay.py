@@ -1,0 +1,155 @@
+"""The live window's cockpit: what a puppeteer needs to see, drawn in the window itself.
+
+Dear ImGui (``imgui-bundle``, through moderngl-window's integration) draws over the face after it
+is rendered into the window's framebuffer:
+
+* **fps and input-to-photon latency**: the numbers and a rolling graph of the last ``HISTORY``
+  frames each;
+* **devices**: each one's state, and while it is LOST the reason its adapter gave (port missing,
+  permission denied, unplugged);
+* **REC**: the take's name and how long it has been recording;
+* **channel monitor** (M): per channel a bar of its raw value within its calibrated range and one
+  of its shaped value's size (the signed value written on it), with the first target it drives;
+* **the keys**.
+
+H hides it. Hidden, a frame makes no ImGui call at all: the overlay costs nothing. It draws on
+any moderngl-window window, headless (EGL) ones included, so tests and screenshots need no
+display.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+HISTORY = 240
+"""Frames the rolling fps and latency graphs show."""
+
+KEYS = (("R", "record / stop"), ("N", "neutral"), ("C", "re-centre sticks"), ("M", "channel monitor"),
+        ("H", "hide this"), ("Q Esc", "quit"))
+
+
+@dataclass
+class DeviceLine:
+    """One device as the cockpit shows it."""
+
+    name: str
+    state: str
+    reason: str = ""
+
+
+class Cockpit:
+    """The overlay on one window (module docstring); ``draw`` once a frame, after the face."""
+
+    def __init__(self, window: Any) -> None:
+        from imgui_bundle import imgui
+        from moderngl_window.integrations.imgui_bundle import ModernglWindowRenderer
+
+        self.imgui = imgui
+        self.context = imgui.create_context()
+        imgui.get_io().set_ini_filename("")  # no imgui.ini written beside the user's takes
+        self.renderer = ModernglWindowRenderer(window)
+        self.window = window
+        self.visible = True
+        self.monitor = False
+        self.fps = deque([0.0] * HISTORY, maxlen=HISTORY)
+        self.latency = deque([0.0] * HISTORY, maxlen=HISTORY)
+        self._last = time.perf_counter()
+
+    def toggle(self) -> None:
+        """H: show or hide the whole overlay."""
+        self.visible = not self.visible
+
+    def draw(self, fps: float, latency_ms: float | None, devices: Iterable[DeviceLine],
+             recording: tuple[str, float] | None, channels: Iterable[Any]) -> None:
+        """Draw the cockpit over the current framebuffer (nothing when hidden). ``recording``:
+        (take name, seconds) while a take runs; ``channels``: ``Mapping.channels()``."""
+        self.fps.append(fps)
+        self.latency.append(latency_ms or 0.0)
+        if not self.visible:
+            return
+        imgui = self.imgui
+        imgui.set_current_context(self.context)
+        now = time.perf_counter()
+        io = imgui.get_io()
+        io.delta_time = max(now - self._last, 1e-4)
+        io.display_size = self.window.size
+        self._last = now
+        imgui.new_frame()
+        self._status(fps, latency_ms, list(devices), recording)
+        if self.monitor:
+            self._monitor(list(channels))
+        imgui.render()
+        self.renderer.render(imgui.get_draw_data())
+
+    def release(self) -> None:
+        self.renderer.shutdown()
+        self.imgui.destroy_context(self.context)
+
+    # -- panels --------------------------------------------------------------------------------
+
+    def _status(self, fps: float, latency_ms: float | None, devices: list[DeviceLine],
+                recording: tuple[str, float] | None) -> None:
+        imgui = self.imgui
+        imgui.set_next_window_pos((8, 8), imgui.Cond_.first_use_ever)
+        imgui.set_next_window_bg_alpha(0.7)
+        flags = imgui.WindowFlags_.always_auto_resize | imgui.WindowFlags_.no_focus_on_appearing
+        imgui.begin("facepuppet", None, flags)
+        latency = "-- ms" if latency_ms is None else f"{latency_ms:.1f} ms"
+        imgui.text(f"{fps:5.1f} fps   input to photon {latency}")
+        imgui.plot_lines("##fps", np.asarray(self.fps, dtype=np.float32), graph_size=(220, 32),
+                         overlay_text="fps", scale_min=0.0)
+        imgui.plot_lines("##latency", np.asarray(self.latency, dtype=np.float32), graph_size=(220, 32),
+                         overlay_text="latency ms", scale_min=0.0)
+        for device in devices:
+            colour = (0.4, 1.0, 0.4, 1.0) if device.state == "open" else (1.0, 0.45, 0.35, 1.0)
+            imgui.text_colored(colour, f"{device.name}: {device.state}")
+            if device.reason:
+                imgui.same_line()
+                imgui.text_wrapped(device.reason)
+        if recording is not None:
+            name, seconds = recording
+            imgui.text_colored((1.0, 0.2, 0.2, 1.0), f"REC {name}  {int(seconds) // 60}:{seconds % 60:04.1f}")
+        imgui.separator()
+        for k, (key, what) in enumerate(KEYS):
+            if k % 2:
+                imgui.same_line(150)
+            imgui.text_disabled(f"{key:>5} {what}")
+        imgui.end()
+
+    def _monitor(self, channels: list[Any]) -> None:
+        imgui = self.imgui
+        width = self.window.size[0]
+        imgui.set_next_window_pos((width - 8, 8), imgui.Cond_.first_use_ever, (1.0, 0.0))
+        imgui.set_next_window_bg_alpha(0.7)
+        imgui.begin("channels", None, imgui.WindowFlags_.always_auto_resize)
+        for channel in channels:
+            imgui.text(channel.name)
+            imgui.same_line(90)
+            raw = channel.raw_fraction
+            imgui.progress_bar(0.0 if raw is None else float(np.clip(raw, 0.0, 1.0)), (80, 0),
+                               "-" if channel.raw is None else f"{channel.raw:.4g}")
+            imgui.same_line()
+            shaped = float(np.clip(channel.value, -1.0, 1.0))
+            imgui.progress_bar(abs(shaped), (60, 0), f"{shaped:+.2f}")
+            if channel.targets:
+                imgui.same_line()
+                more = f" +{len(channel.targets) - 1}" if len(channel.targets) > 1 else ""
+                imgui.text_disabled(f"{channel.targets[0][:22]}{more}")
+        imgui.end()
+
+
+def device_lines(states: Mapping[str, Any], devices: Mapping[str, Any]) -> list[DeviceLine]:
+    """Each device's state (``Frame.states``) and, when it is not open, the reason its adapter gave."""
+    lines = []
+    for name, state in states.items():
+        text = getattr(state, "value", str(state)).lower()
+        counters = getattr(devices.get(name), "counters", None)
+        reason = counters.last_error if counters is not None and text != "open" else ""
+        lines.append(DeviceLine(name, text, reason))
+    return lines
