@@ -54,6 +54,7 @@ LOW_PCT, HIGH_PCT = 0.5, 99.5     # robust extremes of the sweep (and of the res
 NOISE_FACTOR = 4.0                 # a sweep span within this many rest-noise spans "never moved"
 POLL = 0.01                        # seconds between drains while recording
 ANSWER_SECONDS = 3.0               # every device must be open this long after it starts
+READY_SECONDS = 2.0                # the window's calibration: time to let go, and to get ready to sweep
 
 
 class CalibrationError(PuppetError, RuntimeError):
@@ -89,7 +90,7 @@ def calibrate(mapping_path: str | os.PathLike, *, rest_seconds: float = 2.0, swe
     if prompt is input and (sys.stdin is None or sys.stdin.closed):
         raise CalibrationError("calibrate asks you to press Enter before each step: it needs a terminal"
                                " on stdin, which is closed")
-    channels = {name: ch.bipolar for name, ch in mapping._channels.items()}  # name -> bipolar
+    channels = calibration_channels(mapping)
     wanted: dict[str, dict[str, str]] = {}  # device -> {channel key in Sample.values: channel name}
     for name in channels:
         device, key = name.split(".", 1)
@@ -215,6 +216,62 @@ def _analyse(channels: dict[str, bool], rest: dict[str, list[float]], sweep: dic
             update["centre"] = centre
         updates[name] = update
     return result, updates, warnings
+
+
+def calibration_channels(mapping) -> dict[str, bool]:
+    """Every channel of a loaded mapping, and whether it is bipolar (a centre to find)."""
+    return {name: ch.bipolar for name, ch in mapping._channels.items()}
+
+
+class GuidedCalibration:
+    """``calibrate``'s rest-then-sweep inside the live window (K): the phases run on the clock
+    while the window keeps drawing, the raw values come from the session's channels each frame
+    (``feed``), and ``finish`` analyses and writes them back exactly as ``calibrate`` does."""
+
+    def __init__(self, mapping_path: str | os.PathLike, channels: MappingABC[str, bool], *,
+                 rest_seconds: float = 2.0, sweep_seconds: float = 8.0, now: float | None = None) -> None:
+        self.path = Path(mapping_path)
+        self.channels = dict(channels)  # name -> bipolar
+        start = time.monotonic() if now is None else now
+        steps = [("ready", READY_SECONDS), ("rest", rest_seconds), ("get ready to sweep", READY_SECONDS),
+                 ("sweep", sweep_seconds)]
+        self._ends, end = [], start
+        for phase, seconds in steps:
+            end += seconds
+            self._ends.append((phase, end))
+        self.samples = {"rest": {n: [] for n in self.channels}, "sweep": {n: [] for n in self.channels}}
+
+    def phase(self, now: float | None = None) -> tuple[str, float]:
+        """(the phase, seconds left in it); ("done", 0) after the sweep."""
+        now = time.monotonic() if now is None else now
+        for phase, end in self._ends:
+            if now < end:
+                return phase, end - now
+        return "done", 0.0
+
+    def instruction(self, now: float | None = None) -> str:
+        """What the performer should do now, for the cockpit."""
+        phase, left = self.phase(now)
+        return {"ready": f"Calibrating: let go of every control ({left:.1f} s)",
+                "rest": f"Rest: hands off every control ({left:.1f} s)",
+                "get ready to sweep": f"Next: move every control end to end ({left:.1f} s)",
+                "sweep": f"Sweep: move every control end to end, a few times ({left:.1f} s)"}.get(phase, "")
+
+    def feed(self, channels, now: float | None = None) -> None:
+        """Take this frame's raw values (``Mapping.channels()``) into the phase under way."""
+        phase, _ = self.phase(now)
+        if phase in self.samples:
+            for channel in channels:
+                if channel.raw is not None and channel.name in self.channels:
+                    self.samples[phase][channel.name].append(channel.raw)
+
+    def finish(self) -> tuple[dict[str, dict], list[str]]:
+        """Analyse and write back (``calibrate``'s rules: backup, round trip, reload check);
+        returns the result per channel and the warnings."""
+        result, updates, warnings = _analyse(self.channels, self.samples["rest"], self.samples["sweep"])
+        if updates:
+            write_calibration(self.path, updates)
+        return result, warnings
 
 
 def _num(x) -> float | int:

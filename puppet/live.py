@@ -12,12 +12,13 @@ short for window managers' task bars: ``<mapping> | 60 fps | 12.3 ms | box: open
 last second; "-- ms" until samples arrive), each device's state, and the take while recording.
 
 Keys: R starts a take (named ``--record NAME``, default "take": folders ``NAME_001``...) and
-stops it; N neutral pose (``session.neutral()``: every channel back to rest, in the take too); M
-toggles the channel monitor (raw and shaped bars per channel, and their targets); H the whole
+stops it; N neutral pose (``session.neutral()``: every channel back to rest, in the take too); K
+calibrates in the window (``calibrate.GuidedCalibration``: rest, then sweep, guided in the cockpit,
+written into the mapping and used from the next frame); M toggles the channel monitor (raw and shaped bars per channel, and their targets); H the whole
 overlay; Q or Escape quits, finishing any take first so it is complete.
 
 C re-centres the bipolar channels (sticks) where they rest now, undoing drift
-(``session.recentre()``, logged in the take); a full calibration of a channel's range is
+(``session.recentre()``, logged in the take); a full calibration of a channel's range is K, or
 ``puppet calibrate --mapping M.yaml``.
 
 No display: a one-line message on stderr and ``SystemExit(2)``, as ``puppet play``.
@@ -33,9 +34,10 @@ from collections import deque
 from pathlib import Path
 from typing import Any
 
-from .calibrate import device_overrides
+from .calibrate import CalibrationError, GuidedCalibration, calibration_channels, device_overrides
 from .mapping import load_mapping
 from .overlay import Cockpit, device_lines
+from .shipped import mappings_folder
 from .playback import VIEWS, frame_head
 from .render import Renderer
 from .takes import TakeError, check_take_name
@@ -103,6 +105,8 @@ class LiveView:
         self.takes: list[Path] = []         # finished takes
         self._quit = False
         self._take_started = 0.0
+        self.calibration: GuidedCalibration | None = None
+        self.notice, self._notice_until = "", 0.0
         self._title = ""
         window.exit_key = None  # Escape is ours: the take is finished before the window goes
         window.key_event_func = self._on_key
@@ -118,6 +122,8 @@ class LiveView:
         window = self.window
         size = tuple(window.buffer_size)
         frame = self.session.frame()
+        if self.calibration is not None:
+            self._calibrating()
         if min(size) > 0:
             if self.renderer is None or self.renderer.size != size:
                 self._make_renderer(size)
@@ -172,6 +178,8 @@ class LiveView:
             self.cockpit.monitor = not self.cockpit.monitor
         elif key == keys.H:
             self.cockpit.toggle()
+        elif key == keys.K and self.calibration is None:
+            self._start_calibration()
 
     def _stop_recording(self) -> None:
         if self.session.recording:
@@ -179,6 +187,43 @@ class LiveView:
             self.takes.append(Path(folder))
             print(f"take saved: {folder}", file=sys.stderr)
         self.take = None
+
+    # -- calibration from the window ------------------------------------------------------------
+
+    def _start_calibration(self) -> None:
+        """K: ``puppet calibrate``'s rest-then-sweep, guided in the cockpit, written into the
+        mapping when it ends (not while recording; a shipped mapping is copied first)."""
+        path = Path(self.session.mapping_path)
+        if self.session.recording:
+            self._say("calibrate: stop recording first (R)")
+        elif path.resolve().parent == mappings_folder().resolve():
+            self._say(f"calibrate: {path.stem} is a shipped mapping; calibrate a copy "
+                      f"(puppet mappings --copy {path.stem})")
+        else:
+            self.calibration = GuidedCalibration(path, calibration_channels(self.session.mapping))
+
+    def _calibrating(self) -> None:
+        calibration = self.calibration
+        calibration.feed(self.session.mapping.channels())
+        if calibration.phase()[0] != "done":
+            self.notice, self._notice_until = calibration.instruction(), time.monotonic() + 0.5
+            return
+        self.calibration = None
+        try:
+            result, warnings = calibration.finish()
+        except (CalibrationError, OSError) as error:
+            self._say(f"calibration not written: {error}")
+            return
+        self.session.mapping = load_mapping(calibration.path)  # the new ranges from the next frame on
+        for line in warnings:
+            print(f"calibrate: {line}", file=sys.stderr)
+        self._say(f"calibrated {len(result) - len(warnings)} of {len(result)} channels into "
+                  f"{calibration.path.name} ({len(warnings)} left as they were; details on the terminal)")
+
+    def _say(self, text: str, seconds: float = 6.0) -> None:
+        """A notice in the cockpit for ``seconds`` (and on the terminal)."""
+        self.notice, self._notice_until = text, time.monotonic() + seconds
+        print(text, file=sys.stderr)
 
     # -- drawing -----------------------------------------------------------------------------
 
@@ -195,8 +240,9 @@ class LiveView:
         if self.take is not None and self.session.recording:
             recording = (self.take.name, time.monotonic() - self._take_started)
         channels = self.session.mapping.channels() if self.cockpit.monitor else ()
+        notice = self.notice if time.monotonic() < self._notice_until else ""
         self.cockpit.draw(self.stats.fps, self.stats.latency_ms, device_lines(states, self.session.devices),
-                          recording, channels)
+                          recording, channels, notice)
 
     def _set_title(self, states: dict[str, Any]) -> None:
         recording = self.take.name if self.take is not None and self.session.recording else None

@@ -8,6 +8,7 @@ is rendered into the window's framebuffer:
 * **devices**: each one's state, and while it is LOST the reason its adapter gave (port missing,
   permission denied, unplugged);
 * **REC**: the take's name and how long it has been recording;
+* a **notice** line: the steps of a calibration run from the window (K), then its result;
 * **channel monitor** (M): per channel a bar of its raw value within its calibrated range and one
   of its shaped value's size (the signed value written on it), with the first target it drives;
 * **the keys**.
@@ -30,8 +31,8 @@ import numpy as np
 HISTORY = 240
 """Frames the rolling fps and latency graphs show."""
 
-KEYS = (("R", "record / stop"), ("N", "neutral"), ("C", "re-centre sticks"), ("M", "channel monitor"),
-        ("H", "hide this"), ("Q Esc", "quit"))
+KEYS = (("R", "record / stop"), ("N", "neutral"), ("C", "re-centre sticks"), ("K", "calibrate"),
+        ("M", "channel monitor"), ("H", "hide this"), ("Q Esc", "quit"))
 
 
 @dataclass
@@ -66,9 +67,10 @@ class Cockpit:
         self.visible = not self.visible
 
     def draw(self, fps: float, latency_ms: float | None, devices: Iterable[DeviceLine],
-             recording: tuple[str, float] | None, channels: Iterable[Any]) -> None:
+             recording: tuple[str, float] | None, channels: Iterable[Any], notice: str = "") -> None:
         """Draw the cockpit over the current framebuffer (nothing when hidden). ``recording``:
-        (take name, seconds) while a take runs; ``channels``: ``Mapping.channels()``."""
+        (take name, seconds) while a take runs; ``channels``: ``Mapping.channels()``; ``notice``:
+        a line for the performer (the window's calibration steps, its result)."""
         self.fps.append(fps)
         self.latency.append(latency_ms or 0.0)
         if not self.visible:
@@ -81,7 +83,7 @@ class Cockpit:
         io.display_size = self.window.size
         self._last = now
         imgui.new_frame()
-        self._status(fps, latency_ms, list(devices), recording)
+        self._status(fps, latency_ms, list(devices), recording, notice)
         if self.monitor:
             self._monitor(list(channels))
         imgui.render()
@@ -94,7 +96,7 @@ class Cockpit:
     # -- panels --------------------------------------------------------------------------------
 
     def _status(self, fps: float, latency_ms: float | None, devices: list[DeviceLine],
-                recording: tuple[str, float] | None) -> None:
+                recording: tuple[str, float] | None, notice: str) -> None:
         imgui = self.imgui
         imgui.set_next_window_pos((8, 8), imgui.Cond_.first_use_ever)
         imgui.set_next_window_bg_alpha(0.7)
@@ -115,6 +117,8 @@ class Cockpit:
         if recording is not None:
             name, seconds = recording
             imgui.text_colored((1.0, 0.2, 0.2, 1.0), f"REC {name}  {int(seconds) // 60}:{seconds % 60:04.1f}")
+        if notice:
+            imgui.text_colored((1.0, 0.85, 0.3, 1.0), notice)
         imgui.separator()
         for k, (key, what) in enumerate(KEYS):
             if k % 2:

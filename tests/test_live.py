@@ -56,7 +56,7 @@ def test_title():
 
 class _Keys:
     ACTION_PRESS, ACTION_RELEASE = "press", "release"
-    R, N, C, M, H, Q, ESCAPE = "r", "n", "c", "m", "h", "q", "escape"
+    R, N, C, K, M, H, Q, ESCAPE = "r", "n", "c", "k", "m", "h", "q", "escape"
     TAB, LEFT, RIGHT, UP, DOWN, PAGE_UP, PAGE_DOWN = "tab", "left", "right", "up", "down", "pgup", "pgdn"
     HOME, END, DELETE, SPACE, BACKSPACE, ENTER = "home", "end", "delete", "space", "backspace", "enter"
 

@@ -24,7 +24,7 @@ SIZE = (960, 720)
 
 class _Keys:
     ACTION_PRESS, ACTION_RELEASE = "press", "release"
-    R, N, C, M, H, Q, ESCAPE = "r", "n", "c", "m", "h", "q", "escape"
+    R, N, C, K, M, H, Q, ESCAPE = "r", "n", "c", "k", "m", "h", "q", "escape"
     TAB, LEFT, RIGHT, UP, DOWN, PAGE_UP, PAGE_DOWN = "tab", "left", "right", "up", "down", "pgup", "pgdn"
     HOME, END, DELETE, SPACE, BACKSPACE, ENTER = "home", "end", "delete", "space", "backspace", "enter"
 
@@ -91,3 +91,53 @@ def test_a_screenshot_of_the_real_window_under_xvfb_shows_the_cockpit(tmp_path):
     assert pixels.shape == (720, 960, 3)
     panel, monitor = pixels[10:190, 10:300], pixels[10:170, 530:950]
     assert panel.std() > 20 and monitor.std() > 20  # text and graphs, not an empty backdrop
+
+
+def test_calibration_from_the_window_guides_rest_then_sweep_and_writes_the_mapping(tmp_path, headless_window):
+    from puppet.calibrate import GuidedCalibration
+    from puppet.mapping import load_mapping
+
+    mapping = tmp_path / "sliders.yaml"
+    mapping.write_bytes(shipped_mappings()["arduino_sliders"].read_bytes())
+    window = headless_window(SIZE, _Keys)
+    session = open_session(mapping, devices=SIM_BOX, record_root=tmp_path)
+    live = LiveView(session, window)
+    try:
+        live._on_key(_Keys.K, _Keys.ACTION_PRESS, None)
+        calibration = live.calibration
+        assert isinstance(calibration, GuidedCalibration)
+        start = time.monotonic()
+        calibration._ends = [(phase, start + 0.2 * (k + 1)) for k, (phase, _) in enumerate(calibration._ends)]
+        seen = set()
+        while live.calibration is not None:
+            live.step()
+            seen.add(calibration.phase()[0])
+            assert time.monotonic() - start < 10
+        assert {"rest", "sweep"} <= seen and "calibrated" in live.notice
+        assert (tmp_path / "sliders.yaml.bak").exists()
+        assert mapping.read_bytes() != (tmp_path / "sliders.yaml.bak").read_bytes()
+        load_mapping(mapping)
+        assert session.mapping.file == str(mapping)
+    finally:
+        live.close()
+        session.close()
+
+
+@pytest.mark.parametrize("case", ["shipped", "recording"])
+def test_the_window_does_not_calibrate_a_shipped_mapping_or_while_recording(tmp_path, headless_window, case):
+    mapping = shipped_mappings()["arduino_sliders"]
+    if case == "recording":
+        mapping = tmp_path / "mine.yaml"
+        mapping.write_bytes(shipped_mappings()["arduino_sliders"].read_bytes())
+    window = headless_window(SIZE, _Keys)
+    session = open_session(mapping, devices=SIM_BOX, record_root=tmp_path)
+    live = LiveView(session, window)
+    try:
+        if case == "recording":
+            live._on_key(_Keys.R, _Keys.ACTION_PRESS, None)
+        live._on_key(_Keys.K, _Keys.ACTION_PRESS, None)
+        assert live.calibration is None
+        assert ("shipped mapping" if case == "shipped" else "stop recording first") in live.notice
+    finally:
+        live.close()
+        session.close()
