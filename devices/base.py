@@ -34,10 +34,13 @@ class Sample:
 
 
 class DeviceError(RuntimeError):
-    """A device that cannot be opened as asked (bad URL, unknown backend, missing library)."""
+    """The root of every error ``devices/`` raises on purpose; raised as itself for a device that
+    cannot be opened as asked (bad URL or option, unknown backend, missing library). Each more
+    particular error derives from it and keeps its built-in base (``DeviceLost`` is an OSError,
+    ``DescriptorError`` and ``BadFrame`` ValueErrors), so callers can catch either."""
 
 
-class DeviceLost(OSError):
+class DeviceLost(DeviceError, OSError):
     """The hardware went away while open (unplugged, port closed); the device will reopen."""
 
 

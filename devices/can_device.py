@@ -57,7 +57,7 @@ _ORDERS = {"le": "little_endian", "intel": "little_endian", "little": "little_en
            "big": "big_endian", "big_endian": "big_endian"}
 
 
-class BadFrame(ValueError):
+class BadFrame(DeviceError, ValueError):
     """A frame with a known id that cannot carry its signals (too short)."""
 
 
