@@ -132,6 +132,8 @@ def _sample(data: object, where: str) -> Sample:
 class ReplayDevice(Device):
     """A device that plays a sample log back (see module docstring)."""
 
+    OPTIONS = frozenset({"speed", "device"})
+
     def __init__(self, name: str, path: str | os.PathLike, speed: float = 1.0, device: str | None = None) -> None:
         super().__init__(name)
         if speed < 0:
@@ -143,10 +145,12 @@ class ReplayDevice(Device):
 
     @classmethod
     def from_url(cls, url: Url, name: str) -> ReplayDevice:
-        unknown = set(url.options) - {"speed", "device"}
-        if unknown:
-            raise DeviceError(f"replay URL: unknown option(s) {sorted(unknown)}; known: device, speed")
-        return cls(name, url.target, float(url.options.get("speed", 1.0)), url.options.get("device"))
+        cls.check_options(url)
+        try:
+            speed = float(url.options.get("speed", 1.0))
+        except ValueError:
+            raise DeviceError(f"replay URL: speed {url.options['speed']!r} is not a number") from None
+        return cls(name, url.target, speed, url.options.get("device"))
 
     def _open(self) -> None:
         if not self.path.is_file():
