@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import collections
 import contextlib
+import difflib
 import enum
 import importlib
 import threading
@@ -34,10 +35,13 @@ class Sample:
 
 
 class DeviceError(RuntimeError):
-    """A device that cannot be opened as asked (bad URL, unknown backend, missing library)."""
+    """The root of every error ``devices/`` raises on purpose; raised as itself for a device that
+    cannot be opened as asked (bad URL or option, unknown backend, missing library). Each more
+    particular error derives from it and keeps its built-in base (``DeviceLost`` is an OSError,
+    ``DescriptorError`` and ``BadFrame`` ValueErrors), so callers can catch either."""
 
 
-class DeviceLost(OSError):
+class DeviceLost(DeviceError, OSError):
     """The hardware went away while open (unplugged, port closed); the device will reopen."""
 
 
@@ -50,11 +54,13 @@ class State(enum.Enum):
 
 @dataclass
 class Counters:
-    """What a device has seen: samples, dropped samples, bad frames, reconnections."""
+    """What a device has seen: samples, dropped samples, bad frames (and bad checksums among
+    them), reconnections."""
 
     samples: int = 0
     dropped: int = 0
     bad_frames: int = 0
+    bad_checksums: int = 0  # of the bad frames, those whose checksum failed (serial ascii lines)
     reconnects: int = 0
     last_error: str = ""
 
@@ -76,6 +82,12 @@ class Url:
         return cls(parts.scheme, target, dict(parse_qsl(parts.query)))
 
 
+def closest_hint(word: str, choices: Iterable[str]) -> str:
+    """``"; did you mean 'channel'?"`` for the choice nearest ``word`` ("" when none is near)."""
+    close = difflib.get_close_matches(word, list(choices), n=1, cutoff=0.6)
+    return f"; did you mean {close[0]!r}?" if close else ""
+
+
 def table_class(entry: str) -> type:
     """The class a ``"module:Class"`` table entry names (``BACKENDS``, ``TWINS``), its module
     imported only now, so a missing optional library only matters to what needs it (ImportError)."""
@@ -88,6 +100,26 @@ class Device(ABC):
 
     QUEUE = 4096
     BACKOFF = (0.05, 2.0)  # first and longest wait between reopen attempts, in seconds
+    OPTIONS: frozenset[str] = frozenset()
+    """The URL options (``?key=value``) this backend reads; any other is refused, when the URL is
+    parsed and, through ``unknown_option``, when a mapping is loaded."""
+
+    @classmethod
+    def unknown_option(cls, url: Url, key: str) -> str | None:
+        """Why ``key`` is not an option of this backend for ``url`` (None when it is one)."""
+        if key in cls.OPTIONS:
+            return None
+        known = sorted(cls.OPTIONS)
+        return (f"unknown option {key!r} for a {url.scheme}:// device: expected "
+                f"{'one of ' + ', '.join(known) if known else 'no options'}{closest_hint(key, known)}")
+
+    @classmethod
+    def check_options(cls, url: Url) -> None:
+        """DeviceError naming the first option ``url`` has that this backend does not read."""
+        for key in url.options:
+            problem = cls.unknown_option(url, key)
+            if problem:
+                raise DeviceError(f"device URL {url.scheme}://{url.target}: {problem}")
 
     def __init__(self, name: str) -> None:
         self.name = name

@@ -52,12 +52,21 @@ except ImportError:  # the backend says what to install when it is used
     can = None
 
 _OURS = {"dbc", "signals", "decoder", "filter", "timeout_ms"}
+BUS_OPTIONS = frozenset({
+    "app_name", "bitrate", "can_filters", "can_termination", "data_bitrate", "device", "device_id", "fd",
+    "fd_bitrate", "frame_type", "hop_limit", "host", "ignore_rx_error_frames", "listen_only", "local_loopback",
+    "log_errors", "monitor", "operation_mode", "poll_interval", "port", "preserve_timestamps", "protocol",
+    "receive_own_messages", "rtscts", "rx_queue_size", "serial", "sjw_abr", "sjw_dbr", "sleep_after_open",
+    "state", "tcp_tune", "timing", "tseg1_abr", "tseg1_dbr", "tseg2_abr", "tseg2_dbr", "ttyBaudrate",
+    "tty_baudrate", "baudrate"})
+"""The keyword arguments python-can's interfaces take (gathered from their constructors), which a
+URL hands on to ``can.Bus``; any other option is a typo, refused."""
 _ORDERS = {"le": "little_endian", "intel": "little_endian", "little": "little_endian",
            "little_endian": "little_endian", "be": "big_endian", "motorola": "big_endian",
            "big": "big_endian", "big_endian": "big_endian"}
 
 
-class BadFrame(ValueError):
+class BadFrame(DeviceError, ValueError):
     """A frame with a known id that cannot carry its signals (too short)."""
 
 
@@ -271,6 +280,7 @@ class CanDevice(Device):
     """A CAN bus read through python-can; each frame with known signals becomes one reading."""
 
     BATCH = 64  # most frames taken in one _read
+    OPTIONS = frozenset(_OURS) | BUS_OPTIONS
 
     def __init__(self, name: str, interface: str, channel: str | None = None, *,
                  signals: Sequence[CanSignal | Mapping[str, Any] | str] | None = None,
@@ -312,6 +322,7 @@ class CanDevice(Device):
     def from_url(cls, url: Url, name: str, *,
                  signals: Sequence[CanSignal | Mapping[str, Any] | str] | None = None) -> CanDevice:
         text = f"{url.scheme}://{url.target}"
+        cls.check_options(url)
         interface, _, channel = url.target.partition("/")
         if not interface:
             raise DeviceError(f"device URL {text!r}: expected can://<interface>/<channel>, e.g. can://socketcan/can0")

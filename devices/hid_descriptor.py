@@ -44,6 +44,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .base import DeviceError
+
 # -- usage names ---------------------------------------------------------------------------------
 
 GENERIC_DESKTOP = 0x01
@@ -87,7 +89,7 @@ def usage_name(page: int, usage: int) -> str:
 
 # -- the parse -----------------------------------------------------------------------------------
 
-class DescriptorError(ValueError):
+class DescriptorError(DeviceError, ValueError):
     """A report descriptor that cannot be read (names the byte offset)."""
 
 

@@ -44,9 +44,6 @@ try:
 except ImportError:  # the backend says what to install when it is used
     hid = None
 
-_OPTIONS = {"interface", "usage_page", "usage", "fields", "report_id", "raw", "length", "timeout_ms"}
-
-
 def _int(text: str, what: str, url: str) -> int:
     try:
         return int(text, 0) if text.lower().startswith("0x") else int(text)
@@ -58,6 +55,7 @@ class HidDevice(Device):
     """A HID device read through a ``hid`` module (cython-hidapi, or ``FakeHidModule`` in tests)."""
 
     BATCH = 32  # most reports taken in one _read
+    OPTIONS = frozenset({"interface", "usage_page", "usage", "fields", "report_id", "raw", "length", "timeout_ms"})
 
     def __init__(self, name: str, vendor_id: int | None = None, product_id: int | None = None,
                  serial: str | None = None, path: bytes | None = None, *,
@@ -91,9 +89,7 @@ class HidDevice(Device):
     def from_url(cls, url: Url, name: str, *, fields: Sequence[FieldSpec | Mapping[str, Any]] | None = None,
                  hid_module: Any = None) -> HidDevice:
         text = f"{url.scheme}://{url.target}"
-        unknown = set(url.options) - _OPTIONS
-        if unknown:
-            raise DeviceError(f"device URL {text!r}: unknown option(s) {sorted(unknown)}; known: {sorted(_OPTIONS)}")
+        cls.check_options(url)
         kw: dict[str, Any] = {}
         if url.target.startswith("path/"):
             path = unquote(url.target[len("path/"):])

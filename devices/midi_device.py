@@ -50,6 +50,8 @@ def open_port(name: str):
 class MidiDevice(Device):
     """Channels from a MIDI input port."""
 
+    OPTIONS = frozenset({"channel", "cc14"})
+
     def __init__(self, name: str, port: str, channel: int | None = None, cc14: Iterable[int] = (),
                  open_input: Callable[[str], object] = open_port) -> None:
         super().__init__(name)
@@ -65,6 +67,7 @@ class MidiDevice(Device):
 
     @classmethod
     def from_url(cls, url: Url, name: str, open_input: Callable[[str], object] = open_port) -> MidiDevice:
+        cls.check_options(url)
         try:
             channel = url.options.get("channel")
             cc14 = [int(c) for c in url.options.get("cc14", "").split(",") if c]

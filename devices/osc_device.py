@@ -48,6 +48,7 @@ class OscDevice(Device):
 
     @classmethod
     def from_url(cls, url: Url, name: str) -> OscDevice:
+        cls.check_options(url)
         host, _, port = url.target.strip("/").rpartition(":")
         if not port.isdigit() or int(port) > 65535:
             raise DeviceError(f"osc URL: expected osc://HOST:PORT (e.g. osc://127.0.0.1:39539), got {url.target!r}")

@@ -39,6 +39,10 @@ HEADER = {"facepuppet_samples": 1}
 EVENTS = ("frame", "hold", "resume", "reset", "recentre")
 
 
+class SampleLogError(DeviceError, ValueError):
+    """A sample log line that is not a Sample or an event (names the file and line)."""
+
+
 @dataclass(frozen=True)
 class LogEvent:
     """Something besides a Sample that a take's log records (see the module docstring)."""
@@ -95,7 +99,7 @@ def read_take_log(path: str | os.PathLike) -> Iterator[Sample | LogEvent]:
                     warnings.warn(f"{path}:{number}: the last line is incomplete (the recorder stopped "
                                   "mid-line); skipped", stacklevel=2)
                     return
-                raise ValueError(f"{path}:{number}: expected a JSON sample, found {text[:60]!r}") from None
+                raise SampleLogError(f"{path}:{number}: expected a JSON sample, found {text[:60]!r}") from None
             if data == HEADER:
                 continue
             if isinstance(data, dict) and "event" in data:
@@ -107,19 +111,28 @@ def read_take_log(path: str | os.PathLike) -> Iterator[Sample | LogEvent]:
 def _event(data: dict, where: str) -> LogEvent:
     kind, t_ns = data.pop("event"), data.pop("t_ns", None)
     if kind not in EVENTS or not isinstance(t_ns, int):
-        raise ValueError(f"{where}: expected an event {EVENTS} with an integer t_ns, found {kind!r} at {t_ns!r}")
+        raise SampleLogError(f"{where}: expected an event {EVENTS} with an integer t_ns, found {kind!r} at {t_ns!r}")
     return LogEvent(t_ns, kind, data)
 
 
 def _sample(data: object, where: str) -> Sample:
     if not (isinstance(data, dict) and isinstance(data.get("t_ns"), int) and isinstance(data.get("device"), str)
             and isinstance(data.get("values"), dict)):
-        raise ValueError(f"{where}: expected {{\"t_ns\": int, \"device\": str, \"values\": {{...}}}}, found {data!r:.80}")
-    return Sample(data["t_ns"], data["device"], {str(k): float(v) for k, v in data["values"].items()})
+        raise SampleLogError(f"{where}: expected {{\"t_ns\": int, \"device\": str, \"values\": {{...}}}}, "
+                             f"found {data!r:.80}")
+    values = data["values"]
+    try:
+        if all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in values.values()):
+            return Sample(data["t_ns"], data["device"], {str(k): float(v) for k, v in values.items()})
+    except OverflowError:
+        pass
+    raise SampleLogError(f"{where}: expected numbers as values, found {values!r:.80}")
 
 
 class ReplayDevice(Device):
     """A device that plays a sample log back (see module docstring)."""
+
+    OPTIONS = frozenset({"speed", "device"})
 
     def __init__(self, name: str, path: str | os.PathLike, speed: float = 1.0, device: str | None = None) -> None:
         super().__init__(name)
@@ -132,10 +145,12 @@ class ReplayDevice(Device):
 
     @classmethod
     def from_url(cls, url: Url, name: str) -> ReplayDevice:
-        unknown = set(url.options) - {"speed", "device"}
-        if unknown:
-            raise DeviceError(f"replay URL: unknown option(s) {sorted(unknown)}; known: device, speed")
-        return cls(name, url.target, float(url.options.get("speed", 1.0)), url.options.get("device"))
+        cls.check_options(url)
+        try:
+            speed = float(url.options.get("speed", 1.0))
+        except ValueError:
+            raise DeviceError(f"replay URL: speed {url.options['speed']!r} is not a number") from None
+        return cls(name, url.target, speed, url.options.get("device"))
 
     def _open(self) -> None:
         if not self.path.is_file():

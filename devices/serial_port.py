@@ -14,9 +14,11 @@ URLs
 
 Options: ``protocol=ascii|cobs|slip`` (default ascii); ``channels=a,b,c`` names the channels
 (default ``ch0``, ``ch1``, ...); ``format=i16|f32`` (cobs and slip, default i16);
-``timeout=0.03`` seconds a read waits (what bounds ``close()``); and the port settings
-``baudrate`` (115200), ``bytesize``, ``parity``, ``stopbits``, ``xonxoff``, ``rtscts``,
-``dsrdtr``, ``exclusive``.
+``timeout=0.03`` seconds a read waits (what bounds ``close()``); ``checksum=nmea`` (ascii only,
+below); and the port settings ``baudrate`` (115200), ``bytesize``, ``parity``, ``stopbits``,
+``xonxoff``, ``rtscts``, ``dsrdtr``, ``exclusive``. Any other option is refused (with a pyserial
+URL handler, the handler's own options -- ``logging``, rfc2217's ``poll_modem`` ... -- are known
+too and handed on).
 
 Protocols
 ---------
@@ -28,6 +30,16 @@ Serial Plotter prints; with ``channels=`` every name must be one of them). Numbe
 (``-12``, ``3.5``, ``1e3``); NaN and infinities are refused. A malformed line (text, a non-number,
 a wrong count, mixed forms, a repeated name, a line over 4096 bytes) counts as one bad frame and
 is skipped; blank lines are ignored; a line split across reads is joined.
+
+Plain ascii cannot tell noise from data: a line cut short (``51`` of ``512``) or a digit flipped
+on the wire is still a number. ``checksum=nmea`` makes every line carry the NMEA 0183 check:
+``512,300*4A`` -- ``*`` and two hex digits, the XOR of every byte of the line before the ``*``
+(a leading ``$`` is allowed, and left out of the XOR as in NMEA). A line without it, or whose
+check differs, is a bad frame, and is also counted in ``counters.bad_checksums``. It catches every
+single flipped bit and every cut line, but an 8-bit XOR misses two errors in the same bit
+position: for a link that matters, ``cobs`` or ``slip`` with their CRC-16 is the safe choice.
+An Arduino sketch: ``byte x = 0; for (char c : line) x ^= c;`` then print ``line``, ``'*'``
+and ``x`` as two hex digits.
 
 ``cobs`` and ``slip``: binary frames for high rates. Every frame carries one reading::
 
@@ -93,6 +105,7 @@ READ_MAX = 16384        # most bytes taken from the port in one read (one timest
 MAX_LINE = 4096         # longest ascii line
 MAX_FRAME = 2048        # longest cobs/slip frame on the wire, delimiters excluded
 CRC_INIT = 0xFFFF
+CHECKSUMS = ("none", "nmea")
 
 SLIP_END, SLIP_ESC, SLIP_ESC_END, SLIP_ESC_ESC = 0xC0, 0xDB, 0xDC, 0xDD
 _END, _ESC = bytes([SLIP_END]), bytes([SLIP_ESC])
@@ -191,13 +204,33 @@ def encode_slip_frame(values: Sequence[float], fmt: str = "i16") -> bytes:
 
 
 def encode_ascii_line(values: Sequence[float] | Mapping[str, float], sep: str = ",",
-                      end: str = "\r\n") -> bytes:
-    """One reading as an Arduino-style line: ``512,300`` or, from a dict, ``a=512,b=300``."""
+                      end: str = "\r\n", checksum: str = "none") -> bytes:
+    """One reading as an Arduino-style line: ``512,300`` or, from a dict, ``a=512,b=300``;
+    with ``checksum="nmea"``, followed by ``*`` and the line's XOR in two hex digits."""
     if isinstance(values, Mapping):
         text = sep.join(f"{k}={_number(v)}" for k, v in values.items())
     else:
         text = sep.join(_number(v) for v in values)
-    return (text + end).encode("ascii")
+    return add_checksum(text.encode("ascii"), checksum) + end.encode("ascii")
+
+
+def nmea_checksum(data: bytes) -> int:
+    """The XOR of every byte of ``data`` (the NMEA 0183 sentence check)."""
+    x = 0
+    for b in data:
+        x ^= b
+    return x
+
+
+def add_checksum(line: bytes, checksum: str = "none") -> bytes:
+    """``line`` with its ``*hh`` check appended when ``checksum`` is ``nmea``."""
+    _check_checksum(checksum)
+    return line + b"*%02X" % nmea_checksum(line) if checksum == "nmea" else line
+
+
+def _check_checksum(checksum: str) -> None:
+    if checksum not in CHECKSUMS:
+        raise ValueError(f"checksum {checksum!r}: expected one of {', '.join(CHECKSUMS)}")
 
 
 def _number(v: float) -> str:
@@ -281,20 +314,45 @@ class _Splitter:
         return names
 
 
+_HEX2 = re.compile(rb"[0-9A-Fa-f]{2}")
 _SPACE_AROUND_PAIR = re.compile(r"\s*([=:])\s*")
 _SEPARATORS = re.compile(r"[,;\s]+")
 
 
 class AsciiParser(_Splitter):
-    """Lines of numbers or name=value pairs (see the module docstring)."""
+    """Lines of numbers or name=value pairs (see the module docstring), each checked by its
+    ``*hh`` when ``checksum`` is ``nmea`` (a failed check also counts in ``bad_checksums``)."""
 
     DELIMITER = b"\n"
     LIMIT = MAX_LINE
 
+    def __init__(self, names: Sequence[str] | None = None, checksum: str = "none") -> None:
+        super().__init__(names)
+        _check_checksum(checksum)
+        self.checksum = checksum
+        self.bad_checksums = 0
+
     def _normalise(self, data: bytes) -> bytes:
         return data.replace(b"\r", b"\n") if b"\r" in data else data
 
+    def _checked(self, chunk: bytes) -> bytes | None:
+        """The line without its check, or None when the check is missing or wrong."""
+        line = chunk.strip(b" \t")
+        if not line:
+            return line
+        body, star, digits = line.rpartition(b"*")
+        if body.startswith(b"$"):
+            body = body[1:]
+        if star and _HEX2.fullmatch(digits) and int(digits, 16) == nmea_checksum(body):
+            return body
+        self.bad_checksums += 1
+        return None
+
     def _decode(self, chunk: bytes) -> dict[str, float] | None:
+        if self.checksum == "nmea":
+            chunk = self._checked(chunk)
+            if chunk is None:
+                return None
         try:
             line = chunk.decode("ascii").strip(" \t,;")
         except UnicodeDecodeError:
@@ -382,10 +440,12 @@ class SlipParser(_FrameParser):
 
 
 def make_parser(protocol: str = "ascii", names: Sequence[str] | None = None,
-                fmt: str = "i16") -> _Splitter:
+                fmt: str = "i16", checksum: str = "none") -> _Splitter:
     """A parser for a protocol: ``feed(bytes) -> [readings]``, bad frames counted in ``bad``."""
+    if protocol != "ascii" and checksum != "none":
+        raise ValueError(f"checksum= applies to ascii lines; {protocol} frames carry a CRC-16 already")
     if protocol == "ascii":
-        return AsciiParser(names)
+        return AsciiParser(names, checksum)
     if protocol == "cobs":
         return CobsParser(names, fmt)
     if protocol == "slip":
@@ -400,13 +460,25 @@ _PORT_OPTIONS = {
     "xonxoff": "bool", "rtscts": "bool", "dsrdtr": "bool", "exclusive": "bool",
 }
 _TRUE, _FALSE = {"1", "true", "yes", "on"}, {"0", "false", "no", "off"}
+HANDLER_OPTIONS = frozenset({"logging", "ign_set_control", "poll_modem", "file", "color", "raw", "all",
+                             "class", "n", "skip_busy"})
+"""Options of pyserial's own URL handlers (loop, socket, rfc2217, spy, alt, hwgrep): with a
+``serial:HANDLER://`` URL they are handed on to pyserial."""
 
 
 class SerialDevice(Device):
     """Readings from a serial port (a path or any pyserial URL) in one of three protocols."""
 
+    OPTIONS = frozenset({"protocol", "format", "channels", "timeout", "checksum", *_PORT_OPTIONS})
+
+    @classmethod
+    def unknown_option(cls, url: Url, key: str) -> str | None:
+        if "://" in url.target and key in HANDLER_OPTIONS:
+            return None
+        return super().unknown_option(url, key)
+
     def __init__(self, name: str, port: str, *, protocol: str = "ascii",
-                 channels: Sequence[str] | None = None, fmt: str = "i16",
+                 channels: Sequence[str] | None = None, fmt: str = "i16", checksum: str = "none",
                  timeout: float = TIMEOUT, baudrate: int = 115200, **port_options: object) -> None:
         super().__init__(name)
         if channels is not None:
@@ -418,11 +490,11 @@ class SerialDevice(Device):
         if not 0 < timeout <= 0.5:
             raise DeviceError(f"serial {port!r}: timeout must be in (0, 0.5] seconds, not {timeout}")
         try:
-            self._parser = make_parser(protocol, channels, fmt)
+            self._parser = make_parser(protocol, channels, fmt, checksum)
         except ValueError as exc:
             raise DeviceError(f"serial {port!r}: {exc}") from None
         self.port_url = port
-        self.protocol, self.channels, self.fmt = protocol, channels, fmt
+        self.protocol, self.channels, self.fmt, self.checksum = protocol, channels, fmt, checksum
         self._port_kwargs = dict(port_options, baudrate=baudrate, timeout=timeout)
         try:  # check the URL handler and settings now, so _open only fails when hardware does
             serial.serial_for_url(port, do_not_open=True, **self._port_kwargs)
@@ -437,10 +509,13 @@ class SerialDevice(Device):
         if not target:
             raise DeviceError("serial URL: expected serial:///dev/PORT or serial:HANDLER://..., "
                               "e.g. serial:///dev/ttyACM0?protocol=ascii")
+        cls.check_options(url)
         kwargs: dict[str, object] = {}
         try:
             if "protocol" in options:
                 kwargs["protocol"] = options.pop("protocol")
+            if "checksum" in options:
+                kwargs["checksum"] = options.pop("checksum")
             if "format" in options:
                 kwargs["fmt"] = options.pop("format")
             if "channels" in options:
@@ -452,9 +527,7 @@ class SerialDevice(Device):
                     kwargs[key] = _bool(options.pop(key)) if convert == "bool" else convert(options.pop(key))
         except ValueError as exc:
             raise DeviceError(f"serial URL {target!r}: {exc}") from None
-        if options:
-            if "://" not in target:
-                raise DeviceError(f"serial URL {target!r}: unknown option(s) {sorted(options)}")
+        if options:  # a URL handler's own options (check_options let no other through)
             target += ("&" if "?" in target else "?") + urlencode(options)
         return cls(name, target, **kwargs)
 
@@ -485,6 +558,9 @@ class SerialDevice(Device):
         if parser.bad:
             self.counters.bad_frames += parser.bad
             parser.bad = 0
+            if self.checksum != "none":
+                self.counters.bad_checksums += parser.bad_checksums
+                parser.bad_checksums = 0
         return readings
 
     def _close(self) -> None:
@@ -503,6 +579,6 @@ def _bool(text: str) -> bool:
     raise ValueError(f"expected a yes/no value, not {text!r}")
 
 
-__all__ = ["AsciiParser", "CobsParser", "SerialDevice", "SlipParser", "cobs_decode", "cobs_encode",
-           "crc16", "encode_ascii_line", "encode_cobs_frame", "encode_payload", "encode_slip_frame",
+__all__ = ["AsciiParser", "CobsParser", "SerialDevice", "SlipParser", "add_checksum", "cobs_decode", "cobs_encode",
+           "crc16", "encode_ascii_line", "nmea_checksum", "encode_cobs_frame", "encode_payload", "encode_slip_frame",
            "make_parser", "slip_decode", "slip_encode"]

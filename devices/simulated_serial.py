@@ -31,7 +31,8 @@ late; ``rate=math.inf`` writes as fast as the reader takes (for throughput measu
 ``sim://joystick?protocol=ascii&rate=200&channels=6`` (``SimulatedSerialDevice``) is a
 ``SerialDevice`` that starts its own ``PtyJoystick`` and reads it: a serial device for demos with
 no hardware. Options: ``protocol``, ``rate`` (0 = as fast as possible), ``channels`` (a count, or
-names), ``format`` (i16/f32 for cobs and slip), ``style`` (csv, space or pairs for ascii).
+names), ``format`` (i16/f32 for cobs and slip), ``style`` (csv, space or pairs for ascii),
+``checksum`` (``nmea``: ascii lines end in ``*hh``, and the reader checks them).
 """
 
 from __future__ import annotations
@@ -49,6 +50,7 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from .base import DeviceError, Url
 from .serial_port import (
     SerialDevice,
+    add_checksum,
     encode_ascii_line,
     encode_cobs_frame,
     encode_slip_frame,
@@ -76,16 +78,17 @@ def sine_sliders(channels: int = 6, lo: float = 0.0, hi: float = 1023.0, integer
 
 
 def encode_reading(values: Sequence[float], protocol: str = "ascii", fmt: str = "i16", style: str = "csv",
-                   names: Sequence[str] | None = None) -> bytes:
-    """One reading on the wire: a COBS or SLIP frame, or an ascii line in a style."""
+                   names: Sequence[str] | None = None, checksum: str = "none") -> bytes:
+    """One reading on the wire: a COBS or SLIP frame, or an ascii line in a style (with its
+    ``*hh`` check when ``checksum`` is ``nmea``)."""
     if protocol == "cobs":
         return encode_cobs_frame(values, fmt)
     if protocol == "slip":
         return encode_slip_frame(values, fmt)
     if style == "pairs":
         names = names or [f"ch{i}" for i in range(len(values))]
-        return encode_ascii_line(dict(zip(names, values)), STYLES["pairs"])
-    return encode_ascii_line(values, STYLES[style])
+        return encode_ascii_line(dict(zip(names, values)), STYLES["pairs"], checksum=checksum)
+    return encode_ascii_line(values, STYLES[style], checksum=checksum)
 
 
 class PtyJoystick:
@@ -93,13 +96,14 @@ class PtyJoystick:
 
     def __init__(self, protocol: str = "ascii", rate: float | None = 200.0, channels: int = 6, *,
                  fmt: str = "i16", style: str = "csv", names: Sequence[str] | None = None,
-                 signal: Signal | Iterable[Sequence[float]] | None = None, link: str | None = None) -> None:
-        make_parser(protocol, fmt=fmt)  # checks protocol and format
+                 signal: Signal | Iterable[Sequence[float]] | None = None, link: str | None = None,
+                 checksum: str = "none") -> None:
+        make_parser(protocol, fmt=fmt, checksum=checksum)  # checks protocol, format and checksum
         if style not in STYLES:
             raise ValueError(f"style {style!r}: expected one of {sorted(STYLES)}")
         if rate is not None and not rate >= 0:
             raise ValueError(f"rate must be >= 0, not {rate}")
-        self.protocol, self.fmt, self.style = protocol, fmt, style
+        self.protocol, self.fmt, self.style, self.checksum = protocol, fmt, style, checksum
         self.rate = rate or None
         self.names = tuple(names) if names else tuple(f"ch{i}" for i in range(channels))
         self.channels = len(self.names)
@@ -190,7 +194,7 @@ class PtyJoystick:
 
     def encode(self, values: Sequence[float]) -> bytes:
         """One reading in this joystick's wire format."""
-        return encode_reading(values, self.protocol, self.fmt, self.style, self.names)
+        return encode_reading(values, self.protocol, self.fmt, self.style, self.names, self.checksum)
 
     def send(self, values: Sequence[float]) -> bool:
         """Send one reading now; False if it was dropped."""
@@ -275,16 +279,15 @@ def _joystick(url: Url, paced: bool) -> PtyJoystick:
     else only when told (``rate=None``: a twin writes the logged readings itself)."""
     if url.target.strip("/") != "joystick":
         raise DeviceError(f"sim URL: expected sim://joystick?protocol=ascii&rate=200, got target {url.target!r}")
+    SimulatedSerialDevice.check_options(url)
     options = url.options
-    unknown = set(options) - {"protocol", "rate", "channels", "format", "style"}
-    if unknown:
-        raise DeviceError(f"sim URL: unknown option(s) {sorted(unknown)}")
     channels = options.get("channels", "6")
     try:
         rate = float(options.get("rate", "200"))
         names = [f"ch{i}" for i in range(int(channels))] if channels.isdigit() else channels.split(",")
         return PtyJoystick(options.get("protocol", "ascii"), (rate if rate > 0 else math.inf) if paced else None,
-                           fmt=options.get("format", "i16"), style=options.get("style", "csv"), names=names)
+                           fmt=options.get("format", "i16"), style=options.get("style", "csv"), names=names,
+                           checksum=options.get("checksum", "none"))
     except ValueError as exc:
         raise DeviceError(f"sim URL: {exc}") from None
 
@@ -292,9 +295,11 @@ def _joystick(url: Url, paced: bool) -> PtyJoystick:
 class SimulatedSerialDevice(SerialDevice):
     """``sim://joystick?...``: a SerialDevice reading a PtyJoystick it starts itself."""
 
+    OPTIONS = frozenset({"protocol", "rate", "channels", "format", "style", "checksum"})
+
     def __init__(self, name: str, joystick: PtyJoystick, **serial_options: object) -> None:
         super().__init__(name, joystick.path, protocol=joystick.protocol, fmt=joystick.fmt,
-                         channels=joystick.names, **serial_options)
+                         channels=joystick.names, checksum=joystick.checksum, **serial_options)
         self.joystick = joystick
         self._joystick_started = False
 
@@ -336,7 +341,7 @@ class SerialTwin(Twin):
     def from_url(cls, url: str, name: str, wire_info: Mapping) -> SerialTwin:
         options = Url.parse(url).options
         joystick = PtyJoystick(rate=None)  # only a carrier: the twin writes the wire bytes
-        decoding = {k: v for k, v in options.items() if k in ("protocol", "format", "channels")}
+        decoding = {k: v for k, v in options.items() if k in ("protocol", "format", "channels", "checksum")}
         try:
             device = SerialDevice.from_url(Url("serial", joystick.path, decoding), name)
         except DeviceError:
@@ -347,8 +352,8 @@ class SerialTwin(Twin):
     def _put(self, values: Mapping[str, float]) -> int:
         device = self.device
         if device.protocol == "ascii":
-            line = ",".join(f"{k}={float(v)!r}" for k, v in values.items()) + "\n"
-            data = line.encode("ascii")
+            line = ",".join(f"{k}={float(v)!r}" for k, v in values.items()).encode("ascii")
+            data = add_checksum(line, device.checksum) + b"\n"
         else:
             names = device.channels or [f"ch{i}" for i in range(len(values))]
             if set(names) != set(values):

@@ -78,6 +78,7 @@ import difflib
 import math
 import os
 import re
+import reprlib
 from dataclasses import dataclass, field
 from pathlib import Path
 from urllib.parse import parse_qsl, urlencode, urlsplit
@@ -85,8 +86,10 @@ from urllib.parse import parse_qsl, urlencode, urlsplit
 import numpy as np
 import yaml
 
-from devices.base import Sample
+from devices import BACKENDS, DeviceError
+from devices.base import Sample, Url, table_class
 
+from .errors import PuppetError
 from .face import AU
 from .faptable import N_FAPS, faps
 from .filters import Exponential, OneEuro, RateLimit
@@ -118,8 +121,20 @@ NEEDS_RANGE = ("fap", "head", "eyes", "eye_l", "eye_r")
 
 DEVICE_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_-]*\Z")
 SOURCE = re.compile(r"([A-Za-z_][A-Za-z0-9_-]*)\.(\S+)\Z")
-URL = re.compile(r"[A-Za-z][A-Za-z0-9+.-]*://")
+URL = re.compile(r"([A-Za-z][A-Za-z0-9+.-]*):([A-Za-z][A-Za-z0-9+.-]*:)?//")  # serial:loop:// too
 DEG_TO_AU = math.pi / 180.0 / AU
+
+RAW_LIMIT = 1e12        # largest raw value a channel's min / centre / max may name
+RAW_SPAN = 1e-9         # nearest min, centre and max may be (so 1 / span stays finite)
+TARGET_LIMIT = 1e6      # largest target range end or gain (FAPU, degrees, contraction)
+FREQUENCY_LIMIT = 1e3   # Hz: One Euro cutoffs; beta likewise in 1 / (units per second)
+TAU_LIMIT = 3600.0      # seconds
+RATE_LIMIT = 1e6        # shaped units per second
+GAMMA_LIMIT = 100.0
+ALIAS_BUDGET = 10_000   # values a document may hold once its YAML aliases are expanded
+"""Every number a mapping holds has a sane range (the schema says the same), so that no mapping
+that loads can make a NaN or an infinity anywhere in the shaping: a cutoff of 1e308 Hz, a range
+of +-1e308 or a min and max 1e-320 apart are refused with the file, line and key path."""
 
 
 def fap_names() -> list[str]:
@@ -138,7 +153,7 @@ class Problem:
     message: str
 
 
-class MappingError(ValueError):
+class MappingError(PuppetError, ValueError):
     """A mapping that cannot be used; ``problems`` lists everything wrong, each on its own line."""
 
     def __init__(self, file: str, problems: list[Problem]) -> None:
@@ -168,8 +183,8 @@ def load_mapping(path: str | os.PathLike) -> Mapping:
 def parse_mapping(text: str, file: str = "<mapping>") -> Mapping:
     """A mapping from YAML text (``file`` names it in errors)."""
     try:
-        lines, duplicates = _lines(text)
-        data = yaml.safe_load(text)
+        lines, duplicates, size = _lines(text)
+        data = yaml.safe_load(text) if size <= ALIAS_BUDGET else None
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None) or getattr(exc, "context_mark", None)
         what = " ".join(filter(None, (getattr(exc, "context", None), getattr(exc, "problem", None)))) or str(exc)
@@ -180,15 +195,31 @@ def parse_mapping(text: str, file: str = "<mapping>") -> Mapping:
         raise MappingError(file, [Problem("", mark.line + 1 if mark else None, f"{kind}{at}: {what}")]) from None
     except RecursionError:
         raise MappingError(file, [Problem("", None, "the YAML is nested too deeply")]) from None
+    except ValueError as exc:  # a number PyYAML cannot build (an integer of over 4300 digits)
+        raise MappingError(file, [Problem("", None, f"expected numbers of sane size, found one that is "
+                                                    f"not ({_clip(str(exc), 60)})")]) from None
+    if size > ALIAS_BUDGET:
+        raise MappingError(file, [Problem("", None, f"expected at most {ALIAS_BUDGET:,} values with the YAML "
+                                                    f"aliases expanded, found more (aliases nested in aliases)")])
     return Mapping.from_data(data, file, lines=lines, duplicates=duplicates)
 
 
-def _lines(text: str) -> tuple[dict[tuple, int], list[Problem]]:
-    """Line of every key path (from the composed YAML nodes) and the keys written twice."""
+def _lines(text: str) -> tuple[dict[tuple, int], list[Problem], int]:
+    """Line of every key path (from the composed YAML nodes), the keys written twice, and how
+    many values the document holds with its aliases expanded (counted, never expanded)."""
     root = yaml.compose(text, Loader=yaml.SafeLoader)
     lines: dict[tuple, int] = {}
     duplicates: list[Problem] = []
     seen: set[int] = set()
+    sizes: dict[int, int] = {}
+
+    def expanded(node) -> int:
+        if id(node) not in sizes:
+            sizes[id(node)] = 0  # a node inside itself (a recursive alias) counts once
+            children = [n for pair in node.value for n in pair] if isinstance(node, yaml.MappingNode) \
+                else node.value if isinstance(node, yaml.SequenceNode) else []
+            sizes[id(node)] = min(1 + sum(expanded(c) for c in children), ALIAS_BUDGET + 1)
+        return sizes[id(node)]
 
     def walk(node, path: tuple, line: int) -> None:
         lines.setdefault(path, line)
@@ -211,9 +242,12 @@ def _lines(text: str) -> tuple[dict[tuple, int], list[Problem]]:
             for i, item in enumerate(node.value):
                 walk(item, path + (i,), item.start_mark.line + 1)
 
-    if root is not None:
+    if root is None:
+        return lines, duplicates, 0
+    size = expanded(root)
+    if size <= ALIAS_BUDGET:
         walk(root, (), root.start_mark.line + 1)
-    return lines, duplicates
+    return lines, duplicates, size
 
 
 def _format_path(path: tuple) -> str:
@@ -228,18 +262,39 @@ def _format_path(path: tuple) -> str:
     return out
 
 
+_SHORT = reprlib.Repr()
+_SHORT.maxlevel, _SHORT.maxlist, _SHORT.maxdict, _SHORT.maxstring, _SHORT.maxother = 2, 6, 4, 60, 60
+_SHORT.maxlong = 40
+
+
+def _clip(text: str, n: int) -> str:
+    return text if len(text) <= n else text[:n - 3] + "..."
+
+
 def _got(value) -> str:
+    """What was found, in a few words: never longer than a line, whatever the value's size."""
     if value is None:
         return "nothing"
     if isinstance(value, bool):
         return f"{str(value).lower()} (a boolean)"
     if isinstance(value, dict):
         return "a mapping" if value else "an empty mapping"
+    if isinstance(value, int) and value.bit_length() > 128:
+        return f"an integer of about {int(value.bit_length() * 0.30103) + 1} digits"
+    text = _SHORT.repr(value)
     if isinstance(value, list):
-        text = repr(value)
         return text if len(text) <= 40 else f"a list of {len(value)} items"
-    text = repr(value)
-    return text if len(text) <= 60 else text[:57] + "..."
+    return _clip(text, 60)
+
+
+def _finite(value) -> bool:
+    """A number (not a boolean) that is finite as a float: 1e400 written as an integer is not."""
+    if not _is_number(value):
+        return False
+    try:
+        return math.isfinite(value)
+    except OverflowError:
+        return False
 
 
 def _closest(word, choices) -> str:
@@ -329,7 +384,7 @@ class _Checker:
 
     def number(self, path: tuple, value, low=None, high=None, low_open=False, high_open=False,
                expected: str | None = None) -> float | None:
-        ok = _is_number(value) and math.isfinite(value)
+        ok = _finite(value)
         if ok and low is not None:
             ok = value > low if low_open else value >= low
         if ok and high is not None:
@@ -338,12 +393,17 @@ class _Checker:
             if expected is None:
                 expected = "a number"
                 if low is not None and high is not None:
-                    expected += f" from {low} to {high}" + (" (exclusive)" if low_open or high_open else "")
+                    expected += f" from {low:g} to {high:g}" + (" (exclusive)" if low_open or high_open else "")
                 elif low is not None:
-                    expected = f"a number {'>' if low_open else '>='} {low}"
+                    expected = f"a number {'>' if low_open else '>='} {low:g}"
             self.expect(path, expected, value)
             return None
         return float(value)
+
+    def raw_number(self, path: tuple, value) -> float | None:
+        """A raw device value (a channel's min, centre or max)."""
+        return self.number(path, value, -RAW_LIMIT, RAW_LIMIT,
+                           expected=f"a raw value from {-RAW_LIMIT:g} to {RAW_LIMIT:g}")
 
     def choice(self, path: tuple, value, choices, what: str):
         if isinstance(value, str) and value in choices:
@@ -388,19 +448,42 @@ class _Checker:
             if "description" in spec:
                 self.string(where + ("description",), spec["description"])
             url = spec.get("url")
-            if "url" in spec and not (isinstance(url, str) and URL.match(url)):
-                self.expect(where + ("url",), "a device URL scheme://..., e.g. 'serial:///dev/ttyACM0'", url)
+            m = URL.match(url) if isinstance(url, str) else None
+            if "url" in spec and m is None:
+                self.expect(where + ("url",), "a device URL scheme://..., e.g. 'serial:///dev/ttyACM0' "
+                                              "or 'serial:loop://'", url)
+                url = None
+            elif m is not None and m.group(1) not in BACKENDS:
+                self.error(where + ("url",), f"unknown device URL scheme {m.group(1)!r}: expected one of "
+                                             f"{', '.join(sorted(BACKENDS))}{_closest(m.group(1), BACKENDS)}")
                 url = None
             options = spec.get("options", {})
             if not isinstance(options, dict):
                 self.expect(where + ("options",), "a mapping of option -> string, number or boolean", options)
                 options = {}
+            good = {}
             for key, option in options.items():
-                if not isinstance(key, str) or not (isinstance(option, (str, int, float))):
+                if not isinstance(key, str) or not (isinstance(option, str) or _finite(option)
+                                                    or isinstance(option, bool)):
                     self.expect(where + ("options", key), "an option name with a string, number or boolean", option)
+                else:
+                    good[key] = option
             if url is not None:
-                out[name] = self.url_with_options(where, url, options)
+                out[name] = self.url_with_options(where, url, good)
+                self.device_options(where, out[name], good)
         return out
+
+    def device_options(self, where: tuple, url: str, options: dict) -> None:
+        """Every option of the device URL (its query and ``options``) is one its backend reads."""
+        try:
+            parsed = Url.parse(url)
+            backend = table_class(BACKENDS[parsed.scheme])
+        except (ImportError, DeviceError):  # a missing optional library is said when the device opens
+            return
+        for key in parsed.options:
+            problem = backend.unknown_option(parsed, key)
+            if problem:
+                self.error(where + (("options", key) if key in options else ("url",)), problem)
 
     def url_with_options(self, where: tuple, url: str, options: dict) -> str:
         """The URL with ``options`` folded into its query (an option given twice is an error)."""
@@ -449,11 +532,11 @@ class _Checker:
         if "range" in spec:
             polarity = self.choice(where + ("range",), polarity, RANGES, "a channel range")
         bipolar = polarity == "bipolar"
-        low = self.number(where + ("min",), spec["min"]) if "min" in spec else (-1.0 if bipolar else 0.0)
-        high = self.number(where + ("max",), spec["max"]) if "max" in spec else 1.0
+        low = self.raw_number(where + ("min",), spec["min"]) if "min" in spec else (-1.0 if bipolar else 0.0)
+        high = self.raw_number(where + ("max",), spec["max"]) if "max" in spec else 1.0
         centre = None
         if "centre" in spec:
-            centre = self.number(where + ("centre",), spec["centre"])
+            centre = self.raw_number(where + ("centre",), spec["centre"])
             if polarity == "unipolar":
                 self.error(where + ("centre",), "centre applies to a bipolar channel: expected range: bipolar "
                                                 "with centre, or no centre")
@@ -461,9 +544,14 @@ class _Checker:
             if not low < high:
                 self.error(where + ("max",), f"expected max greater than min ({low:g}), got {high:g} "
                                              f"(use invert: true for a reversed control)")
+            elif high - low < RAW_SPAN:
+                self.error(where + ("max",), f"expected max at least {RAW_SPAN:g} above min ({low:g}), got {high:g}")
             elif centre is not None and bipolar and not low < centre < high:
                 self.error(where + ("centre",), f"expected centre between min ({low:g}) and max ({high:g}), "
                                                 f"got {centre:g}")
+            elif centre is not None and bipolar and min(centre - low, high - centre) < RAW_SPAN:
+                self.error(where + ("centre",), f"expected centre at least {RAW_SPAN:g} from min ({low:g}) "
+                                                f"and max ({high:g}), got {centre:g}")
         invert = spec.get("invert", False)
         if not isinstance(invert, bool):
             self.expect(where + ("invert",), "true or false", invert)
@@ -476,8 +564,8 @@ class _Checker:
         smoothing = self.smoothing(where + ("smoothing",), spec["smoothing"]) if "smoothing" in spec else None
         rate = None
         if "rate_limit" in spec:
-            rate = self.number(where + ("rate_limit",), spec["rate_limit"], 0.0, low_open=True,
-                               expected="a number > 0 (units per second)")
+            rate = self.number(where + ("rate_limit",), spec["rate_limit"], 0.0, RATE_LIMIT, low_open=True,
+                               expected=f"a number > 0 and <= {RATE_LIMIT:g} (units per second)")
         button = self.button(where + ("button",), spec["button"]) if "button" in spec else None
         if "button" in spec:
             for key in ("dead_zone", "curve"):
@@ -512,7 +600,8 @@ class _Checker:
                             expected="a number from 0 (linear) to 1 (cubic)") if "factor" in value else None
             return None if k is None else ("expo", k)
         if kind == "gamma":
-            g = self.number(where + ("gamma",), value.get("gamma"), 0.0, low_open=True) if "gamma" in value else None
+            g = self.number(where + ("gamma",), value.get("gamma"), 0.0, GAMMA_LIMIT, low_open=True,
+                            expected=f"a number > 0 and <= {GAMMA_LIMIT:g}") if "gamma" in value else None
             return None if g is None else ("gamma", g)
         return self.points(where + ("points",), value.get("points"), bipolar) if "points" in value else None
 
@@ -524,7 +613,7 @@ class _Checker:
         xs, ys = [], []
         for i, pair in enumerate(value):
             if not (isinstance(pair, list) and len(pair) == 2
-                    and all(_is_number(v) and math.isfinite(v) and 0 <= v <= 1 for v in pair)):
+                    and all(_finite(v) and 0 <= v <= 1 for v in pair)):
                 self.expect(where + (i,), "an [x, y] pair of numbers from 0 to 1", pair)
                 return None
             xs.append(float(pair[0]))
@@ -562,14 +651,15 @@ class _Checker:
         if self.mapping(where, value, keys, f"{kind} smoothing", required=required) is None:
             return None
         if kind == "exponential":
-            tau = self.number(where + ("tau",), value["tau"], 0.0, low_open=True,
-                              expected="a time constant in seconds > 0") if "tau" in value else None
+            tau = self.number(where + ("tau",), value["tau"], 0.0, TAU_LIMIT, low_open=True,
+                              expected=f"a time constant in seconds > 0 and <= {TAU_LIMIT:g}") if "tau" in value else None
             return None if tau is None else ("exponential", tau)
         params = []
         for key in SMOOTHING_KEYS["one_euro"]:
             v = value.get(key, ONE_EURO_DEFAULTS[key])
-            params.append(self.number(where + (key,), v, 0.0, low_open=key != "beta",
-                                      expected="a number >= 0" if key == "beta" else "a frequency in Hz > 0"))
+            params.append(self.number(where + (key,), v, 0.0, FREQUENCY_LIMIT, low_open=key != "beta",
+                                      expected=f"a number >= 0 and <= {FREQUENCY_LIMIT:g}" if key == "beta"
+                                      else f"a frequency in Hz > 0 and <= {FREQUENCY_LIMIT:g}"))
         return None if None in params else ("one_euro", *params)
 
     def button(self, where: tuple, value) -> tuple | None:
@@ -577,8 +667,10 @@ class _Checker:
         if spec is None or "mode" not in spec:
             return None
         mode = self.choice(where + ("mode",), spec["mode"], BUTTON_MODES, "a button mode")
-        threshold = self.number(where + ("threshold",), spec.get("threshold", 0.5))
-        release = self.number(where + ("release",), spec["release"]) if "release" in spec else threshold
+        threshold = self.number(where + ("threshold",), spec.get("threshold", 0.5), -1.0, 1.0,
+                                expected="a number from -1 to 1 (a shaped value)")
+        release = self.number(where + ("release",), spec["release"], -1.0, 1.0,
+                              expected="a number from -1 to 1 (a shaped value)") if "release" in spec else threshold
         if threshold is not None and release is not None and release > threshold:
             self.error(where + ("release",), f"expected release <= threshold ({threshold:g}), got {release:g}")
             return None
@@ -616,15 +708,16 @@ class _Checker:
             self.error(where, "missing key 'source': expected a source device.channel or a list of them")
         combine = self.choice(where + ("combine",), spec["combine"], COMBINE_MODES, "a combine mode") \
             if "combine" in spec else "sum"
-        gain = self.number(where + ("gain",), spec["gain"]) if "gain" in spec else 1.0
+        gain = self.number(where + ("gain",), spec["gain"], -TARGET_LIMIT, TARGET_LIMIT) if "gain" in spec else 1.0
         rng = None
         if "range" in spec:
             r = spec["range"]
-            if isinstance(r, list) and len(r) == 2 and all(_is_number(v) and math.isfinite(v) for v in r):
+            if isinstance(r, list) and len(r) == 2 and all(_finite(v) and abs(v) <= TARGET_LIMIT for v in r):
                 rng = (float(r[0]), float(r[1]))
             else:
-                self.expect(where + ("range",), "two numbers [low, high]" + (
-                    " in degrees" if kind in NEEDS_RANGE[1:] else " in FAPU units" if kind == "fap" else ""), r)
+                unit = " in degrees" if kind in NEEDS_RANGE[1:] else " in FAPU units" if kind == "fap" else ""
+                self.expect(where + ("range",), f"two numbers [low, high]{unit}, each from {-TARGET_LIMIT:g} "
+                                                f"to {TARGET_LIMIT:g}", r)
         elif kind in NEEDS_RANGE:
             unit = "degrees" if kind != "fap" else "FAPU units"
             self.error(where, f"missing key 'range': expected range: [low, high] in {unit} for a {kind}: target")
@@ -885,14 +978,32 @@ class _Channel:
 _SUM, _MAX, _LAST = 0, 1, 2
 
 
+class _Guard:
+    """Targets whose value came out NaN (a corrupt restored state, say): each holds its last good
+    value; ``count`` counts such evaluations and ``first`` says what happened the first time."""
+
+    __slots__ = ("count", "first")
+
+    def __init__(self) -> None:
+        self.count, self.first = 0, None
+
+    def held(self, target: _Target) -> float:
+        self.count += 1
+        if self.first is None:
+            self.first = (f"{target.label} came out as NaN; its last good value ({target.last:g}) is held "
+                          f"(sources: {', '.join(s.name for s in target.sources)})")
+        return target.last
+
+
 class _Target:
     """One target compiled: its sources, the affine map from their domain onto the range, a clamp."""
 
     __slots__ = ("kind", "key", "slots", "sources", "mode", "gain", "x0", "scale", "low", "cmin", "cmax",
-                 "label")
+                 "label", "last", "guard")
 
-    def __init__(self, spec: _TargetSpec, sources: list[_Channel], bipolar: bool) -> None:
+    def __init__(self, spec: _TargetSpec, sources: list[_Channel], bipolar: bool, guard: _Guard) -> None:
         self.kind, self.key = spec.kind, spec.key
+        self.guard = guard
         self.sources = tuple(sources)
         self.mode = (_SUM, _MAX, _LAST)[COMBINE_MODES.index(spec.combine)]
         self.gain = spec.gain
@@ -921,6 +1032,8 @@ class _Target:
         elif spec.kind == "expression":
             name = next(k for k, v in EXPRESSIONS.items() if v == spec.key)
         self.label = f"{spec.kind} {spec.key}" + (f" {name}" if name else "")
+        rest = low - self.x0 * self.scale  # every source at 0: the value before any sample
+        self.last = self.cmin if rest < self.cmin else self.cmax if rest > self.cmax else rest
 
     def evaluate(self) -> float:
         sources = self.sources
@@ -943,7 +1056,11 @@ class _Target:
                     best = s
             x = best.out
         v = self.low + (self.gain * x - self.x0) * self.scale
-        return self.cmin if v < self.cmin else self.cmax if v > self.cmax else v
+        v = self.cmin if v < self.cmin else self.cmax if v > self.cmax else v
+        if v != v:  # NaN (the clamp lets it through): hold the last good value, and say so
+            return self.guard.held(self)
+        self.last = v
+        return v
 
 
 class Mapping:
@@ -965,10 +1082,11 @@ class Mapping:
         for spec in channels.values():
             self._by_device.setdefault(spec.device, {})[spec.channel] = self._channels[spec.name]
         self._timed = tuple(c for c in self._channels.values() if c.timed)
+        self._guard = _Guard()
         compiled = []
         for spec in targets:
             sources = [self._channels[s] for s in spec.sources]
-            target = _Target(spec, sources, sources[0].bipolar)
+            target = _Target(spec, sources, sources[0].bipolar, self._guard)
             compiled.append(target)
             for s in sources:
                 if target.label not in s.targets:
@@ -1061,6 +1179,16 @@ class Mapping:
             if weaker > 0.0:
                 fap += self._shapes["expressions"][other] * (weaker / 63.0)
         return (s1 if i1 > 0 else 0, i1, s2 if i2 > 0 else 0, i2)
+
+    @property
+    def held_values(self) -> int:
+        """How many target values came out NaN and were replaced by the target's last good one."""
+        return self._guard.count
+
+    @property
+    def held_problem(self) -> str | None:
+        """What the first such value was (None while there has been none), for a one-line report."""
+        return None if self._guard.first is None else f"{self.file}: {self._guard.first}"
 
     # -- for people --------------------------------------------------------------------------
 

@@ -30,6 +30,13 @@ Recording
     at t0 in the take's metadata, so that ``puppet.replay`` rebuilds the .fap exactly.
     ``layer=`` (a ``takeclock.Layer``) records a pass over an earlier take: the face shows and
     the take gets the base take's frames with the armed FAPs replaced by the live pose.
+Faults
+    A write to the take that fails in any way ends the take, marked incomplete with the error
+    (``record_error``), and the live face goes on; a frame that fails while recording ends the
+    take the same way before the error goes on up, so a take is only ever marked complete when
+    it was stopped normally. A mapping value that comes out NaN (``Mapping.held_values``) holds
+    its last good value, in the face and the take, and is reported once (``pose_error`` and a
+    warning), not per frame.
 Muscles
     ``Pose.muscles`` is drawn with the FAPs in one frame (the runtime's control-point mode,
     ``Runtime.deform(..., muscles=)``), and a take writes it as the FAPs the muscles' motion
@@ -47,6 +54,7 @@ import heapq
 import os
 import statistics
 import time
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -136,11 +144,20 @@ class LiveSession:
         self._recorder = None
         self._clock: TakeClock | None = None
         self.record_error: str | None = None  # why the last take stopped on its own
+        self.pose_error: str | None = None    # the first mapping value held because it was NaN
 
     # -- the live loop ----------------------------------------------------------------------
 
     def frame(self, now_ns: int | None = None) -> Frame:
         """Drain, map, deform: one frame at ``now_ns`` (default: ``time.monotonic_ns()``)."""
+        try:
+            return self._frame(now_ns)
+        except BaseException as exc:
+            if self._recorder is not None:  # never leave a take that failed looking complete
+                self._end_take(f"the live loop failed: {type(exc).__name__}: {exc}")
+            raise
+
+    def _frame(self, now_ns: int | None) -> Frame:
         states = self.states
         batches = [d.drain() for d in self.devices.values()]
         now = time.monotonic_ns() if now_ns is None else int(now_ns)
@@ -176,6 +193,9 @@ class LiveSession:
             self._apply(LogEvent(now, "frame"))
 
         pose = self.mapping.pose(pose_ns)
+        if self.pose_error is None and self.mapping.held_values:
+            self.pose_error = self.mapping.held_problem
+            warnings.warn(self.pose_error, RuntimeWarning, stacklevel=2)
         if samples or pose_ns != self._last_pose_ns or not self._have_mesh or self.layer is not None:
             fap, viseme, expression = pose.fap, pose.viseme, pose.expression
             if self.layer is not None:
@@ -211,16 +231,21 @@ class LiveSession:
                 self._clock.apply(entry)
                 return
             except OSError as exc:
-                recorder, self._recorder, self._clock = self._recorder, None, None
-                self.record_error = (f"{recorder.folder}: recording stopped after {recorder.frames} frames: "
-                                     f"{exc.strerror or exc}")
-                recorder.abandon(self.record_error)
+                self._end_take(str(exc.strerror or exc))
+            except Exception as exc:  # noqa: BLE001 -- any failed write ends the take, not the face
+                self._end_take(f"{type(exc).__name__}: {exc}")
         if isinstance(entry, Sample):
             self.mapping.feed(entry)
         elif entry.kind == "reset":
             self.mapping.reset()
         elif entry.kind == "recentre":
             self.mapping.recentre(entry.data["centres"])
+
+    def _end_take(self, why: str) -> None:
+        """End the take now, marked incomplete with ``why`` (``record_error``)."""
+        recorder, self._recorder, self._clock = self._recorder, None, None
+        self.record_error = f"{recorder.folder}: recording stopped after {recorder.frames} frames: {why}"
+        recorder.abandon(self.record_error)
 
     def _layered(self, now: int, pose: Pose):
         """The layered pass as shown: the base take where the take is now (its start before)."""

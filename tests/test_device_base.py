@@ -142,3 +142,23 @@ def test_an_open_or_close_that_raises_something_odd_keeps_the_thread_alive():
 
     with Odd([{"x": 2.0}]) as device:
         assert next(device.samples(timeout=1.0)).values == {"x": 2.0}
+
+
+def test_every_device_error_derives_from_device_error_and_keeps_its_builtin_base(tmp_path):
+    from devices.can_device import BadFrame
+    from devices.hid_descriptor import DescriptorError, parse_descriptor
+    from devices.samplelog import SampleLogError, read_take_log
+
+    for cls, builtin in ((DeviceLost, OSError), (DescriptorError, ValueError), (BadFrame, ValueError),
+                         (SampleLogError, ValueError)):
+        assert issubclass(cls, DeviceError) and issubclass(cls, builtin)
+    # what the existing except clauses meant to catch, they still catch
+    with pytest.raises(ValueError):
+        parse_descriptor(b"\xc0")  # End Collection without Collection
+    log = tmp_path / "samples.jsonl"
+    log.write_text('{"t_ns": 1, "device": "box", "values": {"ch0": "loud"}}\n')
+    with pytest.raises(DeviceError, match=r"samples.jsonl:1: expected numbers"):
+        list(read_take_log(log))
+    log.write_text('{"t_ns": 1, "device": "box", "values": {"ch0": 1' + "0" * 400 + '}}\n')
+    with pytest.raises(ValueError, match=r"samples.jsonl:1: expected numbers"):
+        list(read_take_log(log))

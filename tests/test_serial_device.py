@@ -27,6 +27,7 @@ from devices.serial_port import (
     slip_encode,
 )
 from devices.simulated_serial import PtyJoystick
+from polling import wait_for
 
 FRAMED = {"cobs": (encode_cobs_frame, b"\x00"), "slip": (encode_slip_frame, b"\xc0")}
 FAST_BACKOFF = (0.01, 0.05)
@@ -154,6 +155,60 @@ def test_ascii_over_a_pty_names_channels_joins_partial_lines_and_skips_bad_ones(
     assert [s.values for s in samples] == [{"pitch": 10.0, "yaw": 20.0}, {"pitch": 5.0, "yaw": -6.0},
                                            {"pitch": 7.0, "yaw": 8.0}]
     assert device.counters.bad_frames == 3
+
+
+def test_plain_ascii_reads_noise_as_values_and_the_nmea_checksum_refuses_it():
+    good = encode_ascii_line([512, 300])
+    cut, flipped = b"51\n", b"513,300\n"                   # a line cut short, a digit flipped
+    assert make_parser("ascii").feed(good + cut + flipped) == [
+        {"ch0": 512.0, "ch1": 300.0}, {"ch0": 51.0}, {"ch0": 513.0, "ch1": 300.0}]
+    line = encode_ascii_line([512, 300], checksum="nmea")
+    assert line == b"512,300*29\r\n" and 0x29 == ord("5") ^ ord("1") ^ ord("2") ^ ord(",") ^ 0x33 ^ 0x30 ^ 0x30
+    parser = make_parser("ascii", checksum="nmea")
+    noisy = [line[:3] + b"\n", line.replace(b"512", b"513"), b"512,300\n", b"512,300*2G\n", line[:-4] + b"\n"]
+    got = parser.feed(line + b"".join(noisy) + b"$" + line + b"a=1,b=2*" + b"%02X" % (0x61 ^ 0x3D ^ 0x31 ^ 0x2C
+                                                                                     ^ 0x62 ^ 0x3D ^ 0x32) + b"\n")
+    assert got == [{"ch0": 512.0, "ch1": 300.0}] * 2 + [{"a": 1.0, "b": 2.0}]
+    assert parser.bad == parser.bad_checksums == len(noisy)
+    with pytest.raises(ValueError, match="ascii"):
+        make_parser("cobs", checksum="nmea")
+
+
+def test_every_single_bit_flip_in_a_checksummed_line_is_caught():
+    line = encode_ascii_line([512, -300, 7.25], checksum="nmea")
+    for i in range(len(line) - 2):                          # every byte but the line end
+        for bit in range(8):
+            noisy = bytearray(line)
+            noisy[i] ^= 1 << bit
+            if noisy[i] in b"\r\n":
+                continue                                     # that splits the line: two bad lines
+            parser = make_parser("ascii", checksum="nmea")
+            assert parser.feed(bytes(noisy)) == [] and parser.bad_checksums == 1, (i, bit, bytes(noisy))
+
+
+def test_checksummed_lines_end_to_end_over_a_pty_count_bad_lines():
+    device = opened("sim://joystick?protocol=ascii&checksum=nmea&rate=0&channels=2")
+    stick = device.joystick
+    try:
+        assert collect(device, 20) and device.counters.bad_frames == 0
+        stick.write(b"12,34\n" + encode_ascii_line([1, 2], checksum="nmea").replace(b"1,", b"7,"))
+        assert wait_for(lambda: device.counters.bad_checksums == 2)
+        assert collect(device, 5)                          # good lines still arrive
+    finally:
+        device.close()
+    assert device.counters.bad_frames == device.counters.bad_checksums == 2
+
+
+def test_device_options_are_checked_with_the_closest_name():
+    with pytest.raises(DeviceError, match="unknown option 'protocl'.*did you mean 'protocol'"):
+        open_device("serial:///dev/ttyACM0?protocl=ascii")
+    with pytest.raises(DeviceError, match="did you mean 'checksum'"):
+        open_device("sim://joystick?checksun=nmea")
+    with pytest.raises(DeviceError, match="unknown option 'speed'"):
+        open_device("serial:loop://?speed=1")                 # a handler URL: pyserial's options only
+    assert open_device("serial:loop://?protocol=ascii&checksum=nmea").checksum == "nmea"
+    with pytest.raises(DeviceError, match="checksum"):
+        open_device("serial:///dev/x?protocol=slip&checksum=nmea")
 
 
 # -- binary frames --------------------------------------------------------------------------

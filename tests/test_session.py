@@ -145,3 +145,55 @@ def test_a_mapping_that_names_a_missing_device_fails_before_anything_opens(share
         LiveSession(broken, face=shared_runtime, record_root=tmp_path)
     assert threading.active_count() == threads     # no device thread was started
     assert list(tmp_path.iterdir()) == [broken]     # and no take folder made
+
+
+def test_a_mapping_that_would_make_nan_is_refused_before_anything_opens(shared_runtime, tmp_path):
+    """Issue 12: one_euro min_cutoff 1e308 loaded, its NaN pose raised out of frame() at the first
+    recorded frame and the take was marked complete with 0 frames."""
+    from puppet import MappingError
+
+    huge = tmp_path / "huge.yaml"
+    huge.write_text(MAPPING.read_text().replace("min_cutoff: 1.0,", "min_cutoff: 1.0e+308,", 1))
+    with pytest.raises(MappingError, match=r'huge.yaml:\d+: channels\["box.ch0"\]\.smoothing\.min_cutoff: '
+                                           r"expected a frequency in Hz > 0 and <= 1000, got 1e\+308"):
+        LiveSession(huge, face=shared_runtime, record_root=tmp_path)
+
+
+def test_a_nan_in_the_mapping_holds_the_last_good_pose_and_is_reported_once(session):
+    _run_until(session, lambda f: f.states["box"] is State.OPEN and f.n_samples > 0)
+    state = session.mapping.snapshot()
+    jaw = state["channels"]["box.ch0"]
+    jaw["value"] = jaw["out"] = float("nan")
+    jaw["smoother"][1] = [float("nan"), 0.0]        # a corrupt state: the filter stays NaN
+    good = session.frame().pose.fap.copy()
+    session.mapping.restore(state)
+    session.start_recording()
+    with pytest.warns(RuntimeWarning) as caught:
+        for _ in range(20):
+            f = session.frame()
+            time.sleep(0.005)
+    assert len(caught) == 1 and "fap 3 open_jaw came out as NaN" in str(caught[0].message)
+    assert session.pose_error == str(caught[0].message) and session.mapping.held_values >= 20
+    assert np.isfinite(f.pose.fap).all() and f.pose.fap[2] == good[2]
+    assert np.isfinite(f.vertices).all()
+    take = open_take(session.stop_recording())
+    assert take.meta["complete"] and len(take.stream()) >= 1
+    assert np.isfinite(take.stream().values).all()
+
+
+def test_a_take_whose_write_fails_is_never_marked_complete_and_the_face_goes_on(session, monkeypatch):
+    _run_until(session, lambda f: f.states["box"] is State.OPEN and f.n_samples > 0)
+    folder = session.start_recording()
+
+    def broken(*args, **kwargs):
+        raise ValueError("FAP 3: expected a finite value, found nan")
+
+    monkeypatch.setattr(session._clock, "write", broken)   # the take's .fap writer refuses a frame
+    for _ in range(10):
+        f = session.frame()
+        time.sleep(0.01)
+    assert not session.recording and "recording stopped after 0 frames: ValueError" in session.record_error
+    assert f.n_samples >= 0 and np.isfinite(f.vertices).all()
+    session.close()
+    meta = open_take(folder).meta
+    assert meta["complete"] is False and "ValueError" in meta["error"]

@@ -75,6 +75,7 @@ def twins():
 @given(st.dictionaries(NAMES, FINITE, min_size=1, max_size=8))
 def test_ascii_carries_any_finite_float_by_name(twins, values):
     round_trip(twins("serial:///dev/ttyACM0?protocol=ascii&baudrate=9600"), values)
+    round_trip(twins("serial:///dev/ttyACM0?protocol=ascii&checksum=nmea"), values)
 
 
 @EXAMPLES
@@ -92,7 +93,7 @@ def test_f32_frames_carry_float32_values_by_channel_name(twins, floats, protocol
     round_trip(twins(f"serial:///dev/ttyACM0?protocol={protocol}&format=f32&channels=yaw,pitch,roll"), values)
 
 
-@pytest.mark.parametrize("query", ["protocol=ascii&channels=6&rate=200",
+@pytest.mark.parametrize("query", ["protocol=ascii&channels=6&rate=200", "protocol=ascii&channels=3&checksum=nmea",
                                    "protocol=cobs&format=f32&channels=a,b&style=csv",
                                    "protocol=slip&channels=2"])
 def test_sim_joystick_twins_read_through_the_simulated_device(twins, query):
