@@ -112,3 +112,20 @@ def test_defaults_follow_the_rasteriser() -> None:
             render.choose_antialias(ctx, antialias="smaa")
     finally:
         ctx.release()
+
+
+def test_a_window_framebuffer_gets_the_offscreen_image(face_and_poses, old_and_new) -> None:
+    """What the live window draws (a borrowed context, its own framebuffer) is what an
+    offscreen render of the same frame returns: the same defaults, the same passes."""
+    face, poses = face_and_poses
+    _, new = old_and_new
+    ctx = moderngl.create_context(standalone=True, backend="egl")
+    with ctx:
+        screen = ctx.simple_framebuffer(SIZE)
+        renderer = render.Renderer.for_face(face, width=SIZE[0], height=SIZE[1], ctx=ctx)
+        frame_head(renderer, face, "front")
+        renderer.draw(poses["joy"], framebuffer=screen)
+        data = screen.read(components=3, alignment=1)
+        renderer.release()
+    image = np.frombuffer(data, dtype=np.uint8).reshape(SIZE[1], SIZE[0], 3)[::-1]
+    assert np.array_equal(image, new["joy"])
