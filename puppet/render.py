@@ -180,16 +180,16 @@ const float EDGE_THRESHOLD_MIN = 1.0 / 32.0;
 const vec3 LUMA = vec3(0.299, 0.587, 0.114);
 
 uniform sampler2D scene;
-in vec2 v_uv;
 out vec4 f_color;
 
 void main() {
-    vec2 px = 1.0 / vec2(textureSize(scene, 0));
-    vec3 rgb_m = texture(scene, v_uv).rgb;
-    float nw = dot(texture(scene, v_uv + vec2(-0.5, -0.5) * px).rgb, LUMA);
-    float ne = dot(texture(scene, v_uv + vec2(0.5, -0.5) * px).rgb, LUMA);
-    float sw = dot(texture(scene, v_uv + vec2(-0.5, 0.5) * px).rgb, LUMA);
-    float se = dot(texture(scene, v_uv + vec2(0.5, 0.5) * px).rgb, LUMA);
+    ivec2 p = ivec2(gl_FragCoord.xy);
+    ivec2 last = textureSize(scene, 0) - 1;  // neighbours past the border repeat it
+    vec3 rgb_m = texelFetch(scene, p, 0).rgb;
+    float nw = dot(texelFetch(scene, clamp(p + ivec2(-1, -1), ivec2(0), last), 0).rgb, LUMA);
+    float ne = dot(texelFetch(scene, clamp(p + ivec2(1, -1), ivec2(0), last), 0).rgb, LUMA);
+    float sw = dot(texelFetch(scene, clamp(p + ivec2(-1, 1), ivec2(0), last), 0).rgb, LUMA);
+    float se = dot(texelFetch(scene, clamp(p + ivec2(1, 1), ivec2(0), last), 0).rgb, LUMA);
     float m = dot(rgb_m, LUMA);
     float luma_min = min(m, min(min(nw, ne), min(sw, se)));
     float luma_max = max(m, max(max(nw, ne), max(sw, se)));
@@ -197,13 +197,15 @@ void main() {
         f_color = vec4(rgb_m, 1.0);
         return;
     }
+    vec2 px = 1.0 / vec2(last + 1);
+    vec2 uv = gl_FragCoord.xy * px;
     vec2 dir = vec2(-((nw + ne) - (sw + se)), (nw + sw) - (ne + se));
     float reduce = max((nw + ne + sw + se) * 0.25 * REDUCE_MUL, REDUCE_MIN);
     dir = clamp(dir / (min(abs(dir.x), abs(dir.y)) + reduce), -SPAN_MAX, SPAN_MAX) * px;
-    vec3 rgb_a = 0.5 * (texture(scene, v_uv + dir * (1.0 / 3.0 - 0.5)).rgb
-                      + texture(scene, v_uv + dir * (2.0 / 3.0 - 0.5)).rgb);
-    vec3 rgb_b = 0.5 * rgb_a + 0.25 * (texture(scene, v_uv - 0.5 * dir).rgb
-                                     + texture(scene, v_uv + 0.5 * dir).rgb);
+    vec3 rgb_a = 0.5 * (texture(scene, uv + dir * (1.0 / 3.0 - 0.5)).rgb
+                      + texture(scene, uv + dir * (2.0 / 3.0 - 0.5)).rgb);
+    vec3 rgb_b = 0.5 * rgb_a + 0.25 * (texture(scene, uv - 0.5 * dir).rgb
+                                     + texture(scene, uv + 0.5 * dir).rgb);
     float luma_b = dot(rgb_b, LUMA);
     f_color = vec4((luma_b < luma_min || luma_b > luma_max) ? rgb_a : rgb_b, 1.0);
 }
@@ -521,7 +523,7 @@ class Renderer:
         with self._current():
             self._upload(vertices, normals)
             self._set_frame_uniforms()
-            self._draw_antialiased(framebuffer or self._output)
+            self._draw_antialiased(framebuffer or self._output, vertices)
 
     def render(self, vertices: np.ndarray, normals: np.ndarray | None = None) -> np.ndarray:
         """Render one frame and return it as (height, width, 3) uint8 sRGB, top row first.
@@ -594,10 +596,12 @@ class Renderer:
             self._scene = self.ctx.framebuffer(color_attachments=[self._scene_color], depth_attachment=depth)
             self._targets += [self._scene, self._scene_color, depth]
 
-    def _draw_antialiased(self, out: moderngl.Framebuffer) -> None:
+    def _draw_antialiased(self, out: moderngl.Framebuffer, vertices: np.ndarray) -> None:
         """Draw into ``out``: through the multisampled target (resolved) and the FXAA pass where
         those are on, straight into ``out`` when neither is, or when ``out`` is a screen that
-        multisamples by itself and there is no post pass."""
+        multisamples by itself and there is no post pass. The FXAA pass runs only over the
+        mesh's screen box (the background is a smooth gradient, nothing to smooth), the rest of
+        the frame copied as drawn."""
         own_samples = out is self._output or not out.samples
         first = self._scene or out
         if self._multi is not None and own_samples:
@@ -606,10 +610,30 @@ class Renderer:
         else:
             self._draw_scene(first)
         if self._scene is not None:
+            self.ctx.copy_framebuffer(out, self._scene)
             out.use()
+            out.scissor = self._screen_box(vertices)
             self.ctx.disable(moderngl.DEPTH_TEST)
             self._scene_color.use(location=0)
             self._fxaa.render(moderngl.TRIANGLES, vertices=3)
+            out.scissor = None
+
+    def _screen_box(self, vertices: np.ndarray, margin: int = 2) -> tuple[int, int, int, int]:
+        """(x, y, width, height), y up as GL counts it, of a pixel box holding the projection
+        of ``vertices``: that of their bounding box's corners (which contains it), widened by
+        ``margin``; the whole image when a corner lies behind the camera."""
+        low, high = np.min(vertices, axis=0), np.max(vertices, axis=0)
+        corners = np.array(list(itertools.product(*zip(low, high))))
+        local = (corners - self.camera.eye) @ self.camera.basis().T
+        width, height = self.size
+        if np.any(local[:, 2] >= 0):
+            return 0, 0, width, height
+        pixels = self.project(corners)
+        x0, y0 = np.floor(pixels.min(axis=0)).astype(int) - margin
+        x1, y1 = np.ceil(pixels.max(axis=0)).astype(int) + margin
+        x0, x1 = max(x0, 0), min(x1, width)
+        y0, y1 = max(height - y1, 0), min(height - y0, height)
+        return int(x0), int(y0), max(int(x1 - x0), 0), max(int(y1 - y0), 0)
 
     def _prepare(self, vertices: np.ndarray) -> None:
         """Check the vertex array's shape; frame it from the front if there is no camera yet."""
