@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
@@ -23,9 +24,14 @@ def main(argv: list[str] | None = None) -> int:
     demo.add_argument("--out", default="out", help="output folder (default: out)")
     demo.add_argument("--size", type=_size, default=(640, 480), help="video size WxH (default 640x480)")
 
-    render = commands.add_parser("render", help="render a .fap take to an MP4 video")
-    render.add_argument("take", help="the .fap file")
-    render.add_argument("-o", "--output", required=True, help="the video to write (.mp4)")
+    render = commands.add_parser("render", help="render a .fap take to an MP4 video, or many takes on Dask")
+    render.add_argument("take", nargs="+", help="the .fap file (or several, rendered in parallel)")
+    render.add_argument("-o", "--output", required=True,
+                        help="the video to write (.mp4), or for several takes a folder (DIR/): one TAKE.mp4 each")
+    render.add_argument("--scheduler", default=None,
+                        help="many takes: a running Dask scheduler (tcp://host:8786); default a local cluster")
+    render.add_argument("--workers", type=int, default=None,
+                        help="many takes: local worker processes (default: one per core)")
     render.add_argument("--size", type=_size, default=(640, 480), help="video size WxH (default 640x480)")
     render.add_argument("--view", choices=VIEWS, default="front", help="camera (default front)")
     render.add_argument("--fps", type=_positive_float, default=None, help="video fps (default: the take's)")
@@ -243,6 +249,9 @@ def _render(args: argparse.Namespace) -> int:
     from .rig import RigError
     from .takes import TakeError
 
+    if len(args.take) > 1 or args.output.endswith(("/", os.sep)) or os.path.isdir(args.output):
+        return _render_many(args)
+    args.take = args.take[0]
     try:
         face = _face(args.face)
         count = render_take(args.take, args.output, face=face, size=args.size, view=args.view, fps=args.fps,
@@ -255,6 +264,27 @@ def _render(args: argparse.Namespace) -> int:
         return 2
     print(f"{args.output}: {count} frames")
     return 0
+
+
+def _render_many(args: argparse.Namespace) -> int:
+    """``puppet render TAKE... -o DIR/``: a line per take as it finishes (video, frames, sha256, or
+    the error); exit code 2 if any take failed, the others rendered all the same."""
+    from .batch import BatchError, RenderSettings, render_batch
+
+    def report(result) -> None:
+        if result.ok:
+            print(f"{result.video}: {result.frames} frames sha256 {result.sha256}", flush=True)
+        else:
+            print(f"puppet render: {result.error}", file=sys.stderr, flush=True)
+
+    settings = RenderSettings(size=args.size, view=args.view, fps=args.fps, face=args.face)
+    try:
+        results = render_batch(args.take, args.output, settings, scheduler=args.scheduler,
+                               workers=args.workers, on_result=report)
+    except (BatchError, OSError) as exc:
+        print(f"puppet render: {exc}", file=sys.stderr)
+        return 2
+    return 0 if all(result.ok for result in results) else 2
 
 
 def _replay(args: argparse.Namespace) -> int:

@@ -76,3 +76,18 @@ def test_dask_batch_writes_the_serial_render_byte_for_byte(takes, serial, tmp_pa
 def test_two_takes_that_would_overwrite_one_video_are_refused(tmp_path) -> None:
     with pytest.raises(batch.BatchError, match="would both write"):
         batch.render_serial(["a/take.fap", "b/take.fap"], str(tmp_path), SETTINGS)
+
+
+def test_puppet_render_many_takes_into_a_folder(takes, serial, tmp_path, capsys) -> None:
+    from puppet import cli
+
+    _, expected = serial
+    out = tmp_path / "videos"
+    assert cli.main(["render", *takes, "-o", f"{out}/", "--size", "160x120", "--workers", "2"]) == 2
+    captured = capsys.readouterr()
+    assert captured.err.count("\n") == 1 and "corrupt.fap" in captured.err
+    for want in expected:
+        if want.ok:
+            video = out / Path(want.video).name
+            assert f"{video}: 8 frames sha256 {want.sha256}" in captured.out
+            assert batch.sha256_file(video) == want.sha256
