@@ -33,6 +33,11 @@ TAKE_ERRORS = (FapError, TakeError, FaceFileError, MissingFeaturePointsError, Ri
 """What a bad take, face or path raises: reported in the take's result, not raised."""
 
 
+WORKER_ENV = {"LP_NUM_THREADS": "1"}
+"""Environment of local workers: llvmpipe (a software GL) draws on one thread, since there is
+one worker per core already; a GPU's driver ignores it."""
+
+
 class BatchError(PuppetError, ValueError):
     """A batch that cannot start: two takes that would write the same video, no dask."""
 
@@ -106,7 +111,7 @@ def render_batch(takes: Iterable[str], out_dir: str, settings: RenderSettings, *
                          "pip install 'facepuppet[batch]'") from exc
     if scheduler is None:
         cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1,
-                               processes=True, dashboard_address=None)
+                               processes=True, dashboard_address=None, env=WORKER_ENV)
         client = Client(cluster)
     else:
         cluster, client = None, Client(scheduler)
