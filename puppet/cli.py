@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 import warnings
 from pathlib import Path
@@ -74,9 +75,14 @@ def _parser() -> argparse.ArgumentParser:
     demo.add_argument("--out", default="out", help="output folder (default: out)")
     demo.add_argument("--size", type=_size, default=(640, 480), help="video size WxH (default 640x480)")
 
-    render = commands.add_parser("render", help="render a .fap take to an MP4 video")
-    render.add_argument("take", help="the .fap file")
-    render.add_argument("-o", "--output", required=True, help="the video to write (.mp4)")
+    render = commands.add_parser("render", help="render a .fap take to an MP4 video, or many takes on Dask")
+    render.add_argument("take", nargs="+", help="the .fap file (or several, rendered in parallel)")
+    render.add_argument("-o", "--output", required=True,
+                        help="the video to write (.mp4), or for several takes a folder (DIR/): one TAKE.mp4 each")
+    render.add_argument("--scheduler", default=None,
+                        help="many takes: a running Dask scheduler (tcp://host:8786); default a local cluster")
+    render.add_argument("--workers", type=int, default=None,
+                        help="many takes: local worker processes (default: one per core)")
     render.add_argument("--size", type=_size, default=(640, 480), help="video size WxH (default 640x480)")
     render.add_argument("--view", choices=VIEWS, default="front", help="camera (default front)")
     render.add_argument("--fps", type=_seconds_or_rate("fps", 0.1, 1000), default=None,
@@ -317,6 +323,9 @@ def _render(args: argparse.Namespace) -> int:
 
     from .playback import render_take
 
+    if len(args.take) > 1 or args.output.endswith(("/", os.sep)) or os.path.isdir(args.output):
+        return _render_many(args)
+    args.take = args.take[0]
     face = _face(args.face)
     start = time.perf_counter()
     count = render_take(args.take, args.output, face=face, size=args.size, view=args.view, fps=args.fps,
@@ -324,6 +333,23 @@ def _render(args: argparse.Namespace) -> int:
     seconds = time.perf_counter() - start
     print(f"{args.output}: {count} frames in {seconds:.1f} s ({count / max(seconds, 1e-9):.1f} frames/s)")
     return 0
+
+
+def _render_many(args: argparse.Namespace) -> int:
+    """``puppet render TAKE... -o DIR/``: a line per take as it finishes (video, frames, sha256, or
+    the error); exit code 2 if any take failed, the others rendered all the same."""
+    from .batch import RenderSettings, render_batch
+
+    def report(result) -> None:
+        if result.ok:
+            print(f"{result.video}: {result.frames} frames sha256 {result.sha256}", flush=True)
+        else:
+            print(f"puppet render: {result.error}", file=sys.stderr, flush=True)
+
+    settings = RenderSettings(size=args.size, view=args.view, fps=args.fps, face=args.face)
+    results = render_batch(args.take, args.output, settings, scheduler=args.scheduler,
+                           workers=args.workers, on_result=report)
+    return 0 if all(result.ok for result in results) else 2
 
 
 def _replay(args: argparse.Namespace) -> int:

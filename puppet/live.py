@@ -231,7 +231,7 @@ class LiveView:
         if self.renderer is not None:
             self.renderer.release()
         face = self.session.runtime.face
-        self.renderer = Renderer.for_face(face, width=size[0], height=size[1], samples=0, ctx=self.window.ctx)
+        self.renderer = Renderer.for_face(face, width=size[0], height=size[1], ctx=self.window.ctx)
         frame_head(self.renderer, face, self.view)
         self.window.fbo.viewport = (0, 0, *size)
 

@@ -56,6 +56,8 @@ def _session(runtime: Runtime, url: str, root: str) -> LiveSession:
 
 
 def _renderer(runtime: Runtime, size: tuple[int, int]) -> Renderer:
+    """An offscreen renderer with the live window's settings (``render.choose_antialias``'s
+    default for this GL, as ``puppet live`` uses), so the latency measured is what it draws."""
     from .playback import frame_head
 
     face = runtime.face

@@ -84,15 +84,16 @@ class FapPlayback:
 
 def render_take(path: str | os.PathLike, out: str | os.PathLike, *, face: Face | None = None,
                 size: tuple[int, int] = (640, 480), view: str = "front", fps: float | None = None,
-                progress: bool = True) -> int:
+                progress: bool = True, runtime: Runtime | None = None) -> int:
     """Render a .fap take to an MP4 at the take's fps (or ``fps``); return the frame count.
+    ``runtime`` (of ``face``) saves building one when many takes are rendered in turn.
 
     The video is written beside ``out`` and renamed into place only when every frame has been
     rendered, so a bad take never leaves a broken video behind. The take, its folder and ``out``
     are checked before the first frame (an ``OutputError`` for a path that cannot be written).
     """
     out = writable(out, "video")
-    playback = FapPlayback(path, face)
+    playback = FapPlayback(path, face, runtime)
     partial = out.with_name(f".{out.stem}.partial{out.suffix}")
     try:
         with Renderer.for_face(playback.face, width=size[0], height=size[1]) as renderer:

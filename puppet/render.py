@@ -73,35 +73,35 @@ _LIGHT_COLORS = np.array(
 _SKY_COLOR = (0.11, 0.12, 0.14)
 _GROUND_COLOR = (0.05, 0.04, 0.035)
 
+# The mesh shaders are one source compiled in two variants: ``TEXTURED`` mixes a texture over the
+# vertex albedo; without it no texture is sampled and the uv + weight varying is gone. Varyings
+# are packed into vec4s (albedo + specular strength share one), so an untextured triangle sets up
+# three of them, which is most of a software rasteriser's per-triangle cost.
 _MESH_VERTEX_SHADER = """
-#version 330
 uniform mat4 view_projection;
 in vec3 in_position;
 in vec3 in_normal;
-in vec3 in_albedo;
-in float in_specular;
-in vec2 in_uv;
-in float in_texture_weight;
+in vec4 in_material;  // linear albedo, specular strength
 out vec3 v_position;
 out vec3 v_normal;
-out vec3 v_albedo;
-out float v_specular;
-out vec2 v_uv;
-out float v_texture_weight;
+out vec4 v_material;
+#ifdef TEXTURED
+in vec3 in_surface;   // uv, texture weight
+out vec3 v_surface;
+#endif
 
 void main() {
     v_position = in_position;
     v_normal = in_normal;
-    v_albedo = in_albedo;
-    v_specular = in_specular;
-    v_uv = in_uv;
-    v_texture_weight = in_texture_weight;
+    v_material = in_material;
+#ifdef TEXTURED
+    v_surface = in_surface;
+#endif
     gl_Position = view_projection * vec4(in_position, 1.0);
 }
 """
 
 _MESH_FRAGMENT_SHADER = """
-#version 330
 const int N_LIGHTS = 3;
 const float WRAP = 0.5;                           // how far light wraps past the terminator
 const vec3 SCATTER_TINT = vec3(1.0, 0.38, 0.26);  // colour of the wrapped (scattered) light
@@ -112,14 +112,14 @@ uniform vec3 light_color[N_LIGHTS];      // linear
 uniform vec3 eye;
 uniform vec3 sky_color;
 uniform vec3 ground_color;
-uniform sampler2D albedo_map;  // sRGB texture; 1x1 white when the mesh has none
 
 in vec3 v_position;
 in vec3 v_normal;
-in vec3 v_albedo;
-in float v_specular;
-in vec2 v_uv;
-in float v_texture_weight;
+in vec4 v_material;
+#ifdef TEXTURED
+uniform sampler2D albedo_map;  // sRGB
+in vec3 v_surface;
+#endif
 out vec4 f_color;
 
 // Lambert plus the extra light of wrapped diffuse, tinted: skin's reddish terminator.
@@ -153,14 +153,61 @@ void main() {
         n = -n;
     }
     vec3 v = normalize(eye - v_position);
-    vec3 albedo = mix(v_albedo, srgb_decode(texture(albedo_map, v_uv).rgb), v_texture_weight);
+    vec3 albedo = v_material.rgb;
+#ifdef TEXTURED
+    albedo = mix(albedo, srgb_decode(texture(albedo_map, v_surface.xy).rgb), v_surface.z);
+#endif
     vec3 color = albedo * mix(ground_color, sky_color, 0.5 + 0.5 * n.y);
     for (int i = 0; i < N_LIGHTS; ++i) {
         vec3 l = light_direction[i];
         vec3 diffuse = albedo * skin_diffuse(dot(n, l));
-        color += light_color[i] * (diffuse + specular(n, l, v, v_specular));
+        color += light_color[i] * (diffuse + specular(n, l, v, v_material.a));
     }
     f_color = vec4(srgb_encode(color), 1.0);
+}
+"""
+
+# FXAA-style post pass (after Lottes' FXAA 3 "console" variant): where the luma of the four
+# diagonal neighbours shows an edge, blend along the edge's direction; elsewhere, where the local
+# contrast is under a threshold, the pixel passes through unchanged, so flat shading is untouched.
+_FXAA_FRAGMENT_SHADER = """
+#version 330
+const float REDUCE_MIN = 1.0 / 128.0;
+const float REDUCE_MUL = 1.0 / 8.0;
+const float SPAN_MAX = 8.0;
+const float EDGE_THRESHOLD = 1.0 / 8.0;
+const float EDGE_THRESHOLD_MIN = 1.0 / 32.0;
+const vec3 LUMA = vec3(0.299, 0.587, 0.114);
+
+uniform sampler2D scene;
+out vec4 f_color;
+
+void main() {
+    ivec2 p = ivec2(gl_FragCoord.xy);
+    ivec2 last = textureSize(scene, 0) - 1;  // neighbours past the border repeat it
+    vec3 rgb_m = texelFetch(scene, p, 0).rgb;
+    float nw = dot(texelFetch(scene, clamp(p + ivec2(-1, -1), ivec2(0), last), 0).rgb, LUMA);
+    float ne = dot(texelFetch(scene, clamp(p + ivec2(1, -1), ivec2(0), last), 0).rgb, LUMA);
+    float sw = dot(texelFetch(scene, clamp(p + ivec2(-1, 1), ivec2(0), last), 0).rgb, LUMA);
+    float se = dot(texelFetch(scene, clamp(p + ivec2(1, 1), ivec2(0), last), 0).rgb, LUMA);
+    float m = dot(rgb_m, LUMA);
+    float luma_min = min(m, min(min(nw, ne), min(sw, se)));
+    float luma_max = max(m, max(max(nw, ne), max(sw, se)));
+    if (luma_max - luma_min < max(EDGE_THRESHOLD_MIN, luma_max * EDGE_THRESHOLD)) {
+        f_color = vec4(rgb_m, 1.0);
+        return;
+    }
+    vec2 px = 1.0 / vec2(last + 1);
+    vec2 uv = gl_FragCoord.xy * px;
+    vec2 dir = vec2(-((nw + ne) - (sw + se)), (nw + sw) - (ne + se));
+    float reduce = max((nw + ne + sw + se) * 0.25 * REDUCE_MUL, REDUCE_MIN);
+    dir = clamp(dir / (min(abs(dir.x), abs(dir.y)) + reduce), -SPAN_MAX, SPAN_MAX) * px;
+    vec3 rgb_a = 0.5 * (texture(scene, uv + dir * (1.0 / 3.0 - 0.5)).rgb
+                      + texture(scene, uv + dir * (2.0 / 3.0 - 0.5)).rgb);
+    vec3 rgb_b = 0.5 * rgb_a + 0.25 * (texture(scene, uv - 0.5 * dir).rgb
+                                     + texture(scene, uv + 0.5 * dir).rgb);
+    float luma_b = dot(rgb_b, LUMA);
+    f_color = vec4((luma_b < luma_min || luma_b > luma_max) ? rgb_a : rgb_b, 1.0);
 }
 """
 
@@ -189,6 +236,42 @@ void main() {
     f_color = vec4(color * vignette, 1.0);
 }
 """
+
+
+SOFTWARE_RASTERISERS = ("llvmpipe", "softpipe", "swrast", "swiftshader", "lavapipe")
+"""Substrings of ``GL_RENDERER`` (lower case) that name a CPU rasteriser: Mesa's llvmpipe,
+softpipe and swrast, Google's SwiftShader, Mesa's Vulkan lavapipe under Zink."""
+
+ANTIALIAS_MODES = ("fxaa", "none")
+"""Screen-space antialiasing after drawing: an FXAA-style post pass, or nothing."""
+
+
+def software_rasteriser(ctx: moderngl.Context) -> bool:
+    """Whether ``ctx`` draws on the CPU (``SOFTWARE_RASTERISERS``), where every sample costs."""
+    renderer = str(ctx.info.get("GL_RENDERER", "")).lower()
+    return any(name in renderer for name in SOFTWARE_RASTERISERS)
+
+
+def choose_antialias(
+    ctx: moderngl.Context, samples: int | None = None, antialias: str | None = None
+) -> tuple[int, str]:
+    """The (MSAA samples, post pass) a renderer on ``ctx`` uses: the one place defaults are set.
+
+    On a GPU, 4x MSAA and no post pass: the hardware resolves samples almost for free. On a
+    software rasteriser, no MSAA and the FXAA pass: llvmpipe shades and resolves every sample
+    on the CPU (4x cost 35 ms of a 52 ms frame at 640x480, and 2x as much as 4x), while the
+    post pass costs about one full-screen texture pass. Either value may be given to override
+    it; giving only ``samples`` > 1 turns the post pass off (MSAA already smooths edges).
+    """
+    if antialias is not None and antialias not in ANTIALIAS_MODES:
+        raise ValueError(f"antialias {antialias!r}: expected one of {ANTIALIAS_MODES}")
+    software = software_rasteriser(ctx)
+    if samples is None:
+        samples = 0 if software or antialias == "fxaa" else 4
+    if antialias is None:
+        antialias = "fxaa" if software and samples <= 1 else "none"
+    samples = min(int(samples), ctx.max_samples) if samples > 1 else 0
+    return samples, antialias
 
 
 class FaceLike(Protocol):
@@ -262,7 +345,8 @@ class Renderer:
         width: int = 640,
         height: int = 640,
         backend: str = "egl",
-        samples: int = 4,
+        samples: int | None = None,
+        antialias: str | None = None,
         ctx: moderngl.Context | None = None,
     ) -> None:
         """Upload topology, albedo (sRGB 0-1, per vertex) and specular strengths (0-1).
@@ -270,8 +354,8 @@ class Renderer:
         ``colors`` None paints the mesh in a skin tone; ``materials`` None gives every vertex
         ``SKIN_SPECULAR``. ``texture`` (H, W, 3) uint8 sRGB, top row first, with ``uv`` (N, 2)
         per vertex (v up, as in OBJ) and ``texture_weight`` (N,) in 0-1 (None: 1) paints the
-        texture over the vertex colours. ``samples`` > 1 antialiases with multisampling where
-        supported.
+        texture over the vertex colours. ``samples`` (MSAA, > 1 where supported) and
+        ``antialias`` (``ANTIALIAS_MODES``) default to ``choose_antialias``'s choice for the GL.
         """
         self.n_vertices = int(n_vertices)
         self.size = (int(width), int(height))
@@ -282,6 +366,7 @@ class Renderer:
         self._staging = np.empty((self.n_vertices, 6), dtype="f4")
         self.camera: Camera | None = None
         with self._current():
+            samples, self.antialias = choose_antialias(self.ctx, samples, antialias)
             self._create_texture(uv, texture, texture_weight)
             self._create_gl_objects(triangles, colors, materials, samples)
 
@@ -294,15 +379,15 @@ class Renderer:
     def _create_texture(
         self, uv: np.ndarray | None, texture: np.ndarray | None, weight: np.ndarray | None
     ) -> None:
-        """The albedo texture (mipmapped, clamped) and the per-vertex uv + weight buffer; a 1x1
-        white texture with weight 0 everywhere when there is none, so one shader serves both."""
-        surface = np.zeros((self.n_vertices, 3), dtype="f4")
+        """The albedo texture (mipmapped, clamped) and the per-vertex uv + weight buffer, when
+        there is a texture; none of either otherwise (the untextured shader samples nothing)."""
+        self._texture = self._surface = None
         if texture is None:
-            image = np.full((1, 1, 3), 255, dtype=np.uint8)
-        else:
-            image = np.ascontiguousarray(np.asarray(texture, dtype=np.uint8)[::-1, :, :3])
-            surface[:, :2] = uv
-            surface[:, 2] = 1.0 if weight is None else np.clip(weight, 0.0, 1.0)
+            return
+        surface = np.empty((self.n_vertices, 3), dtype="f4")
+        surface[:, :2] = uv
+        surface[:, 2] = 1.0 if weight is None else np.clip(weight, 0.0, 1.0)
+        image = np.ascontiguousarray(np.asarray(texture, dtype=np.uint8)[::-1, :, :3])
         self._texture = self.ctx.texture((image.shape[1], image.shape[0]), 3, image.tobytes(), alignment=1)
         self._texture.repeat_x = self._texture.repeat_y = False
         self._texture.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
@@ -317,31 +402,35 @@ class Renderer:
         samples: int,
     ) -> None:
         """Programs, static and dynamic buffers, vertex arrays, constant uniforms, targets
-        (after ``_create_texture``: the mesh's vertex array reads its uv buffer)."""
+        (after ``_create_texture``: the mesh's shader variant follows whether there is one)."""
+        header = "#version 330\n" + ("#define TEXTURED\n" if self._texture is not None else "")
         self._mesh_program = self.ctx.program(
-            vertex_shader=_MESH_VERTEX_SHADER, fragment_shader=_MESH_FRAGMENT_SHADER
+            vertex_shader=header + _MESH_VERTEX_SHADER, fragment_shader=header + _MESH_FRAGMENT_SHADER
         )
         self._background_program = self.ctx.program(
             vertex_shader=_BACKGROUND_VERTEX_SHADER, fragment_shader=_BACKGROUND_FRAGMENT_SHADER
         )
+        self._fxaa_program = self.ctx.program(
+            vertex_shader=_BACKGROUND_VERTEX_SHADER, fragment_shader=_FXAA_FRAGMENT_SHADER
+        )
         self._dynamic = self.ctx.buffer(reserve=self._staging.nbytes, dynamic=True)
         self._static = self.ctx.buffer(_material_data(self.n_vertices, colors, materials))
         self._indices = self.ctx.buffer(np.ascontiguousarray(triangles, dtype="u4"))
+        attributes = [
+            (self._dynamic, "3f 3f", "in_position", "in_normal"),
+            (self._static, "4f", "in_material"),
+        ]
+        if self._surface is not None:
+            attributes.append((self._surface, "3f", "in_surface"))
         self._mesh = self.ctx.vertex_array(
-            self._mesh_program,
-            [
-                (self._dynamic, "3f 3f", "in_position", "in_normal"),
-                (self._static, "3f 1f", "in_albedo", "in_specular"),
-                (self._surface, "2f 1f", "in_uv", "in_texture_weight"),
-            ],
-            index_buffer=self._indices,
-            index_element_size=4,
+            self._mesh_program, attributes, index_buffer=self._indices, index_element_size=4
         )
         self._background = self.ctx.vertex_array(self._background_program, [])
+        self._fxaa = self.ctx.vertex_array(self._fxaa_program, [])
         self._set_uniform("sky_color", np.array(_SKY_COLOR))
         self._set_uniform("ground_color", np.array(_GROUND_COLOR))
         self._set_uniform("light_color", _LIGHT_COLORS)
-        self._draw_target, self._read_target, self._attachments = self._make_framebuffers(samples)
+        self._make_targets(samples)
 
     def __enter__(self) -> Renderer:
         return self
@@ -352,7 +441,7 @@ class Renderer:
     @property
     def samples(self) -> int:
         """Multisample count actually in use (0: no multisampling)."""
-        return self._draw_target.samples
+        return self._multi.samples if self._multi is not None else 0
 
     def look_at(
         self,
@@ -426,12 +515,15 @@ class Renderer:
         """Draw background and mesh into ``framebuffer`` (default: the offscreen one).
 
         A window passes ``ctx.screen`` (of the renderer's size, since the camera's aspect
-        follows it) and skips the readback of ``render``. Without a
-        camera yet, the first call frames ``vertices`` from the front.
+        follows it) and skips the readback of ``render``; it gets the same antialiasing as an
+        offscreen frame (a multisampled screen is drawn into directly). Without a camera yet,
+        the first call frames ``vertices`` from the front.
         """
         self._prepare(vertices)
         with self._current():
-            self._draw(vertices, normals, framebuffer or self._draw_target)
+            self._upload(vertices, normals)
+            self._set_frame_uniforms()
+            self._draw_antialiased(framebuffer or self._output, vertices)
 
     def render(self, vertices: np.ndarray, normals: np.ndarray | None = None) -> np.ndarray:
         """Render one frame and return it as (height, width, 3) uint8 sRGB, top row first.
@@ -444,9 +536,7 @@ class Renderer:
     def read(self) -> np.ndarray:
         """The last frame drawn offscreen, as (height, width, 3) uint8 sRGB, top row first."""
         with self._current():
-            if self._read_target is not self._draw_target:
-                self.ctx.copy_framebuffer(self._read_target, self._draw_target)
-            data = self._read_target.read(components=3, alignment=1)
+            data = self._output.read(components=3, alignment=1)
         width, height = self.size
         return np.frombuffer(data, dtype=np.uint8).reshape(height, width, 3)[::-1].copy()
 
@@ -463,16 +553,17 @@ class Renderer:
                 self._texture,
                 self._surface,
                 self._background,
+                self._fxaa,
                 self._dynamic,
                 self._static,
                 self._indices,
                 self._mesh_program,
                 self._background_program,
-                self._draw_target,
-                self._read_target,
-                *self._attachments,
+                self._fxaa_program,
+                *self._targets,
             ):
-                obj.release()
+                if obj is not None:
+                    obj.release()
         if self._owns_ctx:
             self.ctx.release()
 
@@ -481,29 +572,68 @@ class Renderer:
         glcontext keeps one saved context per context and a nested exit loses the outer one."""
         return self.ctx if self._owns_ctx else contextlib.nullcontext()
 
-    def _make_framebuffers(
-        self, samples: int
-    ) -> tuple[moderngl.Framebuffer, moderngl.Framebuffer, list[moderngl.Renderbuffer]]:
-        """Offscreen draw and read targets: one plain FBO, or a multisampled one resolved
-        into a plain one. Falls back to no multisampling if the driver refuses it."""
-        plain = self._framebuffer(0)
-        samples = min(samples, self.ctx.max_samples) if samples > 1 else 0
-        if samples == 0:
-            return plain[0], plain[0], plain[1]
-        try:
-            multi = self._framebuffer(samples)
-        except moderngl.Error:
-            return plain[0], plain[0], plain[1]
-        return multi[0], plain[0], multi[1] + plain[1]
+    def _make_targets(self, samples: int) -> None:
+        """The offscreen output (plain RGBA8 + depth, what ``read`` reads); a multisampled
+        target to draw into when ``samples`` > 1 (dropped if the driver refuses it); and for the
+        FXAA pass, a scene target whose colour is a texture the pass samples."""
+        color = self.ctx.renderbuffer(self.size, components=4)
+        depth = self.ctx.depth_renderbuffer(self.size)
+        self._output = self.ctx.framebuffer(color_attachments=[color], depth_attachment=depth)
+        self._targets: list = [self._output, color, depth]
+        self._multi = self._scene = None
+        if samples > 1:
+            try:
+                color = self.ctx.renderbuffer(self.size, components=4, samples=samples)
+                depth = self.ctx.depth_renderbuffer(self.size, samples=samples)
+                self._multi = self.ctx.framebuffer(color_attachments=[color], depth_attachment=depth)
+                self._targets += [self._multi, color, depth]
+            except moderngl.Error:
+                self._multi = None
+        if self.antialias == "fxaa":
+            self._scene_color = self.ctx.texture(self.size, 4)
+            self._scene_color.repeat_x = self._scene_color.repeat_y = False
+            depth = self.ctx.depth_renderbuffer(self.size)
+            self._scene = self.ctx.framebuffer(color_attachments=[self._scene_color], depth_attachment=depth)
+            self._targets += [self._scene, self._scene_color, depth]
 
-    def _framebuffer(
-        self, samples: int
-    ) -> tuple[moderngl.Framebuffer, list[moderngl.Renderbuffer]]:
-        """An RGBA8 + depth framebuffer of the image size, and its renderbuffers."""
-        color = self.ctx.renderbuffer(self.size, components=4, samples=samples)
-        depth = self.ctx.depth_renderbuffer(self.size, samples=samples)
-        framebuffer = self.ctx.framebuffer(color_attachments=[color], depth_attachment=depth)
-        return framebuffer, [color, depth]
+    def _draw_antialiased(self, out: moderngl.Framebuffer, vertices: np.ndarray) -> None:
+        """Draw into ``out``: through the multisampled target (resolved) and the FXAA pass where
+        those are on, straight into ``out`` when neither is, or when ``out`` is a screen that
+        multisamples by itself and there is no post pass. The FXAA pass runs only over the
+        mesh's screen box (the background is a smooth gradient, nothing to smooth), the rest of
+        the frame copied as drawn."""
+        own_samples = out is self._output or not out.samples
+        first = self._scene or out
+        if self._multi is not None and own_samples:
+            self._draw_scene(self._multi)
+            self.ctx.copy_framebuffer(first, self._multi)
+        else:
+            self._draw_scene(first)
+        if self._scene is not None:
+            self.ctx.copy_framebuffer(out, self._scene)
+            out.use()
+            out.scissor = self._screen_box(vertices)
+            self.ctx.disable(moderngl.DEPTH_TEST)
+            self._scene_color.use(location=0)
+            self._fxaa.render(moderngl.TRIANGLES, vertices=3)
+            out.scissor = None
+
+    def _screen_box(self, vertices: np.ndarray, margin: int = 2) -> tuple[int, int, int, int]:
+        """(x, y, width, height), y up as GL counts it, of a pixel box holding the projection
+        of ``vertices``: that of their bounding box's corners (which contains it), widened by
+        ``margin``; the whole image when a corner lies behind the camera."""
+        low, high = np.min(vertices, axis=0), np.max(vertices, axis=0)
+        corners = np.array(list(itertools.product(*zip(low, high))))
+        local = (corners - self.camera.eye) @ self.camera.basis().T
+        width, height = self.size
+        if np.any(local[:, 2] >= 0):
+            return 0, 0, width, height
+        pixels = self.project(corners)
+        x0, y0 = np.floor(pixels.min(axis=0)).astype(int) - margin
+        x1, y1 = np.ceil(pixels.max(axis=0)).astype(int) + margin
+        x0, x1 = max(x0, 0), min(x1, width)
+        y0, y1 = max(height - y1, 0), min(height - y0, height)
+        return int(x0), int(y0), max(int(x1 - x0), 0), max(int(y1 - y0), 0)
 
     def _prepare(self, vertices: np.ndarray) -> None:
         """Check the vertex array's shape; frame it from the front if there is no camera yet."""
@@ -513,20 +643,21 @@ class Renderer:
         if self.camera is None:
             self.frame(vertices)
 
-    def _draw(
-        self, vertices: np.ndarray, normals: np.ndarray | None, target: moderngl.Framebuffer
-    ) -> None:
-        """Upload the frame's data and draw background then mesh; the context is current."""
-        self._upload(vertices, normals)
+    def _set_frame_uniforms(self) -> None:
+        """The camera's uniforms: view-projection, eye and the camera-attached lights."""
         self._set_uniform("view_projection", self._view_projection().T)
         self._set_uniform("eye", self.camera.eye)
         self._set_uniform("light_direction", _LIGHT_DIRECTIONS_CAMERA @ self.camera.basis())
+
+    def _draw_scene(self, target: moderngl.Framebuffer) -> None:
+        """Draw background then mesh into ``target``; the context is current."""
         target.use()
         target.clear(depth=1.0)
         self.ctx.disable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
         self._background.render(moderngl.TRIANGLES, vertices=3)
         self.ctx.enable(moderngl.DEPTH_TEST)
-        self._texture.use(location=0)
+        if self._texture is not None:
+            self._texture.use(location=0)
         self._mesh.render(moderngl.TRIANGLES)
 
     def _upload(self, vertices: np.ndarray, normals: np.ndarray | None) -> None:

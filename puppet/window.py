@@ -53,7 +53,7 @@ from .face import Face
 from .fapfile import FapError, FapReader, FapWarning, iter_fap
 from .faptable import N_FAPS
 from .playback import VIEWS, FapPlayback, frame_head, held_low_level
-from .render import Renderer
+from .render import Renderer, software_rasteriser
 from .runtime import Runtime
 
 BACKENDS = ("pyglet", "glfw")
@@ -345,7 +345,7 @@ def open_window(title: str, size: tuple[int, int], backends: tuple[str, ...] = B
             except Exception as error:
                 failures.append((backend, error))
                 continue
-            if samples and _software_gl(window.ctx):
+            if samples and software_rasteriser(window.ctx):
                 window.close()
                 window.destroy()
                 continue
@@ -357,11 +357,6 @@ def open_window(title: str, size: tuple[int, int], backends: tuple[str, ...] = B
     if "display" in type(error).__name__.lower():
         raise NoDisplayError(f"cannot connect to the display {display!r}") from error
     raise WindowError(f"cannot open an OpenGL 3.3 window with {backend} ({reason})") from error
-
-
-def _software_gl(ctx: Any) -> bool:
-    renderer = str(ctx.info.get("GL_RENDERER", "")).lower()
-    return any(name in renderer for name in ("llvmpipe", "softpipe", "swrast", "swiftshader"))
 
 
 class Player:
@@ -470,7 +465,7 @@ class Player:
         if self.renderer is not None:
             self.renderer.release()
         face = self.face
-        self.renderer = Renderer.for_face(face, width=size[0], height=size[1], samples=0, ctx=self.window.ctx)
+        self.renderer = Renderer.for_face(face, width=size[0], height=size[1], ctx=self.window.ctx)
         frame_head(self.renderer, face, self.view)
         self.window.fbo.viewport = (0, 0, *size)
 

@@ -46,7 +46,7 @@ BAD = [
     "render {take} -o {tmp}/x.mp4 --fps 1e-300", "render {take} -o {tmp}/x.mp4 --fps abc",
     "render {take} -o {tmp}/x.mp4 --size 99999x99999", "render {take} -o {tmp}/x.mp4 --size 1x1",
     "render {take} -o {tmp}/x.mp4 --size big", "render {take} -o /nonexistent/dir/x.mp4",
-    "render {take} -o {folder}", "render {take} -o {tmp}/x.mp4 --view top",
+    "render {take} {take} -o {tmp}/videos/", "render {take} -o {tmp}/x.mp4 --view top",
     "render {take} -o {tmp}/x.mp4 --face /nonexistent.obj", "render {take} -o {tmp}/x.mp4 --face {mesh}",
     "render {binary} -o {tmp}/x.mp4", "render /nonexistent.fap -o {tmp}/x.mp4",
     "render {listed} -o {tmp}/x.mp4", "render {tmp} -o {tmp}/x.mp4",

@@ -1,0 +1,131 @@
+"""The cheap default renderer keeps the studio look: images of the default face drawn the old
+way (one shader sampling a 1x1 white texture, 4x MSAA) and the new way (the untextured variant,
+the default antialiasing for this GL) differ by under 2/255 on average."""
+
+from __future__ import annotations
+
+import moderngl
+import numpy as np
+import pytest
+
+from puppet.face import load_face
+from puppet.playback import frame_head
+from puppet.runtime import Runtime
+
+render = pytest.importorskip("puppet.render")
+
+SIZE = (320, 240)
+POSES = {"neutral": {}, "joy": {"expression": (1, 63, 0, 0)}}
+
+
+def studio_4x(face, **size) -> render.Renderer:
+    """The renderer as it was: the textured shader on a white texel of weight 0, 4x MSAA."""
+    n = len(face.vertices)
+    white = np.full((1, 1, 3), 255, dtype=np.uint8)
+    return render.Renderer(face.triangles, n, face.colors, uv=np.zeros((n, 2)), texture=white,
+                           texture_weight=np.zeros(n), samples=4, antialias="none", **size)
+
+
+@pytest.fixture(scope="module")
+def face_and_poses():
+    face = load_face()
+    runtime = Runtime(face)
+    return face, {name: runtime.pose(**kwargs) for name, kwargs in POSES.items()}
+
+
+def _images(renderer: render.Renderer, face, poses: dict) -> dict:
+    with renderer:
+        frame_head(renderer, face, "front")
+        return {name: renderer.render(vertices) for name, vertices in poses.items()}
+
+
+@pytest.fixture(scope="module")
+def old_and_new(face_and_poses):
+    face, poses = face_and_poses
+    try:
+        old = _images(studio_4x(face, width=SIZE[0], height=SIZE[1]), face, poses)
+    except Exception as exc:  # no EGL here: the reason is the skip message
+        pytest.skip(f"headless EGL OpenGL context unavailable: {exc}")
+    new = _images(render.Renderer.for_face(face, width=SIZE[0], height=SIZE[1]), face, poses)
+    return old, new
+
+
+def smooth_pixels(image: np.ndarray, contrast: int = 6) -> np.ndarray:
+    """Mask of pixels whose 3x3 neighbourhood spans under ``contrast`` levels in every channel:
+    away from edges, where antialiasing has nothing to do and shading alone sets the colour."""
+    padded = np.pad(image.astype(int), ((1, 1), (1, 1), (0, 0)), mode="edge")
+    h, w = image.shape[:2]
+    windows = np.stack([padded[i:i + h, j:j + w] for i in range(3) for j in range(3)])
+    return np.all(windows.max(axis=0) - windows.min(axis=0) < contrast, axis=2)
+
+
+def shading_differs(old: np.ndarray, new: np.ndarray) -> float:
+    """The share of smooth pixels (``smooth_pixels`` of ``old``) that differ by over 2 levels."""
+    smooth = smooth_pixels(old)
+    return float((np.abs(old.astype(int) - new.astype(int)).max(axis=2)[smooth] > 2).mean())
+
+
+@pytest.mark.parametrize("pose", list(POSES))
+def test_default_renderer_keeps_the_studio_look(old_and_new, pose: str) -> None:
+    old, new = old_and_new
+    diff = np.abs(old[pose].astype(int) - new[pose].astype(int))
+    assert diff.mean() < 2.0, diff.mean()  # antialiasing differs on edges, a few % of pixels
+    assert shading_differs(old[pose], new[pose]) < 0.001  # the shading itself is the same
+
+
+def test_a_misdrawn_face_fails_the_bound(old_and_new, face_and_poses) -> None:
+    """The check can fail: the studio shader without its specular sheen changes the shading."""
+    old, _ = old_and_new
+    face, poses = face_and_poses
+    dull = render.Renderer(face.triangles, len(face.vertices), face.colors, materials=np.zeros(len(face.vertices)),
+                           width=SIZE[0], height=SIZE[1])
+    image = _images(dull, face, poses)["neutral"]
+    assert shading_differs(old["neutral"], image) > 0.01
+
+
+def test_fxaa_smooths_a_hard_edge_and_leaves_flat_areas_alone(face_and_poses) -> None:
+    face, poses = face_and_poses
+    plain = _images(render.Renderer.for_face(face, width=SIZE[0], height=SIZE[1], samples=0,
+                                             antialias="none"), face, poses)["neutral"]
+    fxaa = _images(render.Renderer.for_face(face, width=SIZE[0], height=SIZE[1], samples=0,
+                                            antialias="fxaa"), face, poses)["neutral"]
+    changed = np.any(plain != fxaa, axis=2)
+    assert 0 < changed.mean() < 0.1  # some edge pixels, a small part of the image
+    corner = (slice(0, 20), slice(0, 20))  # the smooth background gradient
+    assert np.array_equal(plain[corner], fxaa[corner])
+
+
+def test_defaults_follow_the_rasteriser() -> None:
+    try:
+        ctx = moderngl.create_context(standalone=True, backend="egl")
+    except Exception as exc:
+        pytest.skip(f"headless EGL OpenGL context unavailable: {exc}")
+    try:
+        samples, antialias = render.choose_antialias(ctx)
+        if render.software_rasteriser(ctx):
+            assert (samples, antialias) == (0, "fxaa")
+        else:
+            assert samples > 1 and antialias == "none"
+        assert render.choose_antialias(ctx, samples=0, antialias="none") == (0, "none")
+        assert render.choose_antialias(ctx, antialias="fxaa")[0] == 0
+        with pytest.raises(ValueError, match="antialias 'smaa'"):
+            render.choose_antialias(ctx, antialias="smaa")
+    finally:
+        ctx.release()
+
+
+def test_a_window_framebuffer_gets_the_offscreen_image(face_and_poses, old_and_new) -> None:
+    """What the live window draws (a borrowed context, its own framebuffer) is what an
+    offscreen render of the same frame returns: the same defaults, the same passes."""
+    face, poses = face_and_poses
+    _, new = old_and_new
+    ctx = moderngl.create_context(standalone=True, backend="egl")
+    with ctx:
+        screen = ctx.simple_framebuffer(SIZE)
+        renderer = render.Renderer.for_face(face, width=SIZE[0], height=SIZE[1], ctx=ctx)
+        frame_head(renderer, face, "front")
+        renderer.draw(poses["joy"], framebuffer=screen)
+        data = screen.read(components=3, alignment=1)
+        renderer.release()
+    image = np.frombuffer(data, dtype=np.uint8).reshape(SIZE[1], SIZE[0], 3)[::-1]
+    assert np.array_equal(image, new["joy"])
