@@ -119,8 +119,8 @@ def calibrate(face, examples: Mapping[str, np.ndarray], *, held_out: tuple[str, 
               rig: Rig | None = None, iterations: int = 4, ridge: float = RIDGE,
               mirror: bool = True, limit_folds: bool = False) -> Calibration:
     """Calibrate ``rig`` (default: a new rig of ``face``) from ``examples`` {name: (N, 3)
-    displacement}, leaving out ``held_out`` (``HELD_OUT`` to measure; the shipped calibration
-    uses every example); see the module docstring. ``limit_folds`` also stores each FAP's
+    displacement}, leaving out ``held_out`` (``HELD_OUT_SIDE`` or ``HELD_OUT`` to measure; the
+    shipped calibration uses every example); ``mirror`` ties the two sides (module docstring). ``limit_folds`` also stores each FAP's
     ``fold_free_reach`` in the rig, so that the runtime limits it there (off by default: limits
     found one FAP at a time also cap the FAPs that move together, and halve a smile)."""
     rig = copy.deepcopy(rig) if rig is not None else build_rig(face, calibrated=False)

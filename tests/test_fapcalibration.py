@@ -180,11 +180,14 @@ def test_the_shipped_calibration_moves_the_right_side_as_the_left_mirrored(face,
     skin = face.parts["skin"]
     twin = cKDTree(face.vertices).query(face.vertices * flip)[1]
     rest = runtime.pose({})
-    for left, value in (("raise_l_cornerlip_o", 100), ("raise_l_o_eyebrow", 80), ("lift_l_cheek", 200)):
+    # the grid around the mouth has a few points off the mirror (the uncalibrated rig: 0.15 apart
+    # there; the rig calibrated without the tie: 0.19 at the lip corner, 0.005 at the brow)
+    for left, value, apart in (("raise_l_cornerlip_o", 100, 0.08), ("raise_l_o_eyebrow", 80, 1e-3),
+                               ("lift_l_cheek", 200, 1e-3)):
         moved_left = runtime.pose({left: value}) - rest
         moved_right = runtime.pose({mirror_fap(left): value}) - rest
         mirrored = (moved_left * flip)[twin]
-        assert np.linalg.norm(mirrored[skin] - moved_right[skin]) < 0.05 * np.linalg.norm(moved_right[skin]), left
+        assert np.linalg.norm(mirrored[skin] - moved_right[skin]) < apart * np.linalg.norm(moved_right[skin]), left
 
 
 @needs_examples
