@@ -3,6 +3,11 @@ calibrated from the ARKit example shapes (puppet.fapcalibration), and puppet/dat
 the FAP vector that best reproduces each example on the calibrated rig (the ARKit mappings' rows,
 tools/build_arkit_mappings.py).
 
+The shipped calibration learns from every example (all 52, both sides, with the mirror tie):
+the held-out figures come from the separate calibrations tools/realism.py makes without the
+right side or without whole groups, and a rig a user animates should know every shape an artist
+made. The tie makes its motions symmetric whichever side a shape shows.
+
 Run after tools/build_default_face.py (the rig indexes the face's vertices), with ../shared beside
 the repository:
     python tools/build_default_rig.py
