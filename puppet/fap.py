@@ -21,6 +21,11 @@ file; index 0 = FAP 1) into the runtime's inputs: control point displacements an
   it whole (44 and 46 both raise it).
 * Reach (the rig's ``fap_reach``): a FAP beyond the values this face can show without a fold is
   limited to them here, after the high-level FAPs are expanded; what a file says is never changed.
+  Then follow (the rig's ``fap_follow``): of two FAPs whose feature points lie a hair's breadth
+  apart (inner and outer lip corner), the one with the larger value leads and the other follows
+  just enough that the inner corner never slides through the outer one. ``shown(values)`` gives
+  the values the face then shows, which is what ``encode`` measures back; within reach and
+  follow they are the values themselves (``puppet.foldlimits`` finds both, README "Realism").
 * High-level FAPs 1 and 2 expand into low-level FAPs from ``data/high_level_faps.yaml`` (blends as
   the standard says) and add to the frame's low-level values.
 
@@ -74,6 +79,7 @@ class FapEngine:
         self.reach[0] = -np.inf
         for number, (low, high) in self.rig.fap_reach.items():
             self.reach[:, number - 1] = low, high
+        self.follow = [(a - 1, b - 1, low, high) for (a, b), (low, high) in sorted(self.rig.fap_follow.items())]
 
     # -- decoding ------------------------------------------------------------------------
 
@@ -149,10 +155,24 @@ class FapEngine:
             out += self._high["expressions"][int(s1)] * (i1 / 63) + self._high["expressions"][int(s2)] * (i2 / 63)
         return out
 
-    def controls(self, values: np.ndarray) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-        """Control point displacements (K, 3) and rigid motions for 68 low-level FAP values,
-        each within the face's reach."""
+    def shown(self, values: np.ndarray) -> np.ndarray:
+        """The 68 low-level values this face shows for ``values``: each within its reach, then each
+        follow pair within its range, the FAP with the larger value leading (module docstring)."""
         v = np.clip(np.asarray(values, dtype=float), self.reach[0], self.reach[1])
+        for a, b, low, high in self.follow:
+            gap = v[a] - v[b]
+            if gap > high or gap < low:
+                limit = high if gap > high else low
+                if abs(v[a]) >= abs(v[b]):
+                    v[b] = v[a] - limit
+                else:
+                    v[a] = v[b] + limit
+        return v
+
+    def controls(self, values: np.ndarray) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """Control point displacements (K, 3) and rigid motions for 68 low-level FAP values, as
+        the face shows them (``shown``: within reach, follow pairs in range)."""
+        v = self.shown(values)
         d = (self._translations @ v).reshape(-1, 3)
         motions = {"jaw": self._jaw(v), "head": self._head(v)}
         for part, (yaw, pitch, thrust) in EYE_FAPS.items():
