@@ -124,7 +124,17 @@ def build_rig(face, *, grid: bool = True, calibrated: bool = True) -> Rig:
     rig.face_hash = face.content_hash    # the mesh it was made for: a saved rig is only reused on it
     if grid and calibrated:
         rig.fap_motions = _default_motions(face, rig)
+        rig.fap_follow = _default_follow()
     return rig
+
+
+def _default_follow() -> dict[tuple[int, int], tuple[float, float]]:
+    """The shipped default rig's lip corner follow ranges (``puppet.foldlimits``), in FAPU: the
+    inner and outer corner lie a hair's breadth apart on every face."""
+    from .face import load_default_rig
+
+    default = load_default_rig(generate=False)
+    return dict(default.fap_follow) if default is not None else {}
 
 
 def _default_motions(face, rig: Rig) -> dict[int, dict[str, np.ndarray]]:

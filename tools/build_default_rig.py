@@ -13,6 +13,7 @@ the repository:
 from __future__ import annotations
 
 import argparse
+import copy
 import json
 from pathlib import Path
 
@@ -22,7 +23,7 @@ from puppet.autorig import build_rig
 from puppet.examples import load_examples
 from puppet.face import load_face
 from puppet.fapcalibration import calibrate, fit_faps, relative_residual
-from puppet.foldlimits import fold_safe
+from puppet.foldlimits import fold_safe, widened
 from puppet.faptable import fap
 from puppet.rig import save_rig
 from puppet.runtime import Runtime
@@ -46,9 +47,13 @@ def main(argv: list[str] | None = None) -> int:
     examples = load_examples(face, args.examples)
     result = calibrate(face, examples, rig=rig)
     safe = fold_safe(Runtime(face, result.rig))  # fold limits at pose time (puppet.foldlimits)
+    unlimited = copy.copy(safe)
+    unlimited.fap_reach = {}
+    unlimited_runtime = Runtime(face, unlimited, dtype=np.float64)
+    weights = {name: fit_faps(unlimited_runtime, examples[name]) for name in result.weights}
+    safe.fap_reach = widened(safe.fap_reach, weights.values())  # the artist's shapes keep what they need
     save_rig(safe, args.out)
     runtime = Runtime(face, safe, dtype=np.float64)
-    weights = {name: fit_faps(runtime, examples[name]) for name in result.weights}  # within the reach
     vectors = {name: {fap(i + 1).name: round(float(v)) for i, v in enumerate(values) if round(float(v))}
                for name, values in sorted(weights.items())}
     residuals = {name: round(relative_residual(runtime, values, examples[name]), 3)
