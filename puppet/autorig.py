@@ -23,7 +23,9 @@ Regions (Zhang & Chen's functional regions), decided per skin vertex, first rule
   line like the mouth bag.
 * Parts: eyeballs rigid about their centres, lower teeth rigid with the jaw, the tongue rigid
   on the jaw (its own motion in the jaw's frame), upper teeth still. The four lids are rigid parts too, but of control points only: their margin points
-  turn about the eyeball centre and the lid skin follows by DFFD (the paper's hybrid eyelids).
+  turn about the eyeball centre and the lid skin follows by DFFD (the paper's hybrid eyelids);
+  toward the still eye corners a margin point turns less (``_lid_share``), so a closing or
+  opening lid does not fold the skin at the corners.
 
 Control points per region: the feature points the FAPs move (active, direct: on their vertex),
 extra lid-margin points (the hybrid eyelids turn them about the eyeball centre), lip lines (the
@@ -122,7 +124,17 @@ def build_rig(face, *, grid: bool = True, calibrated: bool = True) -> Rig:
     rig.face_hash = face.content_hash    # the mesh it was made for: a saved rig is only reused on it
     if grid and calibrated:
         rig.fap_motions = _default_motions(face, rig)
+        rig.fap_follow = _default_follow()
     return rig
+
+
+def _default_follow() -> dict[tuple[int, int], tuple[float, float]]:
+    """The shipped default rig's lip corner follow ranges (``puppet.foldlimits``), in FAPU: the
+    inner and outer corner lie a hair's breadth apart on every face."""
+    from .face import load_default_rig
+
+    default = load_default_rig(generate=False)
+    return dict(default.fap_follow) if default is not None else {}
 
 
 def _default_motions(face, rig: Rig) -> dict[int, dict[str, np.ndarray]]:
@@ -415,7 +427,10 @@ class _Builder:
 
     def _lid_margins(self) -> None:
         """Every vertex of each lid margin (the lid-opening loop between the eye corners) rides on
-        its lid, so a closing lid keeps a smooth edge."""
+        its lid, so a closing lid keeps a smooth edge. Toward the eye corners, which stay put, a
+        margin point goes less far with its lid (``_lid_share``): a margin vertex a hair's breadth
+        from a still corner, turned the whole way, folds the skin between them (an upper lid
+        folded there at 149 IRISD, a lower lid at 100, and every smile's raised lower lids)."""
         for side, loop_name, corners in (("l", "left_lid_opening", ("3.7", "3.11")),
                                          ("r", "right_lid_opening", ("3.12", "3.8"))):
             loop = list(np.asarray(self.face.contours[loop_name]))
@@ -423,10 +438,11 @@ class _Builder:
             for lid, centre in (("upper", self.fv["3.1" if side == "l" else "3.2"]),
                                 ("lower", self.fv["3.3" if side == "l" else "3.4"])):
                 path = _loop_path_via(loop, a, b, centre)
-                for vertex in path[1:-1]:
+                for vertex, share in zip(path[1:-1], _lid_share(self.v[path])[1:-1]):
                     if vertex != centre:
                         self._add("forehead", f"{lid}_lid_{side}_{vertex}", "active", vertex=int(vertex),
-                                  group=f"{lid}_lid_{side}", attach=f"{lid}_lid_{side}")
+                                  group=f"{lid}_lid_{side}", attach=f"{lid}_lid_{side}",
+                                  attach_weight=float(share))
 
     def _nose(self) -> None:
         for f in NOSE_ACTIVE:
@@ -539,6 +555,17 @@ def _loop_path_via(loop: list[int], i: int, j: int, via: int) -> list[int]:
     n = len(loop)
     forward = [loop[(i + k) % n] for k in range((j - i) % n + 1)]
     return forward if via in forward else [loop[(i - k) % n] for k in range((i - j) % n + 1)]
+
+
+LID_TAPER = 0.25  # the share of a lid margin, from each eye corner, over which its points ease in
+
+
+def _lid_share(path: np.ndarray) -> np.ndarray:
+    """How far each point of a lid margin path (corner to corner, positions) turns with its lid:
+    0 at the still corners, rising linearly over ``LID_TAPER`` of the margin's length, then 1."""
+    length = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=1))])
+    t = length / length[-1]
+    return np.minimum(1.0, np.minimum(t, 1 - t) / LID_TAPER)
 
 
 def _loop_path(loop: list[int], i: int, j: int) -> list[int]:

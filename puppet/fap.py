@@ -19,7 +19,7 @@ file; index 0 = FAP 1) into the runtime's inputs: control point displacements an
 * Head: pitch (48), yaw (49), roll (50) about 7.1, as yaw * pitch * roll.
 * Tongue (43-46): the default face's tongue is rigid on the jaw, so tip and body FAPs translate
   it whole (44 and 46 both raise it).
-* Limits at pose time (``FapEngine.limit``), after the high-level FAPs are expanded; what a file
+* Limits at pose time (``FapEngine.shown``), after the high-level FAPs are expanded; what a file
   says is never changed (the reader returns any finite value as written):
 
   - what no face can follow: a translation beyond ``TRANSLATION_LIMIT`` FAPU (twice its unit's
@@ -29,7 +29,13 @@ file; index 0 = FAP 1) into the runtime's inputs: control point displacements an
   - the lids' solver reach likewise, and lids crossing: an upper lid's drop plus its lower lid's
     rise is at most 1024 IRISD (IRISD0 is the rest opening / 1024: the margins meet there); past
     that, the closing parts are scaled back in proportion;
-  - the rig's ``fap_reach``: the values this face shows without a fold, where a rig carries them.
+  - the rig's ``fap_reach``: the values this face shows without a fold, where a rig carries them;
+  - then the rig's ``fap_follow``: of two FAPs whose feature points lie a hair's breadth apart
+    (inner and outer lip corner), the one with the larger value leads and the other follows just
+    enough that the inner corner never slides through the outer one.
+
+  ``shown(values)`` gives the values the face then shows, which is what ``encode`` measures back;
+  within these limits they are the values themselves (``puppet.foldlimits`` finds reach and follow).
 
   ``limit_fields`` does the same for FAP 1 / 2 fields read from a file: a select that names no
   viseme or expression shows none (0), blends and intensities are held to 0-63.
@@ -89,6 +95,7 @@ class FapEngine:
         for number, (low, high) in self.rig.fap_reach.items():
             self.reach[0, number - 1] = max(self.reach[0, number - 1], low)
             self.reach[1, number - 1] = min(self.reach[1, number - 1], high)
+        self.follow = [(a - 1, b - 1, low, high) for (a, b), (low, high) in sorted(self.rig.fap_follow.items())]
 
     def _face_limits(self) -> np.ndarray:
         """(2, 68) low / high: what this face can follow at all (see the module docstring)."""
@@ -105,14 +112,23 @@ class FapEngine:
                 reach[:, number - 1] = max(low, -TRANSLATION_LIMIT), min(high, TRANSLATION_LIMIT)
         return reach
 
-    def limit(self, values: np.ndarray) -> np.ndarray:
-        """68 low-level FAP values held to what this face can follow (a new array)."""
+    def shown(self, values: np.ndarray) -> np.ndarray:
+        """The 68 low-level values this face shows for ``values`` (a new array): each within its
+        reach, lids not crossing, then each follow pair within its range (module docstring)."""
         v = np.clip(np.asarray(values, dtype=float), self.reach[0], self.reach[1])
         for upper, lower in ((19, 21), (20, 22)):
             excess = v[upper - 1] + v[lower - 1] - LIDS_MEET
             if excess > 0:
                 closing = np.maximum(v[[upper - 1, lower - 1]], 0.0)
                 v[[upper - 1, lower - 1]] -= excess * closing / closing.sum()
+        for a, b, low, high in self.follow:
+            gap = v[a] - v[b]
+            if gap > high or gap < low:
+                limit = high if gap > high else low
+                if abs(v[a]) >= abs(v[b]):
+                    v[b] = v[a] - limit
+                else:
+                    v[a] = v[b] + limit
         return v
 
     # -- decoding ------------------------------------------------------------------------
@@ -190,9 +206,9 @@ class FapEngine:
         return out
 
     def controls(self, values: np.ndarray) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-        """Control point displacements (K, 3) and rigid motions for 68 low-level FAP values,
-        each within the face's reach."""
-        v = self.limit(values)
+        """Control point displacements (K, 3) and rigid motions for 68 low-level FAP values, as
+        the face shows them (``shown``)."""
+        v = self.shown(values)
         d = (self._translations @ v).reshape(-1, 3)
         motions = {"jaw": self._jaw(v), "head": self._head(v)}
         for part, (yaw, pitch, thrust) in EYE_FAPS.items():

@@ -148,7 +148,7 @@ class Runtime:
     def _load_or_compute(self, cache: bool) -> dict[str, RegionDeformer]:
         """Each region's deformer from the coefficient cache, or computed (and then cached)."""
         geometry = rig_to_dict(self.rig)
-        for key in ("muscles", "fap_motions", "fap_reach"):  # they change no Sibson coordinate: editing them keeps the cache
+        for key in ("muscles", "fap_motions", "fap_reach", "fap_follow"):  # they change no Sibson coordinate: editing them keeps the cache
             del geometry[key]
         key = coefcache.cache_key(self.face.content_hash, geometry)
         cached = (coefcache.load(key) if cache else None) or {}

@@ -296,7 +296,7 @@ class HeldTable:
         row, column = divmod(self._count, self.CHUNK)
         if row == len(self._chunks):
             self._chunks.append(np.empty((self.CHUNK, N_FAPS), dtype=np.float32))
-        self._chunks[row][column] = self.runtime.faps.limit(values)  # float32 holds what a face shows
+        self._chunks[row][column] = self.runtime.faps.shown(values)  # float32 holds what a face shows
         self._count += 1
         return True
 
