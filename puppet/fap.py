@@ -23,13 +23,16 @@ file; index 0 = FAP 1) into the runtime's inputs: control point displacements an
   says is never changed (the reader returns any finite value as written):
 
   - what no face can follow: a translation beyond ``TRANSLATION_LIMIT`` FAPU (twice its unit's
-    reference distance, past every Greta editor range), a turn beyond half a turn (``HALF_TURN``);
+    reference distance, past every Greta editor range), a turn beyond half a turn (``HALF_TURN``),
+    an eyeball turned beyond ``EYE_TURN`` (50 degrees, about a human eye's range) from ahead;
   - the jaw solver's reach: open_jaw beyond the drop at which 2.1 is lowest (highest) on its arc
     about the hinge (on the default face about 46 degrees open);
   - the lids' solver reach likewise, and lids crossing: an upper lid's drop plus its lower lid's
     rise is at most 1024 IRISD (IRISD0 is the rest opening / 1024: the margins meet there); past
     that, the closing parts are scaled back in proportion;
-  - the rig's ``fap_reach``: the values this face shows without a fold, where a rig carries them;
+  - the rig's ``fap_reach``: the values this face shows without a fold, where a rig carries them.
+    For the gaze FAPs (23-26) it caps only the lid skin they carry (``skin_reach``): the eyeball
+    itself turns as far as asked, as eyes do past the point where the lids stop following;
   - then the rig's ``fap_follow``: of two FAPs whose feature points lie a hair's breadth apart
     (inner and outer lip corner), the one with the larger value leads and the other follows just
     enough that the inner corner never slides through the outer one.
@@ -68,6 +71,7 @@ JAW_FAPS = (3, 14, 15)
 LID_FAPS = {19: ("upper_lid_l", "3.1", 1), 20: ("upper_lid_r", "3.2", 1),  # +: the point drops
             21: ("lower_lid_l", "3.3", -1), 22: ("lower_lid_r", "3.4", -1)}  # +: the point rises
 EYE_FAPS = {"eye_l": (23, 25, 27), "eye_r": (24, 26, 28)}
+GAZE_FAPS = (23, 24, 25, 26)
 HEAD_FAPS = (48, 49, 50)
 TONGUE_FAPS = (43, 44, 45, 46)
 NOT_ON_ANY_FACE = {29: "the pupil is painted on the eyeball", 30: "the pupil is painted on the eyeball",
@@ -75,6 +79,7 @@ NOT_ON_ANY_FACE = {29: "the pupil is painted on the eyeball", 30: "the pupil is 
 X, Y, Z = np.eye(3)
 TRANSLATION_LIMIT = 2048.0
 HALF_TURN = math.pi / 1e-5
+EYE_TURN = math.radians(50) / 1e-5
 LIDS_MEET = 1024.0
 
 
@@ -92,15 +97,18 @@ class FapEngine:
         self._translations = self._own + self._calibrated_matrix()
         self._high = high_level_faps()
         self.reach = self._face_limits()
+        self.skin_reach = np.stack([np.full(N_FAPS, -np.inf), np.full(N_FAPS, np.inf)])
         for number, (low, high) in self.rig.fap_reach.items():
-            self.reach[0, number - 1] = max(self.reach[0, number - 1], low)
-            self.reach[1, number - 1] = min(self.reach[1, number - 1], high)
+            limits = self.skin_reach if number in GAZE_FAPS else self.reach
+            limits[0, number - 1] = max(limits[0, number - 1], low)
+            limits[1, number - 1] = min(limits[1, number - 1], high)
         self.follow = [(a - 1, b - 1, low, high) for (a, b), (low, high) in sorted(self.rig.fap_follow.items())]
 
     def _face_limits(self) -> np.ndarray:
         """(2, 68) low / high: what this face can follow at all (see the module docstring)."""
         turns = np.array([f.unit == "AU" for f in faps()])
         limit = np.where(turns, HALF_TURN, TRANSLATION_LIMIT)
+        limit[[n - 1 for n in GAZE_FAPS]] = EYE_TURN
         reach = np.stack([-limit, limit])
         parts = self.rig.rigid_parts
         solved = [(3, "jaw", "2.1", 1, "MNS0")]
@@ -209,7 +217,7 @@ class FapEngine:
         """Control point displacements (K, 3) and rigid motions for 68 low-level FAP values, as
         the face shows them (``shown``)."""
         v = self.shown(values)
-        d = (self._translations @ v).reshape(-1, 3)
+        d = (self._translations @ np.clip(v, self.skin_reach[0], self.skin_reach[1])).reshape(-1, 3)
         motions = {"jaw": self._jaw(v), "head": self._head(v)}
         for part, (yaw, pitch, thrust) in EYE_FAPS.items():
             motions[part] = self._eye(part, v[yaw - 1], v[pitch - 1], v[thrust - 1])

@@ -131,7 +131,7 @@ FREQUENCY_LIMIT = 1e3   # Hz: One Euro cutoffs; beta likewise in 1 / (units per 
 TAU_LIMIT = 3600.0      # seconds
 RATE_LIMIT = 1e6        # shaped units per second
 GAMMA_LIMIT = 100.0
-ALIAS_BUDGET = 10_000   # values a document may hold once its YAML aliases are expanded
+ALIAS_BUDGET = 10_000   # values a document's YAML aliases may add once expanded
 """Every number a mapping holds has a sane range (the schema says the same), so that no mapping
 that loads can make a NaN or an infinity anywhere in the shaping: a cutoff of 1e308 Hz, a range
 of +-1e308 or a min and max 1e-320 apart are refused with the file, line and key path."""
@@ -183,8 +183,8 @@ def load_mapping(path: str | os.PathLike) -> Mapping:
 def parse_mapping(text: str, file: str = "<mapping>") -> Mapping:
     """A mapping from YAML text (``file`` names it in errors)."""
     try:
-        lines, duplicates, size = _lines(text)
-        data = yaml.safe_load(text) if size <= ALIAS_BUDGET else None
+        lines, duplicates, added = _lines(text)
+        data = yaml.safe_load(text) if added <= ALIAS_BUDGET else None
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None) or getattr(exc, "context_mark", None)
         what = " ".join(filter(None, (getattr(exc, "context", None), getattr(exc, "problem", None)))) or str(exc)
@@ -198,27 +198,26 @@ def parse_mapping(text: str, file: str = "<mapping>") -> Mapping:
     except ValueError as exc:  # a number PyYAML cannot build (an integer of over 4300 digits)
         raise MappingError(file, [Problem("", None, f"expected numbers of sane size, found one that is "
                                                     f"not ({_clip(str(exc), 60)})")]) from None
-    if size > ALIAS_BUDGET:
-        raise MappingError(file, [Problem("", None, f"expected at most {ALIAS_BUDGET:,} values with the YAML "
-                                                    f"aliases expanded, found more (aliases nested in aliases)")])
+    if added > ALIAS_BUDGET:
+        raise MappingError(file, [Problem("", None, f"expected YAML aliases to add at most {ALIAS_BUDGET:,} "
+                                                    f"values when expanded, found more (aliases nested in aliases)")])
     return Mapping.from_data(data, file, lines=lines, duplicates=duplicates)
 
 
 def _lines(text: str) -> tuple[dict[tuple, int], list[Problem], int]:
     """Line of every key path (from the composed YAML nodes), the keys written twice, and how
-    many values the document holds with its aliases expanded (counted, never expanded)."""
+    many values the document's aliases add when expanded (counted, never expanded)."""
     root = yaml.compose(text, Loader=yaml.SafeLoader)
     lines: dict[tuple, int] = {}
     duplicates: list[Problem] = []
     seen: set[int] = set()
     sizes: dict[int, int] = {}
+    budget = ALIAS_BUDGET + 1
 
     def expanded(node) -> int:
         if id(node) not in sizes:
             sizes[id(node)] = 0  # a node inside itself (a recursive alias) counts once
-            children = [n for pair in node.value for n in pair] if isinstance(node, yaml.MappingNode) \
-                else node.value if isinstance(node, yaml.SequenceNode) else []
-            sizes[id(node)] = min(1 + sum(expanded(c) for c in children), ALIAS_BUDGET + 1)
+            sizes[id(node)] = min(1 + sum(expanded(c) for c in _children(node)), budget)
         return sizes[id(node)]
 
     def walk(node, path: tuple, line: int) -> None:
@@ -244,10 +243,30 @@ def _lines(text: str) -> tuple[dict[tuple, int], list[Problem], int]:
 
     if root is None:
         return lines, duplicates, 0
-    size = expanded(root)
-    if size <= ALIAS_BUDGET:
+    distinct = _distinct_nodes(root)
+    budget += distinct
+    added = expanded(root) - distinct
+    if added <= ALIAS_BUDGET:
         walk(root, (), root.start_mark.line + 1)
-    return lines, duplicates, size
+    return lines, duplicates, added
+
+
+def _distinct_nodes(root) -> int:
+    """How many nodes a composed YAML document holds, each alias's target once."""
+    seen, stack = {id(root)}, [root]
+    while stack:
+        for child in _children(stack.pop()):
+            if id(child) not in seen:
+                seen.add(id(child))
+                stack.append(child)
+    return len(seen)
+
+
+def _children(node) -> list:
+    """A composed YAML node's keys and values, or items; none for a scalar."""
+    if isinstance(node, yaml.MappingNode):
+        return [n for pair in node.value for n in pair]
+    return node.value if isinstance(node, yaml.SequenceNode) else []
 
 
 def _format_path(path: tuple) -> str:

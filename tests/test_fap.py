@@ -85,6 +85,30 @@ def test_eyeballs_turn_left_and_down_for_positive_values(runtime, face):
         assert np.arctan2(-down[1], down[2]) == pytest.approx(20000 * au, rel=1e-9)
 
 
+def test_the_eyes_turn_past_where_the_lids_stop_following_and_stop_at_50_degrees(runtime, face):
+    """A gaze FAP's reach caps the lid skin it carries (``skin_reach``), not the eyeball: looking
+    further down turns the eye on and folds nothing more; past 50 degrees the eye stops."""
+    from puppet.muscles import folded_triangles
+
+    au, pitch = face.fapu["AU"], 25
+    lids_stop = runtime.faps.skin_reach[1, pitch - 1]
+    assert 0 < lids_stop * au < np.radians(40)
+    p, centre = face.feature_vertices["3.5"], face.pivots["eye_l"]
+
+    def down(value):
+        moved = runtime.pose({pitch: value})
+        folds = folded_triangles(face.vertices, moved, np.asarray(face.triangles)).sum()
+        offset = moved[p] - centre
+        return np.arctan2(-offset[1], offset[2]), folds
+
+    at_stop, folds_at_stop = down(lids_stop)
+    further, folds_further = down(np.radians(40) / au)
+    assert at_stop == pytest.approx(lids_stop * au, rel=1e-9)
+    assert further == pytest.approx(np.radians(40), rel=1e-9)
+    assert folds_further <= folds_at_stop
+    assert down(np.radians(80) / au)[0] == pytest.approx(np.radians(50), rel=1e-9)
+
+
 def test_head_pitch_yaw_roll_turn_about_7_1(runtime, face):
     nose = face.feature_vertices["9.3"]
     top = face.feature_vertices["11.4"]
