@@ -14,16 +14,27 @@ What is read:
   slip Linux forgives too), Report Size, Report Count, Report ID, Push, Pop. Physical extents,
   units and unit exponents are read past.
 - Local items: Usage, Usage Minimum/Maximum (a 4-byte usage carries its own page in the high 16
-  bits; a shorter one takes the Usage Page in force when the Usage item is read). Designators,
-  strings and delimiters are read past.
+  bits; a shorter one takes the Usage Page in force at its main item, as Linux pages them: a
+  Usage Page item between the usages and their Input re-pages them). Designators, strings and
+  delimiters are read past.
 - Long items (prefix 0xFE) are skipped whole.
+- Unknown main items and items of the reserved type are skipped with a warning, as the Linux
+  kernel does: some real pads' descriptors end in a stray 0x00 byte (Xbox One S on its Linux
+  firmware, Xbox Elite 2, 8BitDo SN30 Pro).
+
+Bounds (the kernel's, hid-core.c), so that no descriptor can make the parser allocate without
+limit: Report Size at most 256 bits, Report Count and the usages of one main item at most
+``MAX_USAGES`` (12,288), and a report at most ``MAX_REPORT_BYTES`` (16,384). Past them the
+descriptor is refused with the byte offset, but for a Usage Minimum/Maximum range, which is cut
+to the bound with a warning (vendor pages often declare 0-0xFFFF). Inputs outside any numbered
+report in a descriptor that numbers its reports are kept as report 0 with a warning: no such
+report ever arrives, and ``ReportLayout`` makes no channel of them.
 
 Not supported (documented so nobody relies on it):
 - Array inputs (the Array flag clear: keyboard key arrays, some button arrays) are not expanded
   into one channel per usage; each array slot becomes one raw channel (``array<N>``, the selector
   value itself, not scaled).
 - Fields wider than 32 bits are skipped (no channel); HID values are at most 32 bits in practice.
-- Usage Page items placed after a short Usage but before its main item do not re-page it.
 - Relative inputs (mice) are reported like absolute ones: the value of each report, not a sum.
 - Physical ranges and units are not applied: values are scaled from the logical range.
 
@@ -39,6 +50,7 @@ Scaling (``ReportLayout``, unless ``raw=True``):
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 
@@ -68,23 +80,39 @@ USAGE_NAMES: dict[tuple[int, int], str] = {
     (GENERIC_DESKTOP, 0x40): "Vx",
     (GENERIC_DESKTOP, 0x41): "Vy",
     (GENERIC_DESKTOP, 0x42): "Vz",
+    (GENERIC_DESKTOP, 0x01): "pointer",
+    (GENERIC_DESKTOP, 0x90): "dpad_up",
+    (GENERIC_DESKTOP, 0x91): "dpad_down",
+    (GENERIC_DESKTOP, 0x92): "dpad_right",
+    (GENERIC_DESKTOP, 0x93): "dpad_left",
     (SIMULATION, 0xBA): "Rudder",
     (SIMULATION, 0xBB): "Throttle",
     (SIMULATION, 0xC4): "Accelerator",
     (SIMULATION, 0xC5): "Brake",
     (SIMULATION, 0xC8): "Steering",
 }
-"""(usage page, usage) -> channel name; Button page usages are ``button<N>``; others
-``usage_<page>_<usage>`` in hex."""
+"""(usage page, usage) -> channel name; Button page usages are ``button<N>``; others are named by
+their page (``PAGE_NAMES``: ``consumer_0224``, ``vendor_ff00_0021``) or ``usage_<page>_<usage>``
+in hex. PS3-style pads put their pressure axes under Pointer: ``pointer``, ``pointer_2``, ..."""
+
+PAGE_NAMES = {GENERIC_DESKTOP: "desktop", SIMULATION: "simulation", 0x05: "game", 0x06: "device",
+              0x07: "key", 0x08: "led", 0x0C: "consumer", 0x0D: "digitizer", 0x0F: "pid", 0x20: "sensor"}
+VENDOR_PAGES = range(0xFF00, 0x10000)
 
 HAT = (GENERIC_DESKTOP, 0x39)
 
 
 def usage_name(page: int, usage: int) -> str:
-    """The channel name of a usage (``X``, ``button3``, ``hat``, ``usage_ff00_0020``)."""
+    """The channel name of a usage (``X``, ``button3``, ``hat``, ``consumer_0224``, ``vendor_ff00_0020``)."""
     if page == BUTTON:
         return f"button{usage}"
-    return USAGE_NAMES.get((page, usage), f"usage_{page:04x}_{usage:04x}")
+    if (page, usage) in USAGE_NAMES:
+        return USAGE_NAMES[(page, usage)]
+    if page in PAGE_NAMES:
+        return f"{PAGE_NAMES[page]}_{usage:04x}"
+    if page in VENDOR_PAGES:
+        return f"vendor_{page:04x}_{usage:04x}"
+    return f"usage_{page:04x}_{usage:04x}"
 
 
 # -- the parse -----------------------------------------------------------------------------------
@@ -124,6 +152,9 @@ class ReportField:
 
 
 _SIZES = (0, 1, 2, 4)
+MAX_REPORT_SIZE = 256
+MAX_USAGES = 12288
+MAX_REPORT_BYTES = 16384
 
 # item tags: main (type 0), global (type 1), local (type 2)
 _INPUT, _OUTPUT, _COLLECTION, _FEATURE, _END_COLLECTION = 0x8, 0x9, 0xA, 0xB, 0xC
@@ -157,8 +188,8 @@ def parse_descriptor(descriptor: bytes | Sequence[int]) -> list[ReportField]:
     fields: list[ReportField] = []
     g = _Globals()
     stack: list[_Globals] = []
-    usages: list[tuple[int, int]] = []
-    usage_min: tuple[int, int] | None = None
+    usages: list[tuple[int, int, bool]] = []  # (page, usage, short: paged at its main item)
+    usage_min: tuple[int, int, bool] | None = None
     depth = 0
     offsets: dict[int, int] = {}  # report id -> next input bit offset
     uses_ids = False
@@ -182,19 +213,23 @@ def parse_descriptor(descriptor: bytes | Sequence[int]) -> list[ReportField]:
         if kind == 0:  # main
             if tag == _INPUT:
                 if g.report_id == 0 and uses_ids:
-                    raise DescriptorError(f"report descriptor byte {at}: input without a Report ID "
-                                          "in a descriptor that numbers its reports")
+                    warnings.warn(f"report descriptor byte {at}: an input without a Report ID in a descriptor "
+                                  "that numbers its reports (no such report arrives)", stacklevel=2)
                 logical_max = g.logical_max
                 if g.logical_min >= 0 > logical_max:  # 0x25 0xFF meaning 255, a common slip
                     logical_max &= (1 << (8 * g.logical_max_size)) - 1
                 start = offsets.get(g.report_id, 0)
                 offsets[g.report_id] = start + g.report_size * g.report_count
+                if offsets[g.report_id] > 8 * MAX_REPORT_BYTES:
+                    raise DescriptorError(f"report descriptor byte {at}: report {g.report_id} grows to "
+                                          f"{offsets[g.report_id] // 8:,} bytes, expected at most "
+                                          f"{MAX_REPORT_BYTES:,}")
                 constant = bool(value & 0x01)
                 if not constant and g.report_size > 0 and g.report_count > 0:
                     fields.append(ReportField(
                         report_id=g.report_id, bit_offset=start, bit_size=g.report_size,
                         count=g.report_count, logical_min=g.logical_min, logical_max=logical_max,
-                        usages=tuple(usages), variable=bool(value & 0x02), flags=value))
+                        usages=_paged(usages, g.usage_page), variable=bool(value & 0x02), flags=value))
             elif tag == _COLLECTION:
                 depth += 1
             elif tag == _END_COLLECTION:
@@ -202,7 +237,8 @@ def parse_descriptor(descriptor: bytes | Sequence[int]) -> list[ReportField]:
                     raise DescriptorError(f"report descriptor byte {at}: End Collection without Collection")
                 depth -= 1
             elif tag not in (_OUTPUT, _FEATURE):
-                raise DescriptorError(f"report descriptor byte {at}: unknown main item 0x{prefix:02x}")
+                warnings.warn(f"report descriptor byte {at}: unknown main item 0x{prefix:02x} skipped "
+                              "(as Linux skips it)", stacklevel=2)
             usages, usage_min = [], None  # local items end with every main item
         elif kind == 1:  # global
             if tag == _USAGE_PAGE:
@@ -213,15 +249,18 @@ def parse_descriptor(descriptor: bytes | Sequence[int]) -> list[ReportField]:
                 g.logical_max = _signed(value, size)
                 g.logical_max_size = size
             elif tag == _REPORT_SIZE:
+                _at_most(value, MAX_REPORT_SIZE, "Report Size", at)
                 g.report_size = value
             elif tag == _REPORT_ID:
                 if not 1 <= value <= 255:
                     raise DescriptorError(f"report descriptor byte {at}: Report ID {value} (must be 1..255)")
                 if not uses_ids and offsets:
-                    raise DescriptorError(f"report descriptor byte {at}: Report ID after unnumbered inputs")
+                    warnings.warn(f"report descriptor byte {at}: a Report ID after unnumbered inputs "
+                                  "(no report without an ID arrives)", stacklevel=2)
                 uses_ids = True
                 g.report_id = value
             elif tag == _REPORT_COUNT:
+                _at_most(value, MAX_USAGES, "Report Count", at)
                 g.report_count = value
             elif tag == _PUSH:
                 stack.append(g.copy())
@@ -231,21 +270,44 @@ def parse_descriptor(descriptor: bytes | Sequence[int]) -> list[ReportField]:
                 g = stack.pop()
             # physical extents, unit exponent, unit: not used
         elif kind == 2:  # local
-            full = (value >> 16, value & 0xFFFF) if size == 4 else (g.usage_page, value)
+            full = (value >> 16, value & 0xFFFF, False) if size == 4 else (g.usage_page, value, True)
             if tag == _USAGE:
+                _at_most(len(usages) + 1, MAX_USAGES, "usages before a main item", at)
                 usages.append(full)
             elif tag == _USAGE_MIN:
                 usage_min = full
             elif tag == _USAGE_MAX:
                 if usage_min is None:
                     raise DescriptorError(f"report descriptor byte {at}: Usage Maximum without Usage Minimum")
-                page = usage_min[0]
-                usages.extend((page, u) for u in range(usage_min[1], full[1] + 1))
+                last = min(full[1], usage_min[1] + MAX_USAGES - len(usages) - 1)
+                if last < full[1]:
+                    warnings.warn(f"report descriptor byte {at}: Usage Maximum 0x{full[1]:x} cut to 0x{last:x}, "
+                                  f"{MAX_USAGES:,} usages at the most (as Linux cuts it)", stacklevel=2)
+                usages.extend((usage_min[0], u, full[2]) for u in range(usage_min[1], last + 1))
                 usage_min = None
             # designators, strings, delimiters: not used
         else:
-            raise DescriptorError(f"report descriptor byte {at}: reserved item type in 0x{prefix:02x}")
+            warnings.warn(f"report descriptor byte {at}: item 0x{prefix:02x} of the reserved type skipped "
+                          "(as Linux skips it)", stacklevel=2)
     return fields
+
+
+def _paged(usages: list[tuple[int, int, bool]], page: int) -> tuple[tuple[int, int], ...]:
+    """(page, usage) pairs, the short usages read since the last one on ``page`` (the Usage Page
+    in force at their main item) moved onto it, as Linux's hid_concatenate_last_usage_page does."""
+    paged = [(p, u) for p, u, _ in usages]
+    for i in range(len(usages) - 1, -1, -1):
+        p, u, short = usages[i]
+        if short and p == page:
+            break
+        if short:
+            paged[i] = (page, u)
+    return tuple(paged)
+
+
+def _at_most(value: int, limit: int, what: str, at: int) -> None:
+    if value > limit:
+        raise DescriptorError(f"report descriptor byte {at}: {what} {value:,}, expected at most {limit:,}")
 
 
 # -- channels and extraction ---------------------------------------------------------------------
@@ -437,12 +499,13 @@ class ReportLayout:
     """Every input channel of a device, by report ID, and the decoding of raw reports.
 
     ``numbered`` says whether reports start with a report ID byte (true when any channel has a
-    report ID above 0: a device numbers all its reports or none).
+    report ID above 0: a device numbers all its reports or none, so then report 0's channels,
+    which no report carries, are left out).
     """
 
     def __init__(self, channels: Sequence[Channel], raw: bool = False) -> None:
-        self.channels = list(channels)
-        self.numbered = any(c.report_id for c in self.channels)
+        self.numbered = any(c.report_id for c in channels)
+        self.channels = [c for c in channels if c.report_id or not self.numbered]
         by_id: dict[int, list[Channel]] = {}
         for c in self.channels:
             by_id.setdefault(c.report_id, []).append(c)

@@ -11,8 +11,10 @@ rig should not listen on the network by accident) and turns OSC messages into ch
   frame;
 * bundles are unpacked in order.
 
-Packets are parsed with python-osc's own packet parser; a datagram that is not OSC is counted in
-``bad_frames`` and skipped.
+Datagrams are parsed with bounds (``devices.osc_packet``: a sender on the network can make the
+reader neither loop, recurse nor allocate); one that is not well-formed OSC is counted in
+``bad_frames`` and skipped, and the device goes on reading. At most ``MAX_PENDING`` blendshapes
+wait for their Apply: a sender that never applies cannot grow them without bound.
 
 ``OscTwin`` is the wire twin (``devices.twin``): an ``OscDevice`` on a free loopback port, sent
 each logged reading as OSC over UDP.
@@ -26,15 +28,16 @@ from collections.abc import Mapping
 from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
 from pythonosc.osc_message import OscMessage
 from pythonosc.osc_message_builder import OscMessageBuilder
-from pythonosc.osc_packet import OscPacket, ParseError
 
 from .base import Device, DeviceError, Url
+from .osc_packet import OscFormatError, parse_datagram
 from .twin import Twin
 
 BLEND_VALUE = "/VMC/Ext/Blend/Val"
 BLEND_APPLY = "/VMC/Ext/Blend/Apply"
 TIMEOUT = 0.05
 DATAGRAM = 65536
+MAX_PENDING = 1024  # blendshapes waiting for an Apply (ARKit sends 52)
 
 
 class OscDevice(Device):
@@ -78,13 +81,13 @@ class OscDevice(Device):
         except socket.timeout:
             return []
         try:
-            messages = [timed.message for timed in OscPacket(datagram).messages]
-        except ParseError:
+            messages = parse_datagram(datagram)
+        except OscFormatError:
             self.counters.bad_frames += 1
             return []
         out = []
-        for message in messages:
-            reading = self._reading(message.address, message.params)
+        for address, params in messages:
+            reading = self._reading(address, params)
             if reading:
                 out.append(reading)
         return out
@@ -92,7 +95,8 @@ class OscDevice(Device):
     def _reading(self, address: str, params: list) -> dict[str, float] | None:
         """One message's channels, or None (pending blendshapes, or nothing usable)."""
         if address == BLEND_VALUE:
-            if len(params) >= 2 and isinstance(params[0], str) and _is_number(params[1]):
+            usable = len(params) >= 2 and isinstance(params[0], str) and _is_number(params[1])
+            if usable and (params[0] in self._pending or len(self._pending) < MAX_PENDING):
                 self._pending[params[0]] = float(params[1])
             else:
                 self.counters.bad_frames += 1

@@ -83,7 +83,7 @@ def test_descriptor_items_long_extended_usages_push_pop_arrays_and_the_unsigned_
     assert fields[1].usages == ((0x02, 0xBB),) and fields[1].signed
     assert not fields[2].variable
     names = [c.name for c in channels_of(fields)]
-    assert names == ["Wheel", "Throttle", "array1", "array2", "usage_0007_0030", "usage_0007_0030_2", "X"]
+    assert names == ["Wheel", "Throttle", "array1", "array2", "key_0030", "key_0030_2", "X"]
     layout = ReportLayout.from_descriptor(desc)
     assert not layout.numbered
     values = layout.decode(bytes([255, 0x81, 4, 5, 9, 0, 0]))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import socket
+import struct
 import time
 
 import pytest
@@ -78,3 +79,71 @@ def test_an_osc_url_binds_loopback_by_default():
     with dev:
         assert dev.wait_state(State.OPEN, 2.0)
         assert dev.address[0] == "127.0.0.1" and dev.address[1] > 0
+
+
+def _message(address: bytes, tags: bytes = b",", payload: bytes = b"") -> bytes:
+    def padded(raw: bytes) -> bytes:
+        return raw + b"\0" * (4 - len(raw) % 4)
+    return padded(address) + padded(tags) + payload
+
+
+def _bundle(*elements: bytes) -> bytes:
+    return b"#bundle\0" + b"\0" * 7 + b"\1" + b"".join(struct.pack(">i", len(e)) + e for e in elements)
+
+
+def _nested(depth: int) -> bytes:
+    datagram = _message(b"/deep", b",f", struct.pack(">f", 1.0))
+    for _ in range(depth):
+        datagram = _bundle(datagram)
+    return datagram
+
+
+BAD_DATAGRAMS = {
+    "negative element size (python-osc loops forever)": _bundle() + struct.pack(">i", -4)
+    + _message(b"/x", b",f", struct.pack(">f", 1.0)),
+    "element size beyond the datagram": _bundle() + struct.pack(">i", 4096) + _message(b"/x"),
+    "non-UTF-8 address": _message(b"/fader\xff\xfe", b",f", struct.pack(">f", 1.0)),
+    "bundles nested 900 deep": _nested(900),
+    "unknown type tag": _message(b"/x", b",Z"),
+    "blob longer than the datagram": _message(b"/x", b",b", struct.pack(">i", 1 << 30)),
+}
+
+
+@pytest.mark.parametrize("what", BAD_DATAGRAMS)
+def test_a_malformed_datagram_is_counted_and_the_device_reads_on(device, what):
+    sender = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sender.sendto(BAD_DATAGRAMS[what], device.address)
+    sender.close()
+    deadline = time.monotonic() + 2
+    while device.counters.bad_frames < 1 and time.monotonic() < deadline:
+        time.sleep(0.005)
+    assert device.counters.bad_frames == 1
+    _client(device).send_message("/fader/1", 0.5)
+    assert [s.values for s in _samples(device, 1)] == [{"fader/1": 0.5}]
+    assert device.state is State.OPEN
+
+
+def test_bundles_nested_within_the_limit_are_read(device):
+    from devices.osc_packet import MAX_DEPTH
+
+    sender = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sender.sendto(_nested(MAX_DEPTH), device.address)
+    sender.close()
+    assert [s.values for s in _samples(device, 1)] == [{"deep": 1.0}]
+
+
+def test_blendshapes_never_applied_are_held_to_a_bound(device):
+    from devices.osc_device import MAX_PENDING
+
+    sender = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    names = [f"shape{i}".encode() for i in range(MAX_PENDING + 200)]
+    for first in range(0, len(names), 200):  # a few datagrams: a UDP flood may be dropped
+        values = [_message(b"/VMC/Ext/Blend/Val", b",sf", name + b"\0" * (4 - len(name) % 4) + struct.pack(">f", 0.5))
+                  for name in names[first:first + 200]]
+        sender.sendto(_bundle(*values), device.address)
+        time.sleep(0.02)
+    sender.sendto(_message(b"/VMC/Ext/Blend/Apply"), device.address)
+    sender.close()
+    (sample,) = _samples(device, 1, timeout=5)
+    assert len(sample.values) == MAX_PENDING
+    assert device.counters.bad_frames == 200
