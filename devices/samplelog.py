@@ -33,6 +33,7 @@ from typing import IO
 
 from .base import Device, DeviceError, Sample, Url
 
+MAX_LINE = 1 << 20  # characters: a sample of 52 ARKit channels is about 2,000
 HEADER = {"facepuppet_samples": 1}
 
 
@@ -88,24 +89,27 @@ def read_sample_log(path: str | os.PathLike) -> Iterator[Sample]:
 
 def read_take_log(path: str | os.PathLike) -> Iterator[Sample | LogEvent]:
     """The Samples and events of a log, streamed in order; a bad line names the file and line
-    (a partial last one warns)."""
+    (a partial last one warns). A line longer than ``MAX_LINE`` characters is refused unread."""
     with open(path, encoding="utf-8") as file:
-        lines = iter(enumerate(file, 1))
-        for number, text in lines:
+        number, text = 0, file.readline(MAX_LINE + 1)
+        while text:
+            number += 1
+            if len(text) > MAX_LINE:
+                raise SampleLogError(f"{path}:{number}: a line of more than {MAX_LINE:,} characters, "
+                                     "expected one JSON sample")
+            following = file.readline(MAX_LINE + 1)
             try:
                 data = json.loads(text)
-            except json.JSONDecodeError:
-                if next(lines, None) is None and not text.endswith("\n"):
+            except (json.JSONDecodeError, RecursionError):
+                if not following and not text.endswith("\n"):
                     warnings.warn(f"{path}:{number}: the last line is incomplete (the recorder stopped "
                                   "mid-line); skipped", stacklevel=2)
                     return
                 raise SampleLogError(f"{path}:{number}: expected a JSON sample, found {text[:60]!r}") from None
-            if data == HEADER:
-                continue
-            if isinstance(data, dict) and "event" in data:
-                yield _event(data, f"{path}:{number}")
-            else:
-                yield _sample(data, f"{path}:{number}")
+            if data != HEADER:
+                yield _event(data, f"{path}:{number}") if isinstance(data, dict) and "event" in data \
+                    else _sample(data, f"{path}:{number}")
+            text = following
 
 
 def _event(data: dict, where: str) -> LogEvent:

@@ -1,5 +1,6 @@
-"""Fuzzing what users and other programs hand us: arbitrary bytes and near-valid .fap files, and
-take folders with a part garbled. Only documented errors may come out (``PuppetError`` and its
+"""Fuzzing what users, devices and other programs hand us: arbitrary bytes and near-valid .fap
+files, mappings, serial byte streams, OSC datagrams, and take folders with a part garbled (HID
+descriptors: tests/test_hid_descriptors.py). Only documented errors may come out (``PuppetError`` and its
 subclasses; ``MappingError`` and ``DeviceError`` for a take's mapping and devices), each input in
 bounded time (hypothesis's deadline) and bounded memory (tracemalloc's peak). Set
 PUPPET_FUZZ_SCALE (default 1) to multiply the examples, for a longer run; ``-s`` prints the tally."""
@@ -21,10 +22,13 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from devices.base import DeviceError
+from devices.osc_packet import parse_datagram
+from devices.serial_port import MAX_FRAME, MAX_LINE, encode_cobs_frame, encode_slip_frame, make_parser
 from puppet.arkit import import_csv
 from puppet.errors import PuppetError
 from puppet.fapfile import read_fap, write_fap
-from puppet.mapping import MappingError
+from puppet.mapping import MappingError, parse_mapping
+from puppet.shipped import shipped_mappings
 from puppet.playback import FapPlayback
 from puppet.replay import retake
 from puppet.takes import open_take
@@ -127,6 +131,108 @@ def test_near_valid_fap_files(data):
                 write_fap(again, stream)
                 back = read_fap(again)
             np.testing.assert_array_equal(back.values, np.rint(stream.values) + 0.0)
+
+
+# -- mappings ---------------------------------------------------------------------------------------
+
+MAPPING_NASTY = ["1e400", "1e308", "-1e308", "1e-320", ".nan", ".inf", "1_000", "&a [*a, *a]", "*nowhere",
+                 "!!python/object:os.system", "{", "[", "'", "\t", "~", "[]", "{}", "yes", "0x1F", "9" * 5000]
+
+
+@st.composite
+def near_valid_mapping(draw) -> str:
+    """A shipped mapping with a few lines spoiled, cut, repeated or given nasty values."""
+    lines = draw(st.sampled_from(sorted(shipped_mappings().values()))).read_text("utf-8").split("\n")
+    for _ in range(draw(st.integers(1, 4))):
+        at = draw(st.integers(0, len(lines) - 1))
+        how = draw(st.sampled_from(["value", "drop", "double", "indent", "insert"]))
+        if how == "value" and ":" in lines[at]:
+            lines[at] = lines[at].split(":", 1)[0] + ": " + draw(st.sampled_from(MAPPING_NASTY))
+        elif how == "drop":
+            del lines[at]
+        elif how == "double":
+            lines.insert(at, lines[at])
+        elif how == "indent":
+            lines[at] = " " * draw(st.integers(0, 9)) + lines[at].lstrip()
+        else:
+            lines.insert(at, draw(st.text(max_size=60)))
+    return "\n".join(lines)
+
+
+@settings(max_examples=150 * SCALE, deadline=5000, suppress_health_check=[HealthCheck.too_slow])
+@given(text=st.one_of(st.text(max_size=400), near_valid_mapping()))
+def test_mapping_text(text):
+    _bounded("mapping", lambda: parse_mapping(text, "fuzz.yaml"))
+
+
+# -- serial byte streams ------------------------------------------------------------------------------
+
+@st.composite
+def serial_stream(draw) -> tuple[str, list[bytes]]:
+    """A protocol and the chunks a port hands over: valid frames and lines, garbage, cuts, floods."""
+    protocol = draw(st.sampled_from(["ascii", "cobs", "slip"]))
+    parts = []
+    for _ in range(draw(st.integers(1, 12))):
+        how = draw(st.sampled_from(["good", "garbage", "flood", "flip"]))
+        values = draw(st.lists(st.floats(-1000, 1000), min_size=1, max_size=8))
+        good = (b",".join(b"%g" % v for v in values) + b"\n" if protocol == "ascii"
+                else encode_cobs_frame(values) if protocol == "cobs" else encode_slip_frame(values))
+        if how == "good":
+            parts.append(good)
+        elif how == "garbage":
+            parts.append(draw(st.binary(max_size=200)))
+        elif how == "flood":
+            parts.append(bytes([draw(st.integers(1, 255))]) * (2 * max(MAX_LINE, MAX_FRAME)))
+        else:
+            flipped = bytearray(good)
+            flipped[draw(st.integers(0, len(flipped) - 1))] ^= 1 << draw(st.integers(0, 7))
+            parts.append(bytes(flipped))
+    stream = b"".join(parts)
+    cuts = sorted(draw(st.lists(st.integers(0, len(stream)), max_size=6)))
+    return protocol, [stream[a:b] for a, b in zip([0] + cuts, cuts + [len(stream)])]
+
+
+@settings(max_examples=200 * SCALE, deadline=3000, suppress_health_check=[HealthCheck.too_slow])
+@given(case=serial_stream())
+def test_serial_framing(case):
+    """Every chunk read or counted as bad; readings hold finite numbers only."""
+    protocol, chunks = case
+    parser = make_parser(protocol)
+
+    def feed() -> list:
+        return [reading for chunk in chunks for reading in parser.feed(chunk)]
+
+    for reading in _bounded(f"serial {protocol}", feed) or []:
+        assert all(np.isfinite(v) for v in reading.values())
+
+
+# -- OSC datagrams -------------------------------------------------------------------------------------
+
+def _osc_message(address: bytes, tags: bytes, payload: bytes) -> bytes:
+    def padded(raw: bytes) -> bytes:
+        return raw + b"\0" * (4 - len(raw) % 4)
+    return padded(address) + padded(tags) + payload
+
+
+OSC_SEEDS = [
+    _osc_message(b"/fader/1", b",f", b"\x3f\x00\x00\x00"),
+    _osc_message(b"/VMC/Ext/Blend/Val", b",sf", b"JawOpen\0\x3f\x00\x00\x00"),
+    b"#bundle\0" + bytes(8) + b"\0\0\0\x10" + _osc_message(b"/x", b",i", b"\0\0\0\1"),
+]
+
+
+@st.composite
+def near_valid_datagram(draw) -> bytes:
+    data = bytearray(draw(st.sampled_from(OSC_SEEDS)))
+    for _ in range(draw(st.integers(1, 4))):
+        data[draw(st.integers(0, len(data) - 1))] = draw(st.integers(0, 255))
+    return bytes(data[:draw(st.integers(0, len(data)))])
+
+
+@settings(max_examples=300 * SCALE, deadline=2000, suppress_health_check=[HealthCheck.too_slow])
+@given(datagram=st.one_of(st.binary(max_size=600), near_valid_datagram()))
+def test_osc_datagrams(datagram):
+    _bounded("osc datagram", lambda: parse_datagram(datagram))
 
 
 # -- take folders -----------------------------------------------------------------------------------

@@ -77,3 +77,24 @@ def test_replay_as_fast_as_possible_and_a_missing_log_is_lost(tmp_path):
     with ReplayDevice("box", tmp_path / "missing.jsonl") as device:
         assert device.wait_state(State.LOST, 1.0)
         assert "no such sample log" in device.counters.last_error
+
+
+def test_a_line_longer_than_the_limit_is_refused_unread(tmp_path):
+    from devices.samplelog import MAX_LINE, SampleLogError, read_sample_log
+
+    log = tmp_path / "samples.jsonl"
+    good = '{"t_ns": 1, "device": "box", "values": {"a": 1.0}}\n'
+    log.write_text(good + '{"t_ns": 2, "device": "box", "values": {"a": ' + "1" * (2 * MAX_LINE) + "}}\n" + good)
+    stream = read_sample_log(log)
+    assert next(stream).values == {"a": 1.0}
+    with pytest.raises(SampleLogError, match=r"samples.jsonl:2: a line of more than 1,048,576 characters"):
+        next(stream)
+
+
+def test_a_deeply_nested_line_is_a_sample_log_error(tmp_path):
+    from devices.samplelog import SampleLogError, read_sample_log
+
+    log = tmp_path / "samples.jsonl"
+    log.write_text("[" * 100_000 + "]" * 100_000 + "\n")
+    with pytest.raises(SampleLogError, match="samples.jsonl:1: expected a JSON sample"):
+        list(read_sample_log(log))
