@@ -32,13 +32,16 @@ late; ``rate=math.inf`` writes as fast as the reader takes (for throughput measu
 ``SerialDevice`` that starts its own ``PtyJoystick`` and reads it: a serial device for demos with
 no hardware. Options: ``protocol``, ``rate`` (0 = as fast as possible), ``channels`` (a count, or
 names), ``format`` (i16/f32 for cobs and slip), ``style`` (csv, space or pairs for ascii),
-``checksum`` (``nmea``: ascii lines end in ``*hh``, and the reader checks them).
+``checksum`` (``nmea``: ascii lines end in ``*hh``, and the reader checks them), ``motion``
+(``sines``, the default, or ``calibrate``: ``rest_then_sweep``, a hand doing what ``puppet
+calibrate`` asks, with ``rest`` seconds at rest first, default 4), ``seed`` (its noise).
 """
 
 from __future__ import annotations
 
 import math
 import os
+import random
 import select
 import shutil
 import tempfile
@@ -74,6 +77,39 @@ def sine_sliders(channels: int = 6, lo: float = 0.0, hi: float = 1023.0, integer
     def signal(t: float) -> list[float]:
         values = [mid + amp * math.sin(f * t + i) for i, f in enumerate(freqs)]
         return [float(round(v)) for v in values] if integer else values
+    return signal
+
+
+def rest_then_sweep(channels: int = 6, rest_seconds: float = 4.0, seed: int = 0) -> Signal:
+    """A hand on a 10-bit joystick box doing what calibration asks: every control left at rest for
+    ``rest_seconds``, then each swept end to end at its own pace, over and over.
+
+    Like a real box read by an Arduino's ADC: each control rests a little off mid-scale (up to
+    +-30 counts), its ends stop short of the rails (6-24 counts in, as potentiometers do), and
+    every reading carries noise, Gaussian of 1.2 counts with a 2-3 count flick one time in a
+    hundred, rounded to whole counts in 0..1023.
+    """
+    shape = random.Random(seed)
+    rests = [512 + shape.uniform(-30, 30) for _ in range(channels)]
+    lows = [shape.uniform(6, 24) for _ in range(channels)]
+    highs = [1023 - shape.uniform(6, 24) for _ in range(channels)]
+    periods = [2.0 + 0.37 * i for i in range(channels)]
+    starts = [(rest - lo) / (hi - lo) / 2 for rest, lo, hi in zip(rests, lows, highs)]  # sweep from rest, upward
+    noise = random.Random(seed + 1)
+
+    def signal(t: float) -> list[float]:
+        values = []
+        for i in range(channels):
+            if t < rest_seconds:
+                value = rests[i]
+            else:
+                phase = ((t - rest_seconds) / periods[i] + starts[i]) % 1.0
+                value = lows[i] + (highs[i] - lows[i]) * (1 - abs(2 * phase - 1))
+            value += noise.gauss(0.0, 1.2)
+            if noise.random() < 0.01:
+                value += noise.choice((-3, -2, 2, 3))
+            values.append(float(min(1023, max(0, round(value)))))
+        return values
     return signal
 
 
@@ -287,15 +323,28 @@ def _joystick(url: Url, paced: bool) -> PtyJoystick:
         names = [f"ch{i}" for i in range(int(channels))] if channels.isdigit() else channels.split(",")
         return PtyJoystick(options.get("protocol", "ascii"), (rate if rate > 0 else math.inf) if paced else None,
                            fmt=options.get("format", "i16"), style=options.get("style", "csv"), names=names,
-                           checksum=options.get("checksum", "none"))
+                           checksum=options.get("checksum", "none"), signal=_motion(options, len(names)))
     except ValueError as exc:
         raise DeviceError(f"sim URL: {exc}") from None
+
+
+def _motion(options: Mapping[str, str], channels: int) -> Signal | None:
+    """The signal a sim URL's ``motion`` names (None: the joystick's default sines)."""
+    motion = options.get("motion", "sines")
+    if motion == "calibrate":
+        rest = float(options.get("rest", "4"))
+        if not 0 <= rest <= 600:
+            raise ValueError(f"rest={rest:g}: expected seconds from 0 to 600")
+        return rest_then_sweep(channels, rest, int(options.get("seed", "0")))
+    if motion != "sines" or "rest" in options:
+        raise ValueError(f"motion={motion}: expected sines, or calibrate (with rest=SECONDS)")
+    return None
 
 
 class SimulatedSerialDevice(SerialDevice):
     """``sim://joystick?...``: a SerialDevice reading a PtyJoystick it starts itself."""
 
-    OPTIONS = frozenset({"protocol", "rate", "channels", "format", "style", "checksum"})
+    OPTIONS = frozenset({"protocol", "rate", "channels", "format", "style", "checksum", "motion", "rest", "seed"})
 
     def __init__(self, name: str, joystick: PtyJoystick, **serial_options: object) -> None:
         super().__init__(name, joystick.path, protocol=joystick.protocol, fmt=joystick.fmt,
@@ -377,4 +426,5 @@ class SimTwin(SerialTwin):
         return cls(SimulatedSerialDevice(name, joystick), joystick, url)
 
 
-__all__ = ["PtyJoystick", "SerialTwin", "SimTwin", "SimulatedSerialDevice", "encode_reading", "sine_sliders"]
+__all__ = ["PtyJoystick", "SerialTwin", "SimTwin", "SimulatedSerialDevice", "encode_reading", "rest_then_sweep",
+           "sine_sliders"]

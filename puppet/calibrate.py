@@ -73,7 +73,7 @@ def _ask(prompt: Callable[[str], object], text: str) -> None:
 
 def calibrate(mapping_path: str | os.PathLike, *, rest_seconds: float = 2.0, sweep_seconds: float = 8.0,
               devices: MappingABC[str, Device] | None = None, urls: MappingABC[str, str] | None = None,
-              prompt: Callable[[str], object] = input, out: TextIO = sys.stdout) -> dict[str, dict]:
+              prompt: Callable[[str], object] = input, out: TextIO | None = None) -> dict[str, dict]:
     """Record rest and sweep, report, write min/centre/max into ``mapping_path``.
 
     ``urls`` opens the mapping's device NAME at another URL (``puppet calibrate --device``).
@@ -84,6 +84,7 @@ def calibrate(mapping_path: str | os.PathLike, *, rest_seconds: float = 2.0, swe
     ``CalibrationError`` for a device that is not open within ``ANSWER_SECONDS`` (with the
     reason) or when the written file would not load (the original is restored).
     """
+    out = sys.stdout if out is None else out
     path = Path(mapping_path)
     mapping = load_mapping(path)
     device_urls = device_overrides(path, mapping.devices, urls or {})

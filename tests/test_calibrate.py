@@ -6,6 +6,7 @@ import io
 import time
 
 import pytest
+import yaml
 
 import puppet.calibrate as cal
 from devices.base import Device
@@ -191,3 +192,48 @@ def test_an_absent_port_is_refused_with_the_reason_and_the_mapping_is_untouched(
 def test_a_shipped_mapping_is_not_calibrated_in_place(capsys):
     assert main(["calibrate", "--mapping", "gamepad_hid"]) == 2
     assert "puppet mappings --copy gamepad_hid" in capsys.readouterr().err
+
+
+def test_puppet_calibrate_succeeds_against_the_simulated_joystick(tmp_path, monkeypatch, capsys):
+    """No hardware: sim://joystick?motion=calibrate rests (off mid-scale, with ADC noise), then
+    sweeps; the user's two Enters come from stdin."""
+    mapping = tmp_path / "m.yaml"
+    mapping.write_bytes(shipped_mappings()["arduino_sliders"].read_bytes())
+    monkeypatch.setattr("sys.stdin", io.StringIO("\n\n"))
+    assert main(["calibrate", "--mapping", str(mapping), "--rest", "1", "--sweep", "5",
+                 "--device", "box=sim://joystick?motion=calibrate&rest=1.5&rate=200"]) == 0
+    assert "Wrote 6 channel(s)" in capsys.readouterr().out
+    load_mapping(mapping)
+    channels = yaml.safe_load(mapping.read_text("utf-8"))["channels"]
+    centres = set()
+    for i in range(6):
+        raw = channels[f"box.ch{i}"]
+        assert raw["min"] < 60 and raw["max"] > 960  # swept end to end, short of the rails
+        if "centre" in raw:
+            assert abs(raw["centre"] - 512) <= 35 and raw["centre"] != 512  # the rest, off mid-scale
+            centres.add(raw["centre"])
+    assert len(centres) >= 2
+
+
+def test_the_simulated_joysticks_calibration_motion_rests_with_adc_noise_then_sweeps():
+    from devices.simulated_serial import rest_then_sweep
+
+    signal = rest_then_sweep(channels=3, rest_seconds=2.0, seed=7)
+    rest = [signal(t / 200) for t in range(400)]
+    sweep = [signal(2 + t / 200) for t in range(1600)]
+    for i in range(3):
+        at_rest = [r[i] for r in rest]
+        assert 1 <= max(at_rest) - min(at_rest) <= 12 and all(v == int(v) for v in at_rest)  # whole counts, noisy
+        swept = [s[i] for s in sweep]
+        assert min(swept) < 30 and max(swept) > 990 and 0 <= min(swept) and max(swept) <= 1023
+
+
+@pytest.mark.parametrize("url, message", [("sim://joystick?motion=wiggle", "motion=wiggle: expected sines, or calibrate"),
+                                          ("sim://joystick?rest=2", "expected sines, or calibrate"),
+                                          ("sim://joystick?motion=calibrate&rest=-1", "rest=-1: expected seconds")])
+def test_a_bad_simulated_motion_is_refused(url, message):
+    from devices import open_device
+    from devices.base import DeviceError
+
+    with pytest.raises(DeviceError, match=message):
+        open_device(url, "box")
