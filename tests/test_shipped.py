@@ -65,6 +65,17 @@ def test_the_wheel_carries_the_mappings_and_data_and_finds_them_from_another_fol
                          capture_output=True, text=True).stdout.split()
     assert all(line.startswith(str(site)) for line in out), out
 
+    def puppet(*args: str) -> str:  # the installed command, run from another folder
+        done = subprocess.run([sys.executable, "-m", "puppet.cli", *args], cwd=elsewhere, env=env,
+                              capture_output=True, text=True)
+        assert done.returncode == 0, done.stderr
+        return done.stdout
+
+    sample = ROOT / "docs" / "guide" / "samples" / "livelink_sample.csv"
+    assert puppet("import-arkit", str(sample)).strip() == str(Path("takes") / "arkit_001")
+    assert "30 frames" in puppet("render", "takes/arkit_001", "-o", "arkit.mp4", "--size", "160x120")
+    assert (elsewhere / "arkit.mp4").stat().st_size > 0
+
 
 def test_puppet_mappings_lists_and_copies_and_a_wrong_name_is_one_line(tmp_path, capsys):
     from puppet.cli import main
