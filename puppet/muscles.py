@@ -452,38 +452,35 @@ class EdgeConstraints:
 
     def _sweep(self, displacement: np.ndarray, watched: np.ndarray, free: np.ndarray) -> np.ndarray:
         """The sweeps (class docstring, step 1) on triangles ``watched``, moving only ``free`` movable
-        vertices; returns the watched triangles still squeezed."""
+        vertices; returns the watched triangles still squeezed. The three corners of every triangle
+        are one batch (corner k of triangle i is row k * T + i), so a sweep is a few whole-array steps."""
         verts, local = np.unique(self.triangles[watched], return_inverse=True)
         local = local.reshape(-1, 3)
+        v, a, b = (np.concatenate([local[:, (k + j) % 3] for k in range(3)]) for j in range(3))
         x = self.rest[verts] + displacement[verts]
         w_v = self.inv_mass[verts] * free[verts]
-        normal, floor = self.normal[watched], self.floor[watched]
+        normal = np.tile(self.normal[watched], (3, 1))
+        floor = self.floor[watched].T.ravel()
         m = len(verts)
         for _ in range(EDGE_ITERATIONS):
-            ids, vecs = [], []
-            for k in range(3):
-                v, a, b = local[:, k], local[:, (k + 1) % 3], local[:, (k + 2) % 3]
-                edge = x[b] - x[a]
-                across = np.cross(normal, edge)
-                across /= np.maximum(np.linalg.norm(across, axis=1, keepdims=True), 1e-300)
-                rel = x[v] - x[a]
-                height = np.einsum("ij,ij->i", rel, across)
-                low = np.flatnonzero(height < floor[:, k])
-                if len(low) == 0:
-                    continue
-                e = edge[low]
-                t = np.clip(np.einsum("ij,ij->i", rel[low], e) / np.maximum(np.einsum("ij,ij->i", e, e), 1e-300), 0, 1)
-                corner_ids = np.stack([v[low], a[low], b[low]])  # (3, c)
-                grad = np.stack([np.ones(len(low)), t - 1.0, -t])  # d height / d position, along `across`
-                wg = w_v[corner_ids] * grad
-                denom = (wg * grad).sum(axis=0)
-                ok = denom > 0
-                step = np.where(ok, (EDGE_TARGET * floor[low, k] - height[low]) / np.where(ok, denom, 1.0), 0.0)
-                ids.append(corner_ids.ravel())
-                vecs.append(((wg * step)[..., None] * across[low][None]).reshape(-1, 3))
-            if not ids:
+            edge = x[b] - x[a]
+            rel = x[v] - x[a]
+            across = np.cross(normal, edge)
+            across /= np.maximum(np.sqrt(np.einsum("ij,ij->i", across, across)), 1e-300)[:, None]
+            height = np.einsum("ij,ij->i", rel, across)
+            low = np.flatnonzero(height < floor)
+            if len(low) == 0:
                 break
-            ids_all, vec_all = np.concatenate(ids), np.concatenate(vecs)
+            e = edge[low]
+            t = np.clip(np.einsum("ij,ij->i", rel[low], e) / np.maximum(np.einsum("ij,ij->i", e, e), 1e-300), 0, 1)
+            corner_ids = np.stack([v[low], a[low], b[low]])  # (3, c)
+            grad = np.stack([np.ones(len(low)), t - 1.0, -t])  # d height / d position, along `across`
+            wg = w_v[corner_ids] * grad
+            denom = (wg * grad).sum(axis=0)
+            ok = denom > 0
+            step = np.where(ok, (EDGE_TARGET * floor[low] - height[low]) / np.where(ok, denom, 1.0), 0.0)
+            ids_all = corner_ids.ravel()
+            vec_all = ((wg * step)[..., None] * across[low][None]).reshape(-1, 3)
             moving = np.any(vec_all != 0, axis=1)
             count = np.maximum(np.bincount(ids_all, weights=moving, minlength=m), 1.0)
             for j in range(3):

@@ -256,8 +256,7 @@ class Runtime:
         d = self._effective(np.asarray(displacements, dtype=float), rigid)
         muscle_inputs = None
         if contracting and mode == "control":  # the muscles' share, attached points carried as the FAPs'
-            moved = self._control_muscles.displace(contracting, np.array(displacements, dtype=float))
-            muscle_inputs = self._effective(moved, rigid) - d
+            muscle_inputs = self._carried(self._control_muscles.displace(contracting), rigid)
         if out is None:
             out = np.empty_like(self.rest)
         elif out.shape != self.rest.shape or out.dtype != self.dtype or not out.flags.c_contiguous:
@@ -464,6 +463,17 @@ class Runtime:
                 w = self._attach_weight[idx]
                 d[idx] = w * carried + (1 - w) * d[idx]
         return d
+
+    def _carried(self, extra: np.ndarray, rigid: Mapping[str, np.ndarray]) -> np.ndarray:
+        """What ``extra`` displacements (K, 3) add to ``_effective``'s inputs: its carry is affine
+        in the displacements, so an addition is carried by the rotations alone."""
+        out = np.zeros((len(self._inputs), 3))
+        out[: len(extra)] = extra
+        for part, idx in self._attached.items():
+            if part in rigid and part != "head" and len(idx):
+                w = self._attach_weight[idx]
+                out[idx] = w * (out[idx] @ rigid[part][:, :3].T) + (1 - w) * out[idx]
+        return out
 
     def _turn_head(self, motion: np.ndarray, out: np.ndarray) -> None:
         tmp = self._tmp
