@@ -344,11 +344,12 @@ def _print_report(report: dict) -> None:
 def _print_live(report: dict) -> None:
     if "latency" in report:
         lat = report["latency"]
-        print(f"live latency (sim slider box -> default face, drawn and read back 640x480): "
-              f"frame work (samples in -> mesh) {lat['process_median_ms']:.2f} ms median / {lat['process_p99_ms']:.2f} p99; "
-              f"sample->mesh {lat['mesh_median_ms']:.2f} ms median / {lat['mesh_p99_ms']:.2f} p99; "
-              f"sample->frame {lat['latency_median_ms']:.2f} ms median / {lat['latency_p99_ms']:.2f} p99 "
-              f"at {lat['fps']:.0f} fps")
+        work, mesh, drawn = lat["frame_work_ms"], lat["sample_to_mesh_ms"], lat["sample_to_drawn_ms"]
+        print(f"live latency (a slider box in its own process -> default face, drawn and read back 640x480, "
+              f"every sample to the first frame that shows it): frame work {work['median']:.2f} ms median / "
+              f"{work['p99']:.2f} p99; draw and read-back {lat['draw_ms']['median']:.2f} ms median; sample->mesh {mesh['median']:.2f} / {mesh['p99']:.2f}; "
+              f"sample->drawn {drawn['median']:.2f} ms median / {drawn['p99']:.2f} p99 at {lat['fps']:.0f} fps "
+              f"({lat['samples']} samples)")
     if "flood" in report:
         flood = report["flood"]
         print(f"flood {flood['rate']:,.0f} readings/s for {flood['seconds']:g} s, recording: {flood['fps']:.1f} fps "

@@ -1,9 +1,10 @@
 """The live pipeline under load, for ``puppet bench``: latency, a flood of input, a long take.
 
-* ``latency``: the live session on the default face with the simulated slider box (a real
-  pseudo-terminal read by pyserial, 200 readings/s), every frame drawn and read back by the
-  headless renderer (``session.measure_latency``): Sample timestamp -> mesh ready, and -> frame
-  drawn; medians and p99.
+* ``latency``: the live session on the default face reading a slider box that runs in a process
+  of its own (``PtyJoystick`` on a pseudo-terminal, 200 readings/s, read by pyserial as
+  ``puppet live`` reads a port), every frame drawn and read back by a 640x480 offscreen renderer
+  with the live window's settings (``session.measure_latency``): every Sample, from its
+  timestamp to the first frame that shows it, mesh ready and frame drawn; medians and p99.
 * ``flood``: the same loop, recording a take, while the box sends ``rate`` readings a second
   (COBS frames) for ``seconds``: frames per second against a baseline run in the same call at
   200 readings/s, the samples taken in, the process's resident memory over time (flat: nothing
@@ -16,6 +17,7 @@
 
 from __future__ import annotations
 
+import multiprocessing
 import os
 import tempfile
 import time
@@ -68,14 +70,41 @@ def _renderer(runtime: Runtime, size: tuple[int, int]) -> Renderer:
 
 def latency(runtime: Runtime, seconds: float = 3.0, size: tuple[int, int] = (640, 480)) -> dict:
     """Input-to-frame latency of the live loop (see the module docstring)."""
+    spawn = multiprocessing.get_context("spawn")  # a clean process: no GL or threads of ours forked
     with tempfile.TemporaryDirectory() as root:
-        session = _session(runtime, "sim://joystick?protocol=ascii&rate=200&channels=6", root)
-        renderer = _renderer(runtime, size)
+        link, stop = os.path.join(root, "box"), spawn.Event()
+        box = spawn.Process(target=serve_joystick, args=(link, 200.0, stop), daemon=True)
+        box.start()
         try:
-            return measure_latency(session, renderer, seconds)
+            _wait_for(link, box)
+            session = _session(runtime, f"serial://{link}?protocol=ascii", root)
+            renderer = _renderer(runtime, size)
+            try:
+                return measure_latency(session, renderer, seconds)
+            finally:
+                renderer.release()
+                session.close()
         finally:
-            renderer.release()
-            session.close()
+            stop.set()
+            box.join(5)
+
+
+def serve_joystick(link: str, rate: float, stop) -> None:
+    """A six-slider box sending ascii lines at ``rate`` on a pty behind ``link`` until ``stop``
+    is set: the external device of ``latency``, run in a process of its own."""
+    from devices.simulated_serial import PtyJoystick
+
+    with PtyJoystick("ascii", rate, 6, link=link) as joystick:
+        joystick.start()
+        stop.wait()
+
+
+def _wait_for(link: str, box) -> None:
+    deadline = time.monotonic() + 30
+    while not os.path.exists(link):
+        if not box.is_alive() or time.monotonic() > deadline:
+            raise RuntimeError(f"the slider box process did not start ({link})")
+        time.sleep(0.02)
 
 
 def _loop(session: LiveSession, renderer: Renderer, seconds: float) -> dict:

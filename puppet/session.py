@@ -74,7 +74,7 @@ from .takes import TakeError, TakeRecorder, take_fap
 class Frame:
     """One frame of the live loop. ``vertices`` and ``normals`` are the session's buffers,
     overwritten by the next frame; ``newest_sample_ns`` is the newest Sample ever fed (None before
-    any); ``n_samples`` how many Samples this frame fed."""
+    any); ``n_samples`` how many Samples this frame fed, ``sample_ns`` their timestamps."""
 
     vertices: np.ndarray
     normals: np.ndarray
@@ -83,6 +83,7 @@ class Frame:
     newest_sample_ns: int | None
     states: dict[str, State] = field(default_factory=dict)
     n_samples: int = 0
+    sample_ns: tuple[int, ...] = ()
 
 
 class LiveSession:
@@ -207,7 +208,8 @@ class LiveSession:
         # else: nothing changed since the last frame (a held pose): the buffers already hold it
         self._last_pose_ns = pose_ns
         self.frames += 1
-        return Frame(self._vertices, self._normals, pose, now, self.newest_sample_ns, states, len(samples))
+        return Frame(self._vertices, self._normals, pose, now, self.newest_sample_ns, states, len(samples),
+                     tuple(sample.t_ns for sample in samples))
 
     def neutral(self, now_ns: int | None = None) -> None:
         """Every channel back to rest (the neutral key), at the next frame (and so in the take)."""
@@ -324,29 +326,29 @@ class LiveSession:
 
 # -- latency ----------------------------------------------------------------------------------
 
-def _ms_stats(values_ns: list[int], prefix: str) -> dict:
+def _ms_stats(values_ns: list[int]) -> dict:
+    """Median and 99th percentile, in milliseconds (NaN when nothing was measured)."""
     if not values_ns:
-        return {f"{prefix}_median_ms": float("nan"), f"{prefix}_p99_ms": float("nan")}
+        return {"median": float("nan"), "p99": float("nan")}
     ms = sorted(v / 1e6 for v in values_ns)
-    p99 = ms[min(len(ms) - 1, int(np.ceil(0.99 * len(ms))) - 1)]
-    return {f"{prefix}_median_ms": statistics.median(ms), f"{prefix}_p99_ms": p99}
+    return {"median": statistics.median(ms), "p99": ms[min(len(ms) - 1, int(np.ceil(0.99 * len(ms))) - 1)]}
 
 
 def measure_latency(session: LiveSession, renderer, seconds: float = 3.0) -> dict:
     """Run the live loop for ``seconds``, rendering every frame offscreen, and time it.
 
-    Only frames that took in at least one new Sample are measured (a frame with none would time
-    how long the input has been still, not latency). ``latency``: newest Sample's timestamp ->
-    frame drawn and read back (``renderer.render``); ``mesh``: newest Sample -> vertices and
-    normals ready, before drawing; ``process``: the frame's own work from taking the Samples in
-    to the mesh ready (``mesh`` minus the time the Sample waited for the loop, which is bounded
-    by the previous frame's drawing). The device's own transport (USB, the pty) comes before the
-    Sample's timestamp and is not included.
+    Every Sample is measured from its timestamp to the first frame that shows it:
+    ``sample_to_drawn_ms`` until that frame is drawn and read back (``renderer.render``),
+    ``sample_to_mesh_ms`` until its vertices and normals are ready, before drawing;
+    ``frame_work_ms`` is a frame's own work from taking the Samples in to the mesh ready, and
+    ``draw_ms`` its drawing and read-back: a Sample waits for the frame being drawn when it
+    arrives, then for its own. Medians and 99th percentiles. The device's own transport (USB, the pty) comes before the Sample's
+    timestamp and is not included.
     """
     if renderer.camera is None:
         renderer.frame(session.runtime.rest)
     renderer.render(session.runtime.rest, session.runtime.rest_normals)  # warm-up (shaders, buffers)
-    latency, mesh, process = [], [], []
+    drawn, mesh, work, draw = [], [], [], []
     frames = 0
     start = time.monotonic_ns()
     end = start + int(seconds * 1e9)
@@ -356,10 +358,12 @@ def measure_latency(session: LiveSession, renderer, seconds: float = 3.0) -> dic
         renderer.render(f.vertices, f.normals)
         done = time.monotonic_ns()
         frames += 1
-        if f.n_samples and f.newest_sample_ns is not None:
-            mesh.append(ready - f.newest_sample_ns)
-            latency.append(done - f.newest_sample_ns)
-            process.append(ready - f.t_ns)
+        draw.append(done - ready)
+        if f.sample_ns:
+            drawn.extend(done - t for t in f.sample_ns)
+            mesh.extend(ready - t for t in f.sample_ns)
+            work.append(ready - f.t_ns)
     elapsed = (time.monotonic_ns() - start) / 1e9
-    return {"frames": frames, "measured": len(latency), "fps": frames / elapsed if elapsed else 0.0,
-            **_ms_stats(latency, "latency"), **_ms_stats(mesh, "mesh"), **_ms_stats(process, "process")}
+    return {"sample_to_drawn_ms": _ms_stats(drawn), "sample_to_mesh_ms": _ms_stats(mesh),
+            "frame_work_ms": _ms_stats(work), "draw_ms": _ms_stats(draw), "fps": frames / elapsed if elapsed else 0.0,
+            "frames": frames, "samples": len(drawn)}

@@ -29,7 +29,7 @@ def test_run_bench_prints_json(capsys, monkeypatch):
     monkeypatch.setattr("puppet.bench.bench_inputs", lambda seconds: [{"adapter": "x", "samples_s": 1.0}])
     assert run_bench(frames=2, as_json=True, ict=False, flood_seconds=1.0, take_seconds=30.0) == 0
     report = json.loads(capsys.readouterr().out)
-    assert report["latency"]["measured"] > 0 and report["long_take"]["frames"] == 30 * 30 + 1
+    assert report["latency"]["samples"] > 0 and report["latency"]["sample_to_drawn_ms"]["median"] > 0 and report["long_take"]["frames"] == 30 * 30 + 1
     assert report["deform"][0]["face"] == "default"
     frame = report["frames"][0]
     assert frame["input"] == "FAP" and frame["fps"] > 0
