@@ -219,8 +219,9 @@ class Runtime:
             if region.kind == "rigid":
                 prev = self._rigid_vertices.get(region.part, np.zeros(0, dtype=np.int64))
                 self._rigid_vertices[region.part] = np.concatenate([prev, region.vertices]).astype(np.int64)
+        self._rigid_rows = {part: _as_slice(v) for part, v in self._rigid_vertices.items()}
         self._part_buffers = {part: (np.empty((len(v), 3), self.dtype), np.empty((len(v), 3), self.dtype))
-                              for part, v in self._rigid_vertices.items()}
+                              for part, v in self._rigid_vertices.items() if not isinstance(self._rigid_rows[part], slice)}
         head = self.rig.rigid_parts.get("head")
         self._neck_weight = np.ones(len(self.rest), dtype=self.dtype)
         if head is not None and head.neck is not None:
@@ -270,9 +271,9 @@ class Runtime:
             self._deform_realtime(d, out)
         if contracting:
             self._muscles_on_skin(contracting, mode, muscle_inputs, out)
-        for part, verts in self._rigid_vertices.items():
+        for part in self._rigid_vertices:
             if part in rigid:
-                out[verts] = self._moved(part, self.rest, rigid[part][:, :3], rigid[part][:, 3])
+                self._move_part(part, self.rest, out, rigid[part][:, :3], rigid[part][:, 3])
         if "head" in rigid:
             self._turn_head(rigid["head"], out)
         return out
@@ -389,9 +390,9 @@ class Runtime:
         else:
             np.matmul(self.rest_normals, turn.T.astype(self.dtype), out=out)
             out[self._unturned] = self.rest_normals[self._unturned]
-        for part, verts in self._rigid_vertices.items():
+        for part in self._rigid_vertices:
             if part in rigid:
-                out[verts] = self._moved(part, self.rest_normals, turn @ rigid[part][:, :3])
+                self._move_part(part, self.rest_normals, out, turn @ rigid[part][:, :3])
         self._bend_normals(vertices, out, scatter=True)
         return out
 
@@ -442,14 +443,22 @@ class Runtime:
                 rigid[name] = compose(rigid[part.parent], rigid.get(name, _IDENTITY))
         return rigid
 
-    def _moved(self, part: str, source: np.ndarray, R: np.ndarray, t: np.ndarray | None = None) -> np.ndarray:
-        """``source`` rows of a rigid part turned by R (and moved by t), in the part's buffers."""
-        rows, moved = self._part_buffers[part]
-        np.take(source, self._rigid_vertices[part], axis=0, out=rows)
-        np.matmul(rows, R.T.astype(self.dtype), out=moved)
+    def _move_part(self, part: str, source: np.ndarray, out: np.ndarray, R: np.ndarray,
+                   t: np.ndarray | None = None) -> None:
+        """A rigid part's rows of ``source`` turned by R (and moved by t), written into ``out``:
+        straight through views when the part's vertices are one run (the default face's are),
+        else gathered into and scattered from the part's buffers."""
+        rows, R = self._rigid_rows[part], R.T.astype(self.dtype)
+        if isinstance(rows, slice):
+            moved = np.matmul(source[rows], R, out=out[rows])
+        else:
+            taken, moved = self._part_buffers[part]
+            np.take(source, rows, axis=0, out=taken)
+            np.matmul(taken, R, out=moved)
         if t is not None:
             moved += t.astype(self.dtype)
-        return moved
+        if not isinstance(rows, slice):
+            out[rows] = moved
 
     def _effective(self, d: np.ndarray, rigid: Mapping[str, np.ndarray]) -> np.ndarray:
         k = len(self.control_points)
@@ -535,6 +544,13 @@ def _pruned(B: sp.csr_matrix, prune: float) -> sp.csr_matrix:
     B.data[drop] = 0.0
     B.eliminate_zeros()
     return B
+
+
+def _as_slice(indices: np.ndarray) -> slice | np.ndarray:
+    """A run of consecutive indices as a slice (views, no copies), else the indices."""
+    if len(indices) and np.array_equal(indices, np.arange(indices[0], indices[0] + len(indices))):
+        return slice(int(indices[0]), int(indices[0]) + len(indices))
+    return indices
 
 
 def _default_threshold(face) -> float:
