@@ -176,8 +176,9 @@ def _parser() -> argparse.ArgumentParser:
 
     from_photo = commands.add_parser("face-from-photo", help="build a rigged, textured face from one frontal photo")
     from_photo.add_argument("photo", help="the frontal photo")
-    from_photo.add_argument("--landmarks", required=True,
-                            help="landmark JSON: fdp11, iBUG 68 or MediaPipe 468/478 points (puppet pick-landmarks)")
+    from_photo.add_argument("--landmarks", default=None,
+                            help="landmark JSON: fdp11, iBUG 68 or MediaPipe 468/478 points (puppet pick-landmarks); "
+                                 "default: detected offline (MediaPipe, the photo set-up)")
     from_photo.add_argument("-o", "--output", required=True, help="the face folder to write")
 
     pick = commands.add_parser("pick-landmarks", help="click a photo's landmarks in a web page on 127.0.0.1")

@@ -586,16 +586,21 @@ def read_photo(path: str | os.PathLike) -> np.ndarray:
         raise PhotoFaceError(f"{path}: cannot read the photo: {exc}") from None
 
 
-def build_face_folder(photo_path: str | os.PathLike, landmarks_path: str | os.PathLike,
+def build_face_folder(photo_path: str | os.PathLike, landmarks_path: str | os.PathLike | None,
                       out: str | os.PathLike) -> Path:
     """``puppet face-from-photo``: fit, texture, write ``out`` (``puppet.facefolder``) and rig the
-    written face (rigged from what was written, so the rig matches the face as loaded)."""
+    written face (rigged from what was written, so the rig matches the face as loaded). With no
+    ``landmarks_path`` the landmarks are detected (``puppet.photolandmarks``)."""
+    from .photolandmarks import detect_landmarks
     from .autorig import build_rig
     from .facefolder import FACE_RIG, load_face_folder, write_face_folder
     from .rig import save_rig
 
     photo = read_photo(photo_path)
-    landmarks = read_landmarks(landmarks_path)
+    if landmarks_path is None:
+        landmarks = parse_landmarks(detect_landmarks(photo_path), f"{photo_path} (detected landmarks)")
+    else:
+        landmarks = read_landmarks(landmarks_path)
     face, report = face_from_photo(photo, landmarks, Path(photo_path).stem)
     folder = write_face_folder(face, out, source_photo=str(photo_path), report=report)
     save_rig(build_rig(load_face_folder(folder)), folder / FACE_RIG)

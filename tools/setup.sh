@@ -32,4 +32,14 @@ if [ ! -x .venv/bin/python ]; then
 fi
 .venv/bin/python -m pip install -q --upgrade pip
 .venv/bin/python -m pip install -q --force-reinstall --no-deps . && .venv/bin/python -m pip install -q '.[test,midi,osc,docs,batch]'
+
+# The photo environment: MediaPipe's face landmarks for `puppet face-from-photo` (its model ships
+# in the wheel; it pins numpy < 2, so it lives apart from .venv). FACEPUPPET_NO_PHOTO=1 skips it.
+if [ "${FACEPUPPET_NO_PHOTO:-0}" != 1 ]; then
+  if [ ! -x .venv-photo/bin/python ]; then
+    echo "setup: creating .venv-photo (MediaPipe face landmarks for face-from-photo)"
+    "$PYTHON" -m venv .venv-photo
+  fi
+  .venv-photo/bin/python -m pip install -q 'mediapipe==0.10.21'
+fi
 echo "setup: ready (.venv/bin/puppet)"
