@@ -8,14 +8,14 @@ the devices that need it); the rest of the URL is the backend's business.
 
 from __future__ import annotations
 
-from .base import Counters, Device, DeviceError, DeviceLost, Sample, State, Url, table_class
+from devices.base import Counters, Device, DeviceError, DeviceLost, Sample, State, Url, table_class
 
 BACKENDS: dict[str, str] = {
     "can": "devices.can_device:CanDevice",
     "hid": "devices.hid_device:HidDevice",
     "midi": "devices.midi_device:MidiDevice",
     "osc": "devices.osc_device:OscDevice",
-    "replay": "devices.samplelog:ReplayDevice",
+    "replay": "puppet.io.samplelog:ReplayDevice",
     "serial": "devices.serial_port:SerialDevice",
     "sim": "devices.simulated_serial:SimulatedSerialDevice",
 }

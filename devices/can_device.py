@@ -44,7 +44,7 @@ from dataclasses import asdict, dataclass
 from typing import Any
 from urllib.parse import unquote
 
-from .base import Device, DeviceError, DeviceLost, Url
+from devices.base import Device, DeviceError, DeviceLost, Url
 
 try:
     import can

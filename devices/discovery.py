@@ -46,7 +46,7 @@ def _serial_description(port) -> str:
 def hid_devices() -> list[Found]:
     import hid  # noqa: F401 -- a missing hidapi is reported as such
 
-    from .hid_device import available
+    from devices.hid_device import available
 
     return [Found("hid", url, description) for url, description in available()]
 

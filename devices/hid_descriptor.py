@@ -56,7 +56,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .base import DeviceError
+from devices.base import DeviceError
 
 # -- usage names ---------------------------------------------------------------------------------
 

@@ -36,8 +36,8 @@ from dataclasses import asdict
 from typing import Any
 from urllib.parse import quote, unquote
 
-from .base import Device, DeviceError, DeviceLost, Url
-from .hid_descriptor import DescriptorError, FieldSpec, ReportLayout
+from devices.base import Device, DeviceError, DeviceLost, Url
+from devices.hid_descriptor import DescriptorError, FieldSpec, ReportLayout
 
 try:
     import hid

@@ -28,8 +28,8 @@ from collections.abc import Callable, Iterable, Iterator, Mapping
 
 import mido
 
-from .base import Device, DeviceError, DeviceLost, Url
-from .twin import Twin
+from devices.base import Device, DeviceError, DeviceLost, Url
+from devices.twin import Twin
 
 POLL = 0.005
 WAIT = 0.03

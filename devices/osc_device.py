@@ -29,9 +29,9 @@ from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
 from pythonosc.osc_message import OscMessage
 from pythonosc.osc_message_builder import OscMessageBuilder
 
-from .base import Device, DeviceError, Url
-from .osc_packet import OscFormatError, parse_datagram
-from .twin import Twin
+from devices.base import Device, DeviceError, Url
+from devices.osc_packet import OscFormatError, parse_datagram
+from devices.twin import Twin
 
 BLEND_VALUE = "/VMC/Ext/Blend/Val"
 BLEND_APPLY = "/VMC/Ext/Blend/Apply"

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import struct
 
-from .base import DeviceError
+from devices.base import DeviceError
 
 BUNDLE = b"#bundle\0"
 MAX_DEPTH = 8

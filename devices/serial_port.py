@@ -96,7 +96,7 @@ from urllib.parse import urlencode
 
 import serial
 
-from .base import Device, DeviceError, DeviceLost, Url
+from devices.base import Device, DeviceError, DeviceLost, Url
 
 PROTOCOLS = ("ascii", "cobs", "slip")
 FORMATS = {"i16": ("h", 2), "f32": ("f", 4)}

@@ -32,9 +32,9 @@ from typing import Any
 import can
 import cantools
 
-from .base import Url
-from .can_device import CanDevice
-from .twin import Twin
+from devices.base import Url
+from devices.can_device import CanDevice
+from devices.twin import Twin
 
 AXES_ID, EXTRA_ID = 0x100, 0x101
 BUTTONS = ("Trigger", "ThumbButton", "Button3", "Button4")

@@ -28,9 +28,9 @@ import time
 from collections import deque
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 
-from .base import DeviceError, Url
-from .hid_device import HidDevice
-from .twin import Twin
+from devices.base import DeviceError, Url
+from devices.hid_device import HidDevice
+from devices.twin import Twin
 
 # A USB game pad's report descriptor, as a real one is written (HID 1.11 short items).
 # Report 1: four 16-bit signed sticks, two 8-bit triggers, 12 buttons, a 4-bit hat, a pad byte.

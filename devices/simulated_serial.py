@@ -50,8 +50,8 @@ import time
 import tty
 from collections.abc import Callable, Iterable, Mapping, Sequence
 
-from .base import DeviceError, Url
-from .serial_port import (
+from devices.base import DeviceError, Url
+from devices.serial_port import (
     SerialDevice,
     add_checksum,
     encode_ascii_line,
@@ -59,7 +59,7 @@ from .serial_port import (
     encode_slip_frame,
     make_parser,
 )
-from .twin import Twin
+from devices.twin import Twin
 
 PENDING_MAX = 8192      # bytes waiting for the reader before whole readings are dropped
 MAX_BATCH = 0.1         # at most this many seconds of readings are caught up after a stall

@@ -22,7 +22,7 @@ from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from typing import Self
 
-from .base import Device, DeviceError, Sample, State, Url, table_class
+from devices.base import Device, DeviceError, Sample, State, Url, table_class
 
 TWINS: dict[str, str] = {
     "can": "devices.simulated_can:CanTwin",

@@ -1,12 +1,12 @@
 """facepuppet: live facial puppeteering on an MPEG-4 face rig."""
 
-from .errors import PuppetError
-from .face import Face, load_face
-from .fapfile import FapError, FapStream, FapWarning, FapWriter, iter_fap, read_fap, write_fap
-from .mapping import MappingError, load_mapping
-from .rig import Rig, RigError, load_rig, save_rig
-from .runtime import Runtime
-from .sibson import SibsonError, sibson_coordinates
+from puppet.errors import PuppetError
+from puppet.face.model import Face, load_face
+from puppet.face.rig import Rig, RigError, load_rig, save_rig
+from puppet.io.fapfile import FapError, FapStream, FapWarning, FapWriter, iter_fap, read_fap, write_fap
+from puppet.live.mappingfile import MappingError, load_mapping
+from puppet.runtime.runtime import Runtime
+from puppet.runtime.sibson import SibsonError, sibson_coordinates
 
 __all__ = [
     "PuppetError", "Face", "load_face", "Rig", "RigError", "load_rig", "save_rig", "Runtime", "SibsonError",

@@ -16,15 +16,14 @@ import warnings
 from pathlib import Path
 
 from devices.base import DeviceError
-
-from .errors import PuppetError
-from .mapping import MappingError
-from .render import VIEW_DIRECTIONS
-from .shipped import copy_mapping, mapping_path, mappings_folder, shipped_mappings
+from puppet.errors import PuppetError
+from puppet.io.shipped import copy_mapping, mapping_path, mappings_folder, shipped_mappings
+from puppet.live.mappingfile import MappingError
+from puppet.view.renderer import VIEW_DIRECTIONS
 
 VIEWS = tuple(VIEW_DIRECTIONS)
 BENCH_SECTIONS = ("deform", "frames", "muscles", "inputs", "latency", "flood", "long_take")
-"""``puppet bench --only`` choices (``puppet.bench.SECTIONS``; the bench is imported only when run)."""
+"""``puppet bench --only`` choices (``puppet.bench.deform.SECTIONS``; the bench is imported only when run)."""
 FACE_HELP = "a face folder (puppet rig ... -o FOLDER/, puppet face-from-photo) (default: the embedded face)"
 MAX_SIDE = 8192
 REFUSED = (PuppetError, DeviceError, MappingError, OSError)
@@ -205,7 +204,7 @@ def _run(args: argparse.Namespace) -> int:
     if args.command == "rig":
         return _rig(args)
     if args.command == "demo":
-        from .demo import run_demo
+        from puppet.view.demo import run_demo
 
         for path in run_demo(Path(args.out), size=args.size):
             print(path)
@@ -213,7 +212,7 @@ def _run(args: argparse.Namespace) -> int:
     if args.command == "render":
         return _render(args)
     if args.command == "play":
-        from .window import play_take
+        from puppet.view.window import play_take
 
         play_take(args.take, size=args.size, view=args.view, face=_face(args.face))
         return 0
@@ -224,8 +223,8 @@ def _run(args: argparse.Namespace) -> int:
     if args.command == "import-arkit":
         return _import_arkit(args)
     if args.command == "live":
-        from .live import run_live
-        from .takes import TakeError
+        from puppet.io.takes import TakeError
+        from puppet.view.livewindow import run_live
 
         if args.layer_over and not args.arm:
             raise TakeError("--layer-over needs --arm: what the pass replaces (e.g. --arm box.ch0)")
@@ -243,7 +242,7 @@ def _run(args: argparse.Namespace) -> int:
         print(report(discover()))
         return 0
     if args.command == "bench":
-        from .bench import run_bench
+        from puppet.bench.deform import run_bench
 
         return run_bench(frames=args.frames, as_json=args.json, ict=not args.no_ict,
                          flood_seconds=args.flood_seconds, take_seconds=args.take_seconds,
@@ -280,11 +279,11 @@ def _rig(args: argparse.Namespace) -> int:
     rig file alone (``Runtime(load_face(mesh, landmarks=...), rig.load_rig(path))``)."""
     import time
 
-    from .autorig import build_rig
-    from .face import load_face
-    from .facefolder import write_rigged_folder
-    from .outputs import writable
-    from .rig import save_rig
+    from puppet.face.autorig import build_rig
+    from puppet.face.folder import write_rigged_folder
+    from puppet.face.model import load_face
+    from puppet.face.rig import save_rig
+    from puppet.io.outputs import writable
 
     rig_file = Path(args.output).suffix.lower() in (".rig", ".json")
     output = writable(args.output, "rig file") if rig_file else _folder_output(args.output)
@@ -308,7 +307,7 @@ def _rig(args: argparse.Namespace) -> int:
 
 def _folder_output(path: str) -> Path:
     """A face folder to write: new, or an existing folder (never a file)."""
-    from .outputs import OutputError, writable
+    from puppet.io.outputs import OutputError, writable
 
     folder = Path(path)
     if folder.is_dir():
@@ -322,7 +321,7 @@ def _render(args: argparse.Namespace) -> int:
     """``puppet render``: the take (file or folder) and the output are checked before any frame."""
     import time
 
-    from .playback import render_take
+    from puppet.view.rendertake import render_take
 
     if len(args.take) > 1 or args.output.endswith(("/", os.sep)) or os.path.isdir(args.output):
         return _render_many(args)
@@ -339,7 +338,7 @@ def _render(args: argparse.Namespace) -> int:
 def _render_many(args: argparse.Namespace) -> int:
     """``puppet render TAKE... -o DIR/``: a line per take as it finishes (video, frames, sha256, or
     the error); exit code 2 if any take failed, the others rendered all the same."""
-    from .batch import RenderSettings, render_batch
+    from puppet.view.batch import RenderSettings, render_batch
 
     def report(result) -> None:
         if result.ok:
@@ -356,9 +355,9 @@ def _render_many(args: argparse.Namespace) -> int:
 def _replay(args: argparse.Namespace) -> int:
     """``puppet replay``: a window on the take, or its log replayed into a new .fap (then shown).
     Exit code 1 when the new .fap differs from the recorded one or that one cannot be read."""
-    from .replay import retake
-    from .takes import open_take
-    from .window import play_take
+    from puppet.io.takes import open_take
+    from puppet.live.retake import retake
+    from puppet.view.window import play_take
 
     path = args.take
     if args.through_devices or args.mapping or args.output:
@@ -384,7 +383,7 @@ def _face(path: str | None):
     """``--face``: the face at ``path`` (a face folder or a rigged mesh), or None for the embedded one."""
     if path is None:
         return None
-    from .face import FaceFileError, load_face
+    from puppet.face.model import FaceFileError, load_face
 
     face = load_face(path)
     if not face.feature_points:
@@ -396,7 +395,7 @@ def _face(path: str | None):
 
 def _export(args: argparse.Namespace) -> int:
     """``puppet export``: a take to .glb."""
-    from .gltf import export_glb
+    from puppet.view.gltf import export_glb
 
     info = export_glb(args.take, args.output, mode=args.mode, max_frames=args.max_frames, face=_face(args.face))
     print(f"{args.output}: {info['frames']} frames, {info['targets']} morph targets, "
@@ -406,7 +405,7 @@ def _export(args: argparse.Namespace) -> int:
 
 def _import_arkit(args: argparse.Namespace) -> int:
     """``puppet import-arkit``: a Live Link Face CSV to a take."""
-    from .arkit import DEFAULT_MAPPING, import_csv
+    from puppet.live.arkit import DEFAULT_MAPPING, import_csv
 
     folder = import_csv(args.csv, args.takes, args.name, args.fps, args.mapping or DEFAULT_MAPPING,
                         args.csv_fps)
@@ -416,7 +415,7 @@ def _import_arkit(args: argparse.Namespace) -> int:
 
 def _calibrate(args: argparse.Namespace) -> int:
     """``puppet calibrate``: record, then write the ranges into the mapping."""
-    from .calibrate import CalibrationError, calibrate
+    from puppet.live.calibrate import CalibrationError, calibrate
 
     if args.shipped_mapping:
         name = Path(args.mapping).stem
@@ -428,7 +427,7 @@ def _calibrate(args: argparse.Namespace) -> int:
 
 def _face_from_photo(args: argparse.Namespace) -> int:
     """``puppet face-from-photo``: a face folder from a photo and its landmarks."""
-    from .photoface import build_face_folder
+    from puppet.face.photo import build_face_folder
 
     print(build_face_folder(args.photo, args.landmarks, args.output))
     return 0
@@ -438,8 +437,8 @@ def _pick_landmarks(args: argparse.Namespace) -> int:
     """``puppet pick-landmarks``: serve the picker until the points are saved."""
     import webbrowser
 
-    from .outputs import writable
-    from .picker import PickerServer
+    from puppet.io.outputs import writable
+    from puppet.view.picker import PickerServer
 
     picker = PickerServer(args.photo, args.layout, writable(args.output, "landmark file"), port=args.port)
     print(f"click the points at {picker.url} (Ctrl-C to give up)")

@@ -6,8 +6,8 @@ import warnings
 import numpy as np
 import pytest
 
-from puppet.face import load_face
-from puppet.runtime import Runtime
+from puppet.face.model import load_face
+from puppet.runtime.runtime import Runtime
 
 
 @pytest.fixture(autouse=True, scope="session")

@@ -11,16 +11,10 @@ import numpy as np
 import pytest
 import yaml
 
-from puppet.arkit import (
-    DEFAULT_MAPPING,
-    CsvError,
-    import_csv,
-    parse_timecode,
-    read_live_link_csv,
-)
-from puppet.face import AU
-from puppet.mapping import load_mapping
-from puppet.takes import open_take
+from puppet.face.model import AU
+from puppet.io.takes import open_take
+from puppet.live.arkit import DEFAULT_MAPPING, CsvError, import_csv, parse_timecode, read_live_link_csv
+from puppet.live.mappingfile import load_mapping
 
 ROOT = Path(__file__).resolve().parents[1]
 NAMES = ["EyeBlinkLeft", "EyeBlinkRight", "JawOpen", "JawLeft", "MouthSmileLeft", "MouthSmileRight",

@@ -1,5 +1,5 @@
 """The auto-rig from landmarks: deterministic, regions partition the mesh, rotation and scale do
-not change the motion, landmark errors are named, iBUG 68 works (puppet.landmarks, puppet.autorig)."""
+not change the motion, landmark errors are named, iBUG 68 works (puppet.face.landmarks, puppet.face.autorig)."""
 
 from __future__ import annotations
 
@@ -8,12 +8,12 @@ import json
 import numpy as np
 import pytest
 
-from puppet.autorig import _loop_path_via, build_rig
-from puppet.bench import shared_assets
-from puppet.face import load_face
-from puppet.landmarks import IBUG_FDP, LandmarkError, read_landmarks
-from puppet.rig import rig_to_dict
-from puppet.runtime import Runtime
+from puppet.bench.deform import shared_assets
+from puppet.face.autorig import _loop_path_via, build_rig
+from puppet.face.landmarks import IBUG_FDP, LandmarkError, read_landmarks
+from puppet.face.model import load_face
+from puppet.face.rig import rig_to_dict
+from puppet.runtime.runtime import Runtime
 from tools.rig_faces import ict_inputs, mediapipe_inputs
 
 

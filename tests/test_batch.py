@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from puppet import batch
-from puppet.fapfile import read_fap, write_fap
+from puppet.io.fapfile import read_fap, write_fap
+from puppet.view import batch
 
 distributed = pytest.importorskip("dask.distributed")
 

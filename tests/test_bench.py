@@ -5,8 +5,8 @@ import json
 import numpy as np
 import pytest
 
-from puppet.bench import bench_face, performance, run_bench
-from puppet.face import load_face
+from puppet.bench.deform import bench_face, performance, run_bench
+from puppet.face.model import load_face
 
 
 def test_bench_face_reports_every_figure():
@@ -25,8 +25,8 @@ def test_the_benchmark_take_is_smooth():
 
 
 def test_run_bench_prints_json(capsys, monkeypatch):
-    monkeypatch.setattr("puppet.bench.bench_faces", lambda ict, subdivided=True: [(load_face(), None, "default")])
-    monkeypatch.setattr("puppet.bench.bench_inputs", lambda seconds: [{"adapter": "x", "samples_s": 1.0}])
+    monkeypatch.setattr("puppet.bench.deform.bench_faces", lambda ict, subdivided=True: [(load_face(), None, "default")])
+    monkeypatch.setattr("puppet.bench.deform.bench_inputs", lambda seconds: [{"adapter": "x", "samples_s": 1.0}])
     assert run_bench(frames=2, as_json=True, ict=False, flood_seconds=1.0, take_seconds=30.0) == 0
     report = json.loads(capsys.readouterr().out)
     assert report["latency"]["samples"] > 0 and report["latency"]["sample_to_drawn_ms"]["median"] > 0 and report["long_take"]["frames"] == 30 * 30 + 1
@@ -37,7 +37,7 @@ def test_run_bench_prints_json(capsys, monkeypatch):
 
 
 def test_every_adapter_carries_samples_through_its_mapping():
-    from puppet.inputbench import bench_inputs
+    from puppet.bench.inputs import bench_inputs
 
     rows = bench_inputs(seconds=0.3)
     assert [r.get("error") for r in rows] == [None] * len(rows)
@@ -63,7 +63,7 @@ def test_the_cli_refuses_an_unknown_section_in_one_line(capsys):
 
 
 def test_the_cli_sections_are_the_bench_sections():
-    from puppet.bench import SECTIONS
+    from puppet.bench.deform import SECTIONS
     from puppet.cli import BENCH_SECTIONS
 
     assert BENCH_SECTIONS == SECTIONS

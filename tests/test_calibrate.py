@@ -1,4 +1,4 @@
-"""puppet.calibrate: rest + sweep recordings -> min / centre / max written back into the YAML."""
+"""puppet.live.calibrate: rest + sweep recordings -> min / centre / max written back into the YAML."""
 
 from __future__ import annotations
 
@@ -8,12 +8,12 @@ import time
 import pytest
 import yaml
 
-import puppet.calibrate as cal
+import puppet.live.calibrate as cal
 from devices.base import Device
-from puppet.calibrate import CalibrationError, calibrate, write_calibration
 from puppet.cli import main
-from puppet.mapping import MappingError, load_mapping
-from puppet.shipped import shipped_mappings
+from puppet.io.shipped import shipped_mappings
+from puppet.live.calibrate import CalibrationError, calibrate, write_calibration
+from puppet.live.mappingfile import MappingError, load_mapping
 
 MAPPING = """\
 # A test box: the first comment line must survive calibration.

@@ -18,13 +18,7 @@ from polling import wait_for
 
 from devices import DeviceError, State, Url, open_device
 from devices.can_device import BadFrame, CanDevice, CanSignal, SignalDecoder, load_dbc
-from devices.simulated_can import (
-    AXES_ID,
-    EXTRA_ID,
-    JOYSTICK_DBC,
-    JOYSTICK_SIGNALS,
-    CanJoystick,
-)
+from devices.simulated_can import AXES_ID, EXTRA_ID, JOYSTICK_DBC, JOYSTICK_SIGNALS, CanJoystick
 
 _channels = itertools.count()
 

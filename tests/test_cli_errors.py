@@ -10,8 +10,9 @@ from pathlib import Path
 
 import pytest
 
-from puppet import cli, window
-from puppet.arkit import import_csv
+from puppet import cli
+from puppet.live.arkit import import_csv
+from puppet.view import window
 
 ROOT = Path(__file__).resolve().parents[1]
 MAPPING = str(ROOT / "mappings" / "arduino_sliders.yaml")
@@ -126,9 +127,9 @@ def test_with_a_display_bad_input_is_refused_before_the_window_opens(line, place
     monkeypatch.setenv("DISPLAY", ":99")
     opened = []
     monkeypatch.setattr(window, "open_window", lambda *a, **k: opened.append(a) or pytest.fail("window opened"))
-    import puppet.live
+    import puppet.view.livewindow
 
-    monkeypatch.setattr(puppet.live, "open_window", lambda *a, **k: opened.append(a) or pytest.fail("window opened"))
+    monkeypatch.setattr(puppet.view.livewindow, "open_window", lambda *a, **k: opened.append(a) or pytest.fail("window opened"))
     _one_clear_line(*_main(_argv(line, place), capsys))
     assert not opened
 
@@ -162,8 +163,8 @@ def test_every_error_class_in_puppet_is_a_puppet_error_with_its_builtin_base():
     from puppet.errors import PuppetError
 
     found = {}
-    for module in pkgutil.iter_modules(puppet.__path__):
-        mod = importlib.import_module(f"puppet.{module.name}")
+    for module in pkgutil.walk_packages(puppet.__path__, "puppet."):
+        mod = importlib.import_module(module.name)
         for name, value in vars(mod).items():
             if isinstance(value, type) and issubclass(value, Exception) and value.__module__ == mod.__name__:
                 found[name] = value

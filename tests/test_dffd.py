@@ -8,9 +8,9 @@ import scipy.sparse as sp
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from puppet.controls import catmull_rom_weights, lip_line_weights
-from puppet.dffd import DffdError, RegionDeformer, weighted_coefficients
-from puppet.sibson import sibson_coordinates
+from puppet.runtime.dffd import DffdError, RegionDeformer, weighted_coefficients
+from puppet.runtime.sibson import sibson_coordinates
+from puppet.runtime.spreading import catmull_rom_weights, lip_line_weights
 
 
 def _sheet(n: int = 15) -> np.ndarray:

@@ -22,10 +22,10 @@ import yaml
 from devices import BACKENDS, State, open_device
 from devices.serial_port import make_parser
 from puppet import cli
-from puppet.fapfile import read_fap
-from puppet.mapping import load_mapping
-from puppet.shipped import shipped_mapping
-from puppet.takes import open_take
+from puppet.io.fapfile import read_fap
+from puppet.io.shipped import shipped_mapping
+from puppet.io.takes import open_take
+from puppet.live.mappingfile import load_mapping
 
 ROOT = Path(__file__).resolve().parent.parent
 GUIDE = ROOT / "docs" / "guide"

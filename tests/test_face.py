@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import puppet
-from puppet.face import Face, FaceFileError, MissingFeaturePointsError, load_face, read_obj
+from puppet.face.model import Face, FaceFileError, MissingFeaturePointsError, load_face, read_obj
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO.parent / "shared"

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from puppet.cli import main
-from puppet.face import load_face
-from puppet.fapfile import write_fap
-from puppet.runtime import Runtime
+from puppet.face.model import load_face
+from puppet.io.fapfile import write_fap
+from puppet.runtime.runtime import Runtime
 
 
 @pytest.fixture(scope="module")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from puppet.faptable import UnknownFapError, faps
+from puppet.fap.table import UnknownFapError, faps
 
 
 def _translational(runtime) -> list:
@@ -31,7 +31,7 @@ def test_every_translational_fap_moves_its_point_by_value_times_fapu_along_its_d
     low, high = runtime.faps.reach
     capped = []
     for f in _translational(runtime):
-        value = min(150.0, high[f.number - 1])  # up to the face's reach (puppet.foldlimits)
+        value = min(150.0, high[f.number - 1])  # up to the face's reach (puppet.runtime.foldlimits)
         if value < 150:
             capped.append(f.number)
         moved = runtime.pose({f.number: 150.0})
@@ -88,7 +88,7 @@ def test_eyeballs_turn_left_and_down_for_positive_values(runtime, face):
 def test_the_eyes_turn_past_where_the_lids_stop_following_and_stop_at_50_degrees(runtime, face):
     """A gaze FAP's reach caps the lid skin it carries (``skin_reach``), not the eyeball: looking
     further down turns the eye on and folds nothing more; past 50 degrees the eye stops."""
-    from puppet.muscles import folded_triangles
+    from puppet.face.muscles import folded_triangles
 
     au, pitch = face.fapu["AU"], 25
     lids_stop = runtime.faps.skin_reach[1, pitch - 1]
@@ -227,7 +227,7 @@ def test_eyelids_never_cross(runtime, face, upper, lower, point_up, point_low):
 
 
 def test_fap_1_and_2_fields_a_face_cannot_show_pose_as_none_or_held(runtime):
-    from puppet.fap import limit_fields
+    from puppet.runtime.fapengine import limit_fields
 
     viseme, expression = limit_fields(np.array([20, -3, 900, 0]), np.array([9, -5, 2, 1e12, 0, 0]))
     assert viseme == (0, 0, 63.0) and expression == (0, 0.0, 2, 63.0)

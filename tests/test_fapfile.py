@@ -16,9 +16,18 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import puppet
-from puppet.faptable import clamp_ranges
-from puppet.fapfile import (COUNT_WIDTH, DEFAULT_FPS, FapError, FapStream, FapWarning, FapWriter,
-                            iter_fap, read_fap, write_fap)
+from puppet.fap.table import clamp_ranges
+from puppet.io.fapfile import (
+    COUNT_WIDTH,
+    DEFAULT_FPS,
+    FapError,
+    FapStream,
+    FapWarning,
+    FapWriter,
+    iter_fap,
+    read_fap,
+    write_fap,
+)
 
 REPO = Path(__file__).resolve().parents[1]
 CORPUS = Path(__file__).resolve().parents[2] / "shared" / "fap-corpus"
@@ -477,7 +486,7 @@ def test_writer_file_is_valid_after_every_frame(tmp_path):
 KILLED_WRITER = """
 import os, signal, sys
 import numpy as np
-from puppet.fapfile import FapWriter
+from puppet.io.fapfile import FapWriter
 out = FapWriter(sys.argv[1], 25, "killed")
 for i in range(int(sys.argv[2])):
     out.write_frame((np.arange(68) % 7 + i) * 10.0)

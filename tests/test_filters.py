@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from puppet.filters import Exponential, OneEuro, RateLimit
+from puppet.live.filters import Exponential, OneEuro, RateLimit
 
 # -- an independent transcription of the 1€ filter -------------------------------------------
 # Casiez, Roussel & Vogel, CHI 2012, the pseudocode as printed: a LowPassFilter object that keeps

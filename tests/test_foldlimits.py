@@ -1,5 +1,5 @@
 """No FAP, expression or viseme folds the default face; the limits that see to it act at pose time
-only, and a FAP still moves its own point by value x FAPU up to them (puppet.foldlimits)."""
+only, and a FAP still moves its own point by value x FAPU up to them (puppet.runtime.foldlimits)."""
 
 from __future__ import annotations
 
@@ -10,14 +10,14 @@ from importlib.resources import files
 import numpy as np
 import pytest
 
-from puppet.autorig import _lid_share
-from puppet.fap import high_level_faps
-from puppet.fapfile import read_fap, write_fap
-from puppet.faptable import clamp_ranges, fap
-from puppet.foldlimits import CORNER_PAIRS, mirror
-from puppet.muscles import folded_triangles
-from puppet.rig import load_rig, save_rig
-from puppet.runtime import Runtime
+from puppet.face.autorig import _lid_share
+from puppet.face.muscles import folded_triangles
+from puppet.face.rig import load_rig, save_rig
+from puppet.fap.table import clamp_ranges, fap
+from puppet.io.fapfile import read_fap, write_fap
+from puppet.runtime.fapengine import high_level_faps
+from puppet.runtime.foldlimits import CORNER_PAIRS, mirror
+from puppet.runtime.runtime import Runtime
 
 
 def _folds(face, vertices) -> int:
@@ -37,7 +37,7 @@ def _needed(runtime) -> np.ndarray:
 def test_a_fap_folds_the_face_at_a_range_end_only_where_an_artist_shape_needs_that_far(runtime, face):
     """At both ends of every FAP's range the face shows the FAP's reach; that folds nothing,
     except for FAPs whose reach was widened to what a fit of the artist's ARKit shapes uses
-    (puppet.foldlimits.widened: the lip corners, open_jaw, the mid lips, the lids following the
+    (puppet.runtime.foldlimits.widened: the lip corners, open_jaw, the mid lips, the lids following the
     gaze down...). A gaze FAP's reach caps the lid skin it carries, not the eyeball."""
     low, high = clamp_ranges()
     need = _needed(runtime)
@@ -114,7 +114,7 @@ def test_a_value_beyond_the_reach_stays_in_the_file_and_is_capped_on_the_face(ru
 @pytest.fixture(scope="module")
 def following(face, runtime):
     """The default face with the lip corners following each other (``fold_safe(follow=True)``'s
-    ranges on it; the shipped rig leaves follow out, see puppet.foldlimits)."""
+    ranges on it; the shipped rig leaves follow out, see puppet.runtime.foldlimits)."""
     rig = copy.copy(runtime.rig)
     rig.fap_follow = {(6, 53): (-36.0, 9.8), (7, 54): (-36.0, 9.8), (12, 59): (-47.7, 41.0), (13, 60): (-47.7, 41.0)}
     return Runtime(face, rig, dtype=np.float64)

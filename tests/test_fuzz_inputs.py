@@ -24,14 +24,14 @@ from hypothesis import strategies as st
 from devices.base import DeviceError
 from devices.osc_packet import parse_datagram
 from devices.serial_port import MAX_FRAME, MAX_LINE, encode_cobs_frame, encode_slip_frame, make_parser
-from puppet.arkit import import_csv
 from puppet.errors import PuppetError
-from puppet.fapfile import read_fap, write_fap
-from puppet.mapping import MappingError, parse_mapping
-from puppet.shipped import shipped_mappings
-from puppet.playback import FapPlayback
-from puppet.replay import retake
-from puppet.takes import open_take
+from puppet.io.fapfile import read_fap, write_fap
+from puppet.io.shipped import shipped_mappings
+from puppet.io.takes import open_take
+from puppet.live.arkit import import_csv
+from puppet.live.mappingfile import MappingError, parse_mapping
+from puppet.live.retake import retake
+from puppet.view.rendertake import FapPlayback
 
 DOCUMENTED = (PuppetError, MappingError, DeviceError)
 MEMORY_BOUND = 32_000_000
@@ -253,7 +253,7 @@ def good_take(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="module")
 def shared(face):
-    from puppet.runtime import Runtime
+    from puppet.runtime.runtime import Runtime
 
     return face, Runtime(face)
 

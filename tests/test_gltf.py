@@ -12,9 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from puppet.fapfile import write_fap
-from puppet.gltf import export_glb
-from puppet.playback import FapPlayback
+from puppet.io.fapfile import write_fap
+from puppet.view.gltf import export_glb
+from puppet.view.rendertake import FapPlayback
 
 FPS = 25
 SIZES = {5126: 4, 5125: 4}

@@ -1,6 +1,6 @@
 """The skin under the jaw line: an opening, shifting or thrusting jaw stretches it smoothly into
 the still neck (no fold, no notch where jaw-carried skin meets the neck), and the neck below the
-throat stays put (``puppet.autorig``: the jaw band)."""
+throat stays put (``puppet.face.autorig``: the jaw band)."""
 
 import numpy as np
 import pytest
@@ -8,7 +8,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 import puppet
-from puppet.muscles import folded_triangles
+from puppet.face.muscles import folded_triangles
 
 JAW_POSES = [{"open_jaw": 250}, {"open_jaw": 500}, {"open_jaw": 824},
              {"shift_jaw": 104}, {"shift_jaw": -104}, {"thrust_jaw": 300}, {"thrust_jaw": 600},

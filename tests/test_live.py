@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from puppet import cli
-from puppet.fapfile import iter_fap
-from puppet.live import LiveStats, LiveView, live_title, open_session
-from puppet.takes import open_take
+from puppet.io.fapfile import iter_fap
+from puppet.io.takes import open_take
+from puppet.view.livewindow import LiveStats, LiveView, live_title, open_session
 
 LINUX_LIKE = sys.platform.startswith(("linux", "freebsd", "openbsd", "netbsd"))
 MAPPING = Path(__file__).resolve().parents[1] / "mappings" / "arduino_sliders.yaml"

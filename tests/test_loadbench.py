@@ -8,8 +8,8 @@ from __future__ import annotations
 import pytest
 
 from devices.base import Device
-from puppet import loadbench
-from puppet.runtime import Runtime
+from puppet.bench import pipeline as loadbench
+from puppet.runtime.runtime import Runtime
 
 
 @pytest.fixture(scope="module")

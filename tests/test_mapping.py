@@ -17,10 +17,10 @@ from hypothesis import strategies as st
 
 from devices.base import Sample
 from puppet import MappingError, load_mapping
-from puppet.face import AU
-from puppet.fap import high_level_faps
-from puppet.faptable import faps
-from puppet.mapping import (
+from puppet.face.model import AU
+from puppet.face.muscles import MUSCLE_NAMES
+from puppet.fap.table import faps
+from puppet.live.mappingfile import (
     BUTTON_KEYS,
     BUTTON_MODES,
     CHANNEL_KEYS,
@@ -37,7 +37,7 @@ from puppet.mapping import (
     fap_names,
     parse_mapping,
 )
-from puppet.muscles import MUSCLE_NAMES
+from puppet.runtime.fapengine import high_level_faps
 
 MAPPINGS = Path(__file__).resolve().parents[1] / "mappings"
 SCHEMA = json.loads((MAPPINGS / "schema.json").read_text())

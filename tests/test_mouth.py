@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 import puppet
-from puppet.autorig import build_rig
-from puppet.mouthcheck import mouth_pixels
+from puppet.face.autorig import build_rig
+from puppet.view.mouthcheck import mouth_pixels
 
 JAW_OPENINGS = np.arange(0.0, 1081.0, 120.0)
 
@@ -51,7 +51,7 @@ def test_closed_mouth_shows_neither_cavity_nor_teeth(face, runtime, open_mouth):
 
 
 def _mouth_bag(face) -> np.ndarray:
-    from puppet.autorig import _Builder
+    from puppet.face.autorig import _Builder
 
     skin = face.parts["skin"]
     return skin[_Builder(face)._mouth_bag(skin)]

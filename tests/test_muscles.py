@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.interpolate import LinearNDInterpolator
 
-from puppet.muscles import (
+from puppet.face.muscles import (
     EdgeConstraints,
     LinearMuscle,
     MuscleModel,

@@ -11,15 +11,15 @@ import pytest
 
 from devices import State, open_device
 from puppet import MappingError, load_mapping
-from puppet.autorig import build_rig
-from puppet.fapfile import read_fap
-from puppet.faptable import fap
-from puppet.muscles import MUSCLE_NAMES, folded_triangles
-from puppet.replay import retake
-from puppet.rig import rig_from_dict, rig_to_dict
-from puppet.runtime import MUSCLE_MODES, Runtime
-from puppet.session import LiveSession
-from puppet.takes import open_take
+from puppet.face.autorig import build_rig
+from puppet.face.muscles import MUSCLE_NAMES, folded_triangles
+from puppet.face.rig import rig_from_dict, rig_to_dict
+from puppet.fap.table import fap
+from puppet.io.fapfile import read_fap
+from puppet.io.takes import open_take
+from puppet.live.retake import retake
+from puppet.live.session import LiveSession
+from puppet.runtime.runtime import MUSCLE_MODES, Runtime
 
 JOYSTICK = "sim://joystick?protocol=ascii&rate=200&channels=6"
 SMILE_MAPPING = """\

@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from puppet.live import LiveView, open_session
-from puppet.overlay import device_lines
-from puppet.shipped import shipped_mappings
+from puppet.io.shipped import shipped_mappings
+from puppet.view.livewindow import LiveView, open_session
+from puppet.view.overlay import device_lines
 
 SIM_BOX = {"box": "sim://joystick?protocol=ascii&rate=200&channels=6"}
 SIZE = (960, 720)
@@ -94,8 +94,8 @@ def test_a_screenshot_of_the_real_window_under_xvfb_shows_the_cockpit(tmp_path):
 
 
 def test_calibration_from_the_window_guides_rest_then_sweep_and_writes_the_mapping(tmp_path, headless_window):
-    from puppet.calibrate import GuidedCalibration
-    from puppet.mapping import load_mapping
+    from puppet.live.calibrate import GuidedCalibration
+    from puppet.live.mappingfile import load_mapping
 
     mapping = tmp_path / "sliders.yaml"
     mapping.write_bytes(shipped_mappings()["arduino_sliders"].read_bytes())

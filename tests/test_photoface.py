@@ -1,5 +1,5 @@
-"""A face from one frontal photo (puppet.photoface), its folder (puppet.facefolder), the picker
-(puppet.picker) and the command. The photo is the default face itself, rendered frontally with a
+"""A face from one frontal photo (puppet.face.photo), its folder (puppet.face.folder), the picker
+(puppet.view.picker) and the command. The photo is the default face itself, rendered frontally with a
 long lens (nearly the orthographic projection the fit assumes), so the rebuilt face must be the
 default face again."""
 
@@ -12,12 +12,12 @@ import urllib.request
 import numpy as np
 import pytest
 
-from puppet import photoface as pf
 from puppet.cli import main
-from puppet.face import Face, load_face
-from puppet.facefolder import load_face_folder, load_folder_rig
-from puppet.picker import PickerServer
-from puppet.runtime import Runtime
+from puppet.face import photo as pf
+from puppet.face.folder import load_face_folder, load_folder_rig
+from puppet.face.model import Face, load_face
+from puppet.runtime.runtime import Runtime
+from puppet.view.picker import PickerServer
 
 SIZE = 512
 
@@ -25,7 +25,7 @@ SIZE = 512
 @pytest.fixture(scope="module")
 def shot():
     """(photo, projector): the default face rendered frontally, and its camera's projection."""
-    from puppet.render import Renderer
+    from puppet.view.renderer import Renderer
 
     face = load_face()
     try:
@@ -96,7 +96,7 @@ def test_texture_coordinates_land_inside_the_image(shot, fdp11):
 
 
 def test_the_command_writes_a_folder_that_loads_rigs_and_animates(shot, fdp11, tmp_path):
-    from puppet.render import render_face, save_png
+    from puppet.view.renderer import render_face, save_png
 
     photo, _ = shot
     save_png(photo, tmp_path / "photo.png")
@@ -115,9 +115,9 @@ def test_the_command_writes_a_folder_that_loads_rigs_and_animates(shot, fdp11, t
     textured, untextured = render_face(face, width=200, height=200), render_face(plain, width=200, height=200)
     assert np.abs(textured.astype(int) - untextured).max() > 30
 
-    from puppet.autorig import rig_for_face
-    from puppet.face import load_face as load_any
-    from puppet.fapfile import FapWriter
+    from puppet.face.autorig import rig_for_face
+    from puppet.face.model import load_face as load_any
+    from puppet.io.fapfile import FapWriter
 
     again = load_any(tmp_path / "me")                     # puppet ... --face me/
     assert rig_for_face(again).face_hash == again.content_hash == load_folder_rig(tmp_path / "me").face_hash
@@ -170,7 +170,7 @@ def test_wrong_counts_and_orders_are_refused(fdp11):
 
 
 def test_the_picker_saves_what_is_posted(shot, fdp11, tmp_path):
-    from puppet.render import save_png
+    from puppet.view.renderer import save_png
 
     save_png(shot[0], tmp_path / "photo.png")
     picker = PickerServer(tmp_path / "photo.png", "fdp11", tmp_path / "points.json")

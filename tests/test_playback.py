@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from puppet.demo import demo_take, run_demo
-from puppet.fapfile import FapFrame, read_fap, write_fap
 from puppet import cli
-from puppet.playback import FapPlayback, HeldFaps, render_take
-from puppet.takes import TakeError
+from puppet.io.fapfile import FapFrame, read_fap, write_fap
+from puppet.io.takes import TakeError
+from puppet.view.demo import demo_take, run_demo
+from puppet.view.rendertake import FapPlayback, HeldFaps, render_take
 
 
 def _frame(values: dict[int, float], viseme=None) -> FapFrame:

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 import puppet
-from puppet.autorig import build_rig
-from puppet.bench import shared_assets
-from puppet.examples import load_examples
+from puppet.bench.deform import shared_assets
+from puppet.face.autorig import build_rig
+from puppet.face.examples import load_examples
 from tools.realism import TARGETS, fap_ends, fits, fold_count, folds, residuals, summary, targets
 
 EXAMPLES = shared_assets() / "makehuman" / "faceunits_arkit"

@@ -11,8 +11,8 @@ import pytest
 import trimesh
 from PIL import Image
 
-from puppet.normals import VertexNormals
-from puppet.render import VIEW_DIRECTIONS, Renderer, render_face, save_png, write_video
+from puppet.runtime.normals import VertexNormals
+from puppet.view.renderer import VIEW_DIRECTIONS, Renderer, render_face, save_png, write_video
 
 WIDTH, HEIGHT = 192, 160
 CENTRE = np.array([0.0, 7.2, 1.0])

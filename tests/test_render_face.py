@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from puppet import rigid
-from puppet.face import load_face
-from puppet.runtime import Runtime
+from puppet.face import rigid
+from puppet.face.model import load_face
+from puppet.runtime.runtime import Runtime
 
-render = pytest.importorskip("puppet.render")
+render = pytest.importorskip("puppet.view.renderer")
 
 
 @pytest.fixture(scope="module")

@@ -8,11 +8,11 @@ import moderngl
 import numpy as np
 import pytest
 
-from puppet.face import load_face
-from puppet.playback import frame_head
-from puppet.runtime import Runtime
+from puppet.face.model import load_face
+from puppet.runtime.runtime import Runtime
+from puppet.view.rendertake import frame_head
 
-render = pytest.importorskip("puppet.render")
+render = pytest.importorskip("puppet.view.renderer")
 
 SIZE = (320, 240)
 POSES = {"neutral": {}, "joy": {"expression": (1, 63, 0, 0)}}

@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 
 from devices import State, open_device
-from puppet.fapfile import read_fap
-from puppet.replay import retake
-from puppet.runtime import Runtime
-from puppet.session import LiveSession
-from puppet.takes import TakeError, open_take
+from puppet.io.fapfile import read_fap
+from puppet.io.takes import TakeError, open_take
+from puppet.live.retake import retake
+from puppet.live.session import LiveSession
+from puppet.runtime.runtime import Runtime
 
 ROOT = Path(__file__).resolve().parents[1]
 MAPPING = ROOT / "mappings" / "arduino_sliders.yaml"
@@ -192,7 +192,7 @@ def test_puppet_replay_writes_and_checks_a_new_fap(live_take, tmp_path, capsys):
 
 
 def test_an_imported_arkit_take_can_be_re_mapped(tmp_path):
-    from puppet.arkit import DEFAULT_MAPPING, import_csv
+    from puppet.live.arkit import DEFAULT_MAPPING, import_csv
 
     names = ["JawOpen", "MouthSmileLeft", "MouthSmileRight", "BrowInnerUp"]
     rows = [f"00:00:00:{i:02d}.000,4," + ",".join(f"{(i * (k + 1) % 17) / 16:.4f}" for k in range(4))
@@ -244,7 +244,7 @@ def test_a_can_joystick_take_replays_through_can_frames_to_the_identical_fap(sha
     import uuid
 
     from devices.simulated_can import CanJoystick
-    from puppet.mapping import load_mapping
+    from puppet.live.mappingfile import load_mapping
 
     channel = f"replay-{uuid.uuid4().hex[:8]}"
     mapping_url = load_mapping(ROOT / "mappings" / "can_joystick.yaml").devices["stick"]

@@ -7,11 +7,11 @@ import json
 import numpy as np
 import pytest
 
-from puppet import rigid
-from puppet.face import load_default_rig, load_face
-from puppet.rig import load_rig, save_rig
-from puppet.runtime import Runtime
-from puppet.sibson import sibson_coordinates
+from puppet.face import rigid
+from puppet.face.model import load_default_rig, load_face
+from puppet.face.rig import load_rig, save_rig
+from puppet.runtime.runtime import Runtime
+from puppet.runtime.sibson import sibson_coordinates
 
 
 def _displace(rt: Runtime, moves: dict[str, tuple[float, float, float]]) -> np.ndarray:
@@ -61,7 +61,7 @@ def test_moving_the_nose_moves_no_forehead_vertex(runtime, face):
 
 
 def test_passive_points_carry_motion_across_their_border_one_way(face):
-    from puppet.autorig import build_rig
+    from puppet.face.autorig import build_rig
 
     runtime = Runtime(face, build_rig(face, grid=False, calibrated=False), dtype=np.float64)  # no grid point in the way
     lower_lip = runtime.deform(_displace(runtime, {"8.2": (0, -0.04, 0), "8.7": (0, -0.03, 0), "8.8": (0, -0.03, 0)}))
@@ -158,7 +158,7 @@ def test_cached_coefficients_load_the_same_rig_without_computing(face, tmp_path,
     def no_sibson(*args, **kwargs):
         raise AssertionError("Sibson coordinates were computed although they are cached")
 
-    monkeypatch.setattr("puppet.dffd.sibson_coordinates", no_sibson)
+    monkeypatch.setattr("puppet.runtime.dffd.sibson_coordinates", no_sibson)
     second = Runtime(face, dtype=np.float64)
     assert (first.B != second.B).nnz == 0
 
@@ -203,15 +203,15 @@ def test_normals_follow_the_deformation(runtime, face):
                                          ("upper_lid_r", (1, 0, 0), 20), ("head", (0.3, 1, 0.1), 25))}
     d = _displace(runtime, {"8.3": (0.02, 0.02, 0), "4.4": (0, 0.03, 0)})
     v, n = runtime.deform_with_normals(d, motions)
-    from puppet.normals import VertexNormals
+    from puppet.runtime.normals import VertexNormals
 
     np.testing.assert_allclose(n, VertexNormals(face.triangles, len(face.vertices))(v), atol=1e-9)
     np.testing.assert_allclose(np.linalg.norm(n, axis=1), 1.0, atol=1e-9)
 
 
 def test_the_shipped_rig_is_what_autorig_builds_today(face):
-    from puppet.autorig import build_rig
-    from puppet.rig import rig_to_dict
+    from puppet.face.autorig import build_rig
+    from puppet.face.rig import rig_to_dict
 
     shipped = rig_to_dict(load_default_rig())
     built = json.loads(json.dumps(rig_to_dict(build_rig(face, calibrated=False))))
@@ -237,7 +237,7 @@ def test_hybrid_eyelid_turns_its_margin_about_the_eyeball_and_the_lid_follows(ru
 
 
 def test_a_face_without_feature_points_cannot_be_rigged_and_says_which(tmp_path):
-    from puppet.rig import RigError
+    from puppet.face.rig import RigError
 
     path = tmp_path / "tet.obj"
     path.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 2 4\nf 1 3 4\nf 2 3 4\n")
@@ -246,7 +246,7 @@ def test_a_face_without_feature_points_cannot_be_rigged_and_says_which(tmp_path)
 
 
 def test_a_bad_rig_file_names_the_file_and_the_problem(tmp_path, runtime):
-    from puppet.rig import RigError, rig_to_dict
+    from puppet.face.rig import RigError, rig_to_dict
 
     data = rig_to_dict(runtime.rig)
     data["control_points"][0]["role"] = "dancing"

@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 
 from devices import open_device
 from devices.base import Sample, State
-from devices.samplelog import ReplayDevice, SampleLogWriter, read_sample_log
+from puppet.io.samplelog import ReplayDevice, SampleLogWriter, read_sample_log
 
 values = st.dictionaries(st.text("abcxyz0123._", min_size=1, max_size=8),
                          st.floats(allow_nan=False, allow_infinity=False), max_size=6)
@@ -80,7 +80,7 @@ def test_replay_as_fast_as_possible_and_a_missing_log_is_lost(tmp_path):
 
 
 def test_a_line_longer_than_the_limit_is_refused_unread(tmp_path):
-    from devices.samplelog import MAX_LINE, SampleLogError, read_sample_log
+    from puppet.io.samplelog import MAX_LINE, SampleLogError, read_sample_log
 
     log = tmp_path / "samples.jsonl"
     good = '{"t_ns": 1, "device": "box", "values": {"a": 1.0}}\n'
@@ -92,7 +92,7 @@ def test_a_line_longer_than_the_limit_is_refused_unread(tmp_path):
 
 
 def test_a_deeply_nested_line_is_a_sample_log_error(tmp_path):
-    from devices.samplelog import SampleLogError, read_sample_log
+    from puppet.io.samplelog import SampleLogError, read_sample_log
 
     log = tmp_path / "samples.jsonl"
     log.write_text("[" * 100_000 + "]" * 100_000 + "\n")

@@ -10,6 +10,7 @@ import time
 import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
+from polling import wait_for
 
 from devices import BACKENDS, DeviceError, State, open_device
 from devices.serial_port import (
@@ -27,7 +28,6 @@ from devices.serial_port import (
     slip_encode,
 )
 from devices.simulated_serial import PtyJoystick
-from polling import wait_for
 
 FRAMED = {"cobs": (encode_cobs_frame, b"\x00"), "slip": (encode_slip_frame, b"\xc0")}
 FAST_BACKOFF = (0.01, 0.05)

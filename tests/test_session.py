@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from devices import State, open_device
-from puppet.runtime import Runtime
-from puppet.session import LiveSession, measure_latency
-from puppet.takes import open_take
+from puppet.io.takes import open_take
+from puppet.live.session import LiveSession, measure_latency
+from puppet.runtime.runtime import Runtime
 
 MAPPING = Path(__file__).resolve().parents[1] / "mappings" / "arduino_sliders.yaml"
 JOYSTICK = "sim://joystick?protocol=ascii&rate=200&channels=6"
@@ -98,7 +98,7 @@ def test_a_slow_loop_still_writes_every_tick(session):
 
 
 def test_measure_latency_offscreen_counts_every_sample(session, face):
-    render = pytest.importorskip("puppet.render")
+    render = pytest.importorskip("puppet.view.renderer")
     try:
         renderer = render.Renderer(face.triangles, len(face.vertices), face.colors, width=320, height=240)
     except Exception as exc:  # no EGL here: the reason is the skip message

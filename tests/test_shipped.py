@@ -11,8 +11,8 @@ from pathlib import Path
 import pytest
 
 from puppet.errors import PuppetError
-from puppet.mapping import load_mapping
-from puppet.shipped import MappingExists, MappingNotFound, copy_mapping, mapping_path, shipped_mappings
+from puppet.io.shipped import MappingExists, MappingNotFound, copy_mapping, mapping_path, shipped_mappings
+from puppet.live.mappingfile import load_mapping
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -58,7 +58,7 @@ def test_the_wheel_carries_the_mappings_and_data_and_finds_them_from_another_fol
                    check=True, capture_output=True)
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()
-    probe = ("import puppet, puppet.shipped as s, puppet.arkit as a; "
+    probe = ("import puppet, puppet.io.shipped as s, puppet.live.arkit as a; "
              "print(puppet.__file__); print(s.mapping_path('arduino_sliders')); print(a.DEFAULT_MAPPING)")
     env = {**os.environ, "PYTHONPATH": str(site)}
     out = subprocess.run([sys.executable, "-c", probe], cwd=elsewhere, env=env, check=True,
@@ -92,10 +92,10 @@ def test_puppet_mappings_lists_and_copies_and_a_wrong_name_is_one_line(tmp_path,
 
 
 def test_live_takes_go_where_takes_says(monkeypatch, tmp_path):
-    import puppet.live
+    import puppet.view.livewindow
     from puppet.cli import main
 
     seen = {}
-    monkeypatch.setattr(puppet.live, "run_live", lambda mapping, **kw: seen.update(kw, mapping=mapping))
+    monkeypatch.setattr(puppet.view.livewindow, "run_live", lambda mapping, **kw: seen.update(kw, mapping=mapping))
     assert main(["live", "--mapping", "arduino_sliders", "--takes", str(tmp_path)]) == 0
     assert seen["record_root"] == str(tmp_path) and seen["mapping"] == str(shipped_mappings()["arduino_sliders"])

@@ -8,8 +8,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial import ConvexHull, Delaunay, HalfspaceIntersection, QhullError, Voronoi
 
-from puppet import sibson
-from puppet.sibson import SibsonError, natural_neighbour_mask, sibson_coordinates
+from puppet.runtime import sibson
+from puppet.runtime.sibson import SibsonError, natural_neighbour_mask, sibson_coordinates
 
 ORACLE_TOL = 1e-9
 MODES = ["generic", "mirror", "grid"]

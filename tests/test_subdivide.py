@@ -2,8 +2,8 @@
 
 import numpy as np
 
-from puppet.face import load_face
-from puppet.subdivide import subdivide
+from puppet.face.model import load_face
+from puppet.face.subdivide import subdivide
 
 
 def test_subdividing_the_skin_keeps_indices_and_closes_loops():

@@ -13,12 +13,12 @@ import numpy as np
 import pytest
 
 from puppet import cli
-from puppet.arkit import import_csv
 from puppet.errors import PuppetError
-from puppet.fapfile import COUNT_WIDTH, read_fap, write_fap
-from puppet.playback import FapPlayback
-from puppet.replay import retake
-from puppet.takes import TakeError, open_take, take_fap
+from puppet.io.fapfile import COUNT_WIDTH, read_fap, write_fap
+from puppet.io.takes import TakeError, open_take, take_fap
+from puppet.live.arkit import import_csv
+from puppet.live.retake import retake
+from puppet.view.rendertake import FapPlayback
 
 
 @pytest.fixture(scope="module")
@@ -193,8 +193,8 @@ def test_every_take_error_is_a_puppet_error():
 
 def test_the_window_table_holds_extreme_takes_without_overflow(tmp_path, face):
     """The player's float32 table keeps what the face can show: 1e300 neither overflows nor warns."""
-    from puppet.runtime import Runtime
-    from puppet.window import HeldTable
+    from puppet.runtime.runtime import Runtime
+    from puppet.view.window import HeldTable
 
     fap = tmp_path / "huge.fap"
     values = np.zeros((3, 68))
@@ -212,9 +212,9 @@ def test_the_window_table_holds_extreme_takes_without_overflow(tmp_path, face):
 KILLED_RECORDER = """
 import os, signal, sys
 from devices.base import Sample
-from puppet.mapping import load_mapping
-from puppet.takeclock import TakeClock, default_muscle_faps
-from puppet.takes import TakeRecorder
+from puppet.live.mappingfile import load_mapping
+from puppet.live.takeclock import TakeClock, default_muscle_faps
+from puppet.io.takes import TakeRecorder
 mapping = load_mapping({mapping!r})
 rec = TakeRecorder({root!r}, "fast", 25, mapping_path={mapping!r}, devices={{"box": "sim://joystick"}},
                    extra={{"t0_ns": 0, "hold_ns": None, "mapping_state": mapping.snapshot()}})

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from devices.base import Sample
-from puppet.takes import TakeError, TakeRecorder, next_take_folder, open_take
+from puppet.io.takes import TakeError, TakeRecorder, next_take_folder, open_take
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -48,7 +48,7 @@ def test_a_killed_recorder_leaves_every_complete_frame_and_sample(tmp_path):
     script = f"""
 import os, signal, numpy as np
 from devices.base import Sample
-from puppet.takes import TakeRecorder
+from puppet.io.takes import TakeRecorder
 rec = TakeRecorder({str(tmp_path)!r}, "crash", 25)
 for i in range(7):
     rec.sample(Sample(i, "box", {{"ch0": float(i)}}))

@@ -21,20 +21,8 @@ from devices.can_device import CanDevice
 from devices.hid_descriptor import ReportLayout
 from devices.hid_device import HidDevice
 from devices.midi_device import MidiDevice
-from devices.simulated_can import (
-    AXES_ID,
-    EXTRA_ID,
-    JOYSTICK_DBC,
-    JOYSTICK_SIGNALS,
-    joystick_database,
-)
-from devices.simulated_hid import (
-    GAMEPAD_DESCRIPTOR,
-    FakeHidModule,
-    gamepad,
-    gamepad_report,
-    knobs_report,
-)
+from devices.simulated_can import AXES_ID, EXTRA_ID, JOYSTICK_DBC, JOYSTICK_SIGNALS, joystick_database
+from devices.simulated_hid import GAMEPAD_DESCRIPTOR, FakeHidModule, gamepad, gamepad_report, knobs_report
 from devices.twin import differences, open_twin
 
 EXAMPLES = settings(max_examples=300, deadline=None,

@@ -12,13 +12,13 @@ import numpy as np
 import pytest
 
 from puppet import cli
-from puppet import window as player
-from puppet.demo import demo_take
-from puppet.face import load_face
-from puppet.fapfile import FapWarning, write_fap
-from puppet.playback import FapPlayback
-from puppet.runtime import Runtime
-from puppet.window import HeldTable, NoDisplayError, PlayClock, check_display, window_title
+from puppet.face.model import load_face
+from puppet.io.fapfile import FapWarning, write_fap
+from puppet.runtime.runtime import Runtime
+from puppet.view import window as player
+from puppet.view.demo import demo_take
+from puppet.view.rendertake import FapPlayback
+from puppet.view.window import HeldTable, NoDisplayError, PlayClock, check_display, window_title
 
 LINUX_LIKE = sys.platform.startswith(("linux", "freebsd", "openbsd", "netbsd"))
 

@@ -21,8 +21,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from puppet import batch  # noqa: E402
-from puppet.fapfile import read_fap, write_fap  # noqa: E402
+from puppet.io.fapfile import read_fap, write_fap
+from puppet.view import batch
 
 
 def cut(stream, start: int, frames: int):

@@ -1,5 +1,5 @@
 """Median milliseconds per rendered frame (draw + RGB read-back) of the default face, for the
-renderer as it was (``--old-rev``'s puppet/render.py, loaded from git: the studio shader, 4x MSAA
+renderer as it was (``--old-rev``'s puppet/view/renderer.py, loaded from git: the studio shader, 4x MSAA
 by default), the renderer now (no AA, the default for this GL, 4x MSAA) and a minimal Lambert
 draw of the same triangles without MSAA (the floor). Configurations take turns, a few frames
 each, so a load that comes and goes on a shared machine hits them alike.
@@ -24,10 +24,10 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from puppet import render  # noqa: E402
-from puppet.face import load_face  # noqa: E402
-from puppet.playback import frame_head  # noqa: E402
-from puppet.runtime import Runtime  # noqa: E402
+from puppet.face.model import load_face
+from puppet.runtime.runtime import Runtime
+from puppet.view import renderer as render
+from puppet.view.rendertake import frame_head
 
 _LAMBERT_VS = """
 #version 330
@@ -82,8 +82,8 @@ class Lambert:
 
 
 def old_render_module(rev: str):
-    """puppet/render.py as it was at ``rev``, imported under another name."""
-    source = subprocess.run(["git", "-C", str(ROOT), "show", f"{rev}:puppet/render.py"],
+    """puppet/view/renderer.py as it was at ``rev``, imported under another name."""
+    source = subprocess.run(["git", "-C", str(ROOT), "show", f"{rev}:puppet/view/renderer.py"],
                             check=True, capture_output=True, text=True).stdout
     path = Path(tempfile.mkdtemp()) / "old_render.py"
     path.write_text(source)

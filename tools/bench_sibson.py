@@ -1,4 +1,4 @@
-"""Time puppet.sibson.sibson_coordinates on the realistic case: 36,000 queries x 48 sites.
+"""Time puppet.runtime.sibson.sibson_coordinates on the realistic case: 36,000 queries x 48 sites.
 
 Sites: 40 control points on a mirror-symmetric half-ellipsoid "face" (16 pairs (+-x, y, z) and 8
 points on x = 0) plus the 8 corners of the face's bounding box enlarged 1.5x about its centre.
@@ -35,7 +35,7 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 import scipy.sparse as sp  # noqa: E402
 
-from puppet import sibson  # noqa: E402
+from puppet.runtime import sibson
 
 SEMI_AXES = np.array([0.8, 1.0, 0.6])
 

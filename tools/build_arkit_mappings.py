@@ -2,7 +2,7 @@
 sent to the FAP vector that best reproduces it on the calibrated default face.
 
 The vectors come from puppet/data/arkit_faps.json (tools/build_default_rig.py solves them with
-puppet.fapcalibration.fit_faps against the artist-made example of each blendshape). A weight w of
+puppet.runtime.fapcalibration.fit_faps against the artist-made example of each blendshape). A weight w of
 a blendshape adds w x the vector: a row ``{fap: F, source: S, range: [0, v]}`` per FAP of the
 vector, FAPs under ``SMALLEST`` FAPU left out. Every blendshape's rows carry a comment with how
 much of the artist's shape the vector leaves unexplained. Head and eye angles (the CSV's) keep
@@ -41,14 +41,14 @@ CSV_HEADER = """\
 # Written by tools/build_arkit_mappings.py: edit that, not this file.
 #
 # A Live Link Face (Epic's iPhone app) / ARKit blendshape CSV imported as a take by
-# puppet.arkit.import_csv: every CSV row becomes one Sample from device `csv`, its channels named
+# puppet.live.arkit.import_csv: every CSV row becomes one Sample from device `csv`, its channels named
 # as in the CSV header (EyeBlinkLeft, JawOpen, MouthSmileLeft, ... -- not the _L / _R names of
 # the VMC / OSC trackers, see arkit_osc.yaml). Blendshape weights are 0..1. Left / Right are the
 # performer's own left and right, the face's own left and right in MPEG-4 (l / r in FAP names).
 #
 # Each blendshape drives the FAP vector that best reproduces the artist-made example of that
 # blendshape on the calibrated default face (puppet/data/arkit_faps.json, solved by
-# puppet.fapcalibration.fit_faps); its comment says how much of the example's motion the vector
+# puppet.runtime.fapcalibration.fit_faps); its comment says how much of the example's motion the vector
 # leaves unexplained (relative RMS residual). Targets that write the same FAP add up, so blends
 # of blendshapes add as ARKit's do.
 #
@@ -63,7 +63,7 @@ CSV_HEADER = """\
 #
 # The device is never opened by the importer (it feeds the rows itself); its URL replays nothing.
 # To re-map an imported take live, point a replay device at the take's samples.jsonl.
-description: Live Link Face / ARKit blendshape CSV (imported with puppet.arkit.import_csv)
+description: Live Link Face / ARKit blendshape CSV (imported with puppet.live.arkit.import_csv)
 
 devices:
   csv:
@@ -103,7 +103,7 @@ OSC_HEADER = """\
 #
 # Each blendshape drives the FAP vector that best reproduces the artist-made example of that
 # blendshape on the calibrated default face (puppet/data/arkit_faps.json, solved by
-# puppet.fapcalibration.fit_faps); its comment says how much of the example's motion the vector
+# puppet.runtime.fapcalibration.fit_faps); its comment says how much of the example's motion the vector
 # leaves unexplained (relative RMS residual). Opposite shapes (BrowInnerUp and BrowDown_L,
 # EyeBlink_L and EyeWide_L) write the same FAPs in opposite directions and add up. A light One
 # Euro filter takes the tracker's jitter out of the jaw, smile, blink and brows.

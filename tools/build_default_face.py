@@ -73,7 +73,7 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:
     sys.path.insert(0, str(REPO))
 
-from puppet.face import read_obj  # noqa: E402  (the project's own file-order OBJ reader)
+from puppet.face.model import read_obj
 
 DEFAULT_SOURCE = Path("../shared/assets/makehuman/base.obj")  # relative to the repository root
 DEFAULT_OUT = REPO / "puppet" / "data"
@@ -1355,13 +1355,13 @@ face oval) are carried the same way; `neck_cut` is added.
 ## The rig
 
 `default_rig.json` is the default face's rig, generated from its feature points by
-`puppet.autorig` (the same code rigs any face with feature points). Rebuild it after the face:
+`puppet.face.autorig` (the same code rigs any face with feature points). Rebuild it after the face:
 
 ```sh
 python tools/build_default_rig.py
 ```
 
-A test fails when the shipped rig differs from what `puppet.autorig` builds today.
+A test fails when the shipped rig differs from what `puppet.face.autorig` builds today.
 """
 
 

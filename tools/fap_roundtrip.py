@@ -13,9 +13,9 @@ import sys
 
 import numpy as np
 
-from puppet.face import load_face
-from puppet.faptable import faps
-from puppet.runtime import Runtime
+from puppet.face.model import load_face
+from puppet.fap.table import faps
+from puppet.runtime.runtime import Runtime
 
 
 def random_frame(rng: np.random.Generator, effects: dict[int, str]) -> np.ndarray:

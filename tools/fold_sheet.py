@@ -1,5 +1,5 @@
 """Draw docs/folds.png: the poses that folded the default face worst, before and after its fold
-limits (puppet.foldlimits), front view, framed on the face as tools/realism.py frames it.
+limits (puppet.runtime.foldlimits), front view, framed on the face as tools/realism.py frames it.
 
     .venv/bin/python tools/fold_sheet.py [--before RIG] [--out docs/folds.png]
 
@@ -18,9 +18,9 @@ from pathlib import Path
 import numpy as np
 
 import puppet
-from puppet.muscles import folded_triangles
-from puppet.render import Renderer
-from puppet.rig import load_rig
+from puppet.face.muscles import folded_triangles
+from puppet.face.rig import load_rig
+from puppet.view.renderer import Renderer
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from realism import TILE, frame, labelled, sheet  # noqa: E402  (a sibling tool)

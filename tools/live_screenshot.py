@@ -2,7 +2,7 @@
 
     xvfb-run -s "-screen 0 1280x800x24" .venv/bin/python tools/live_screenshot.py docs/live_cockpit.png
 
-Opens the real window (``puppet.window.open_window``: pyglet; under Xvfb when there is no
+Opens the real window (``puppet.view.window.open_window``: pyglet; under Xvfb when there is no
 screen), performs the shipped slider-box mapping with the simulated box for a second, turns the
 channel monitor on and saves the window's pixels.
 """
@@ -16,9 +16,9 @@ import time
 import numpy as np
 from PIL import Image
 
-from puppet.live import LiveView, open_session
-from puppet.shipped import shipped_mappings
-from puppet.window import open_window
+from puppet.io.shipped import shipped_mappings
+from puppet.view.livewindow import LiveView, open_session
+from puppet.view.window import open_window
 
 SIM_BOX = {"box": "sim://joystick?protocol=ascii&rate=200&channels=6"}
 

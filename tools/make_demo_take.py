@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from puppet.fapfile import FapWriter
+from puppet.io.fapfile import FapWriter
 
 FPS = 25
 # (viseme, frames): 0 none, 1 p/b/m, 2 f/v, 3 th, 4 t/d, 5 k/g, 6 ch/j/sh, 7 s/z, 8 n/l, 9 r,

@@ -53,8 +53,8 @@ import numpy as np
 from PIL import Image, ImageDraw
 from scipy.interpolate import LinearNDInterpolator
 
-from puppet.face import load_face
-from puppet.muscles import (
+from puppet.face.model import load_face
+from puppet.face.muscles import (
     EdgeConstraints,
     LinearMuscle,
     MuscleModel,
@@ -62,7 +62,7 @@ from puppet.muscles import (
     flat_grid,
     folded_triangles,
 )
-from puppet.runtime import Runtime
+from puppet.runtime.runtime import Runtime
 
 CONTRACTIONS = (0, 3, 5, 10)
 MODES = ("classic", "improved", "control-point, no guard", "control-point")

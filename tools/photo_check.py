@@ -1,7 +1,7 @@
 """An honest check of ``puppet face-from-photo`` on a face whose shape is known: the ICT face.
 
 The ICT-FaceKit neutral head (read from ``../shared/assets/ict_facekit``, never copied) is
-rendered frontally (``puppet.render``, its default portrait camera, a flat skin tone: ICT has no
+rendered frontally (``puppet.view.renderer``, its default portrait camera, a flat skin tone: ICT has no
 colours); its 68 iBUG landmark vertices are projected with the same camera to give the 2D
 landmarks a detector would. The face is built from that image (layout ibug68) and compared with
 the ICT mesh after a similarity alignment (Umeyama, on the 68 landmarks), relative to the ICT
@@ -27,9 +27,9 @@ import trimesh
 from PIL import Image, ImageDraw
 from scipy.spatial import cKDTree
 
-from puppet import photoface as pf
-from puppet.face import Face, load_face
-from puppet.render import Renderer, render_face, save_png
+from puppet.face import photo as pf
+from puppet.face.model import Face, load_face
+from puppet.view.renderer import Renderer, render_face, save_png
 
 ROOT = Path(__file__).resolve().parents[1]
 ICT = ROOT.parent / "shared" / "assets" / "ict_facekit"
@@ -51,7 +51,7 @@ def umeyama(source: np.ndarray, target: np.ndarray) -> tuple[float, np.ndarray, 
 
 def face_area(face: Face) -> np.ndarray:
     """Skin vertices inside the face oval (frontal x, y) whose normal faces forward."""
-    from puppet.normals import VertexNormals
+    from puppet.runtime.normals import VertexNormals
 
     skin = face.parts["skin"]
     oval = face.vertices[face.contours["face_oval"], :2]
@@ -144,7 +144,7 @@ def _report(table: str, report: dict) -> str:
 
 `tools/photo_check.py` renders the ICT-FaceKit neutral head frontally ({SIZE}x{SIZE}, the
 renderer's portrait camera, flat skin tone), projects its 68 iBUG landmark vertices with the same
-camera as the detector's points, builds the face from that image (`puppet.photoface`, layout
+camera as the detector's points, builds the face from that image (`puppet.face.photo`, layout
 ibug68) and compares it with the ICT mesh after a similarity alignment on the 68 landmarks.
 Errors are relative to the ICT face width (landmark 0 to 16). "Face area": every rebuilt skin
 vertex inside the face oval facing forward, its distance to the ICT face-area surface.

@@ -7,7 +7,7 @@ Measures the default face (``puppet.load_face()``) against the ARKit example sha
 tongueOut are skipped and named):
 
 1. **Fit residual** |V(f) - V0 - D| / |D| over the vertices a shape moves
-   (``puppet.fapcalibration``), median and worst, with the FAPs fitted on the moved vertices and
+   (``puppet.runtime.fapcalibration``), median and worst, with the FAPs fitted on the moved vertices and
    on the whole skin: on the shipped (calibrated) rig, on the coarse uncalibrated rig
    (``build_rig(grid=False, calibrated=False)``) as a baseline, and on rigs calibrated here
    without some shapes (held-out and training shapes reported apart): the side split
@@ -18,7 +18,7 @@ tongueOut are skipped and named):
    FAP 3..68 alone at both ends of its range, for expressions 1..6 at intensity 63 and for
    visemes 0..14; and, as information, in the rig's fit of each ARKit shape.
 3. **Open mouth**: dark and teeth pixels inside the inner lip line at open_jaw 400
-   (``puppet.mouthcheck``).
+   (``puppet.view.mouthcheck``).
 4. **Targets**: met or missed for each.
 
 Images (unless ``--no-images``), in ``--out``: ``realism.png`` (each ARKit shape, the example
@@ -39,14 +39,14 @@ import numpy as np
 from PIL import Image, ImageDraw
 
 import puppet
-from puppet.autorig import build_rig
-from puppet.bench import shared_assets
-from puppet.examples import load_examples
-from puppet.fapcalibration import HELD_OUT, HELD_OUT_SIDE, calibrate, capacity, fit_faps, relative_residual
-from puppet.faptable import clamp_ranges, fap
-from puppet.mouthcheck import mouth_pixels
-from puppet.muscles import folded_triangles
-from puppet.render import Renderer
+from puppet.bench.deform import shared_assets
+from puppet.face.autorig import build_rig
+from puppet.face.examples import load_examples
+from puppet.face.muscles import folded_triangles
+from puppet.fap.table import clamp_ranges, fap
+from puppet.runtime.fapcalibration import HELD_OUT, HELD_OUT_SIDE, calibrate, capacity, fit_faps, relative_residual
+from puppet.view.mouthcheck import mouth_pixels
+from puppet.view.renderer import Renderer
 
 EXPRESSIONS = ("joy", "sadness", "anger", "fear", "disgust", "surprise")
 VISEMES = range(15)

@@ -14,9 +14,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
 from test_render_variants import POSES, _images, studio_4x  # noqa: E402
 
-from puppet.face import load_face  # noqa: E402
-from puppet.render import Renderer, save_png  # noqa: E402
-from puppet.runtime import Runtime  # noqa: E402
+from puppet.face.model import load_face
+from puppet.runtime.runtime import Runtime
+from puppet.view.renderer import Renderer, save_png
 
 
 def main(out: str = "docs/render_variants.png", size: tuple[int, int] = (640, 480)) -> None:

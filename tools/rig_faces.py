@@ -26,11 +26,11 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from puppet.autorig import build_rig
-from puppet.bench import shared_assets
-from puppet.face import Face, load_face
-from puppet.render import SKIN_SRGB, Renderer, save_png, texture_kwargs
-from puppet.runtime import Runtime
+from puppet.bench.deform import shared_assets
+from puppet.face.autorig import build_rig
+from puppet.face.model import Face, load_face
+from puppet.runtime.runtime import Runtime
+from puppet.view.renderer import SKIN_SRGB, Renderer, save_png, texture_kwargs
 
 EXPRESSIONS = ("joy", "sadness", "anger", "fear", "disgust", "surprise")
 

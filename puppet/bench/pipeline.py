@@ -1,0 +1,183 @@
+"""The live pipeline under load, for ``puppet bench``: latency, a flood of input, a long take.
+
+* ``latency``: the live session on the default face reading a slider box that runs in a process
+  of its own (``PtyJoystick`` on a pseudo-terminal, 200 readings/s, read by pyserial as
+  ``puppet live`` reads a port), every frame drawn and read back by a 640x480 offscreen renderer
+  with the live window's settings (``session.measure_latency``): every Sample, from its
+  timestamp to the first frame that shows it, mesh ready and frame drawn; medians and p99.
+* ``flood``: the same loop, recording a take, while the box sends ``rate`` readings a second
+  (COBS frames) for ``seconds``: frames per second against a baseline run in the same call at
+  200 readings/s, the samples taken in, the process's resident memory over time (flat: nothing
+  grows), and the device queue's longest backlog (bounded by ``Device.QUEUE``).
+* ``long_take``: a take of ``take_seconds`` made at an accelerated clock -- the recorder and
+  take clock, the parts that grow with a take's length, fed ``rate`` readings a second through
+  the shipped mapping (its muscles written as FAPs) as fast as they go -- with the resident
+  memory at checkpoints.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import tempfile
+import time
+
+import numpy as np
+
+from devices import open_device
+from devices.base import Sample, State
+from puppet.io.samplelog import LogEvent
+from puppet.io.shipped import shipped_mapping
+from puppet.io.takes import TakeRecorder
+from puppet.live.mappingfile import load_mapping
+from puppet.live.session import LiveSession, measure_latency
+from puppet.live.takeclock import TakeClock, default_muscle_faps
+from puppet.runtime.runtime import Runtime
+from puppet.view.renderer import Renderer
+
+MAPPING = shipped_mapping("arduino_sliders")
+PAGE = os.sysconf("SC_PAGE_SIZE")
+
+
+def rss_mb() -> float:
+    """This process's resident memory, in MiB (Linux ``/proc``)."""
+    with open("/proc/self/statm") as statm:
+        return int(statm.read().split()[1]) * PAGE / 2**20
+
+
+def _session(runtime: Runtime, url: str, root: str) -> LiveSession:
+    session = LiveSession(MAPPING, face=runtime, devices={"box": open_device(url, "box")}, record_root=root)
+    deadline = time.monotonic() + 5
+    while not (session.frame().states["box"] is State.OPEN and session.samples_fed):
+        if time.monotonic() > deadline:
+            session.close()
+            raise RuntimeError(f"the simulated box ({url}) did not start sending")
+        time.sleep(0.01)
+    return session
+
+
+def _renderer(runtime: Runtime, size: tuple[int, int]) -> Renderer:
+    """An offscreen renderer with the live window's settings (``render.choose_antialias``'s
+    default for this GL, as ``puppet live`` uses), so the latency measured is what it draws."""
+    from puppet.view.rendertake import frame_head
+
+    face = runtime.face
+    renderer = Renderer.for_face(face, width=size[0], height=size[1])
+    frame_head(renderer, face, "front")
+    return renderer
+
+
+def latency(runtime: Runtime, seconds: float = 3.0, size: tuple[int, int] = (640, 480)) -> dict:
+    """Input-to-frame latency of the live loop (see the module docstring)."""
+    spawn = multiprocessing.get_context("spawn")  # a clean process: no GL or threads of ours forked
+    with tempfile.TemporaryDirectory() as root:
+        link, stop = os.path.join(root, "box"), spawn.Event()
+        box = spawn.Process(target=serve_joystick, args=(link, 200.0, stop), daemon=True)
+        box.start()
+        try:
+            _wait_for(link, box)
+            session = _session(runtime, f"serial://{link}?protocol=ascii", root)
+            renderer = _renderer(runtime, size)
+            try:
+                return measure_latency(session, renderer, seconds)
+            finally:
+                renderer.release()
+                session.close()
+        finally:
+            stop.set()
+            box.join(5)
+
+
+def serve_joystick(link: str, rate: float, stop) -> None:
+    """A six-slider box sending ascii lines at ``rate`` on a pty behind ``link`` until ``stop``
+    is set: the external device of ``latency``, run in a process of its own."""
+    from devices.simulated_serial import PtyJoystick
+
+    with PtyJoystick("ascii", rate, 6, link=link) as joystick:
+        joystick.start()
+        stop.wait()
+
+
+def _wait_for(link: str, box) -> None:
+    deadline = time.monotonic() + 30
+    while not os.path.exists(link):
+        if not box.is_alive() or time.monotonic() > deadline:
+            raise RuntimeError(f"the slider box process did not start ({link})")
+        time.sleep(0.02)
+
+
+def _loop(session: LiveSession, renderer: Renderer, seconds: float) -> dict:
+    """Run frames (drawn and read back) for ``seconds``; fps, samples/s, memory and backlog."""
+    device = session.devices["box"]
+    frames, fed, backlog, rss = 0, session.samples_fed, 0, [rss_mb()]
+    start = last = time.perf_counter()
+    while (now := time.perf_counter()) - start < seconds:
+        backlog = max(backlog, device.backlog)
+        f = session.frame()
+        renderer.render(f.vertices, f.normals)
+        frames += 1
+        if now - last >= 1.0:
+            rss.append(rss_mb())
+            last = now
+    elapsed = time.perf_counter() - start
+    rss.append(rss_mb())
+    return {"fps": frames / elapsed, "samples_s": (session.samples_fed - fed) / elapsed, "rss_mb": rss,
+            "backlog_max": backlog, "dropped": device.counters.dropped}
+
+
+def flood(runtime: Runtime, seconds: float = 60.0, rate: float = 10_000.0,
+          size: tuple[int, int] = (320, 240)) -> dict:
+    """The live loop, recording, under ``rate`` readings a second (see the module docstring)."""
+    renderer = _renderer(runtime, size)
+    try:
+        with tempfile.TemporaryDirectory() as root:
+            calm = _session(runtime, "sim://joystick?protocol=cobs&rate=200&channels=6", root)
+            try:
+                baseline = _loop(calm, renderer, min(5.0, seconds))
+            finally:
+                calm.close()
+            session = _session(runtime, f"sim://joystick?protocol=cobs&rate={rate:g}&channels=6", root)
+            try:
+                session.start_recording()
+                loaded = _loop(session, renderer, seconds)
+                take = session.stop_recording()
+                take_mb = sum(p.stat().st_size for p in take.iterdir()) / 2**20
+            finally:
+                session.close()
+    finally:
+        renderer.release()
+    rss = loaded["rss_mb"]
+    settled = rss[min(len(rss) - 1, 2):] or rss
+    return {"seconds": seconds, "rate": rate, "baseline_fps": baseline["fps"], "fps": loaded["fps"],
+            "fps_ratio": loaded["fps"] / baseline["fps"], "samples_s": loaded["samples_s"],
+            "rss_start_mb": settled[0], "rss_end_mb": rss[-1], "rss_growth_mb": rss[-1] - settled[0],
+            "backlog_max": loaded["backlog_max"], "dropped": loaded["dropped"], "take_mb": take_mb}
+
+
+def long_take(take_seconds: float = 3600.0, rate: float = 100.0, fps: int = 30, checkpoints: int = 6) -> dict:
+    """A take of ``take_seconds`` at an accelerated clock; resident memory at each checkpoint."""
+    mapping = load_mapping(MAPPING)
+    rng = np.random.default_rng(7)
+    step = int(1e9 / rate)
+    total = int(take_seconds * rate)
+    resident = []
+    start = time.perf_counter()
+    with tempfile.TemporaryDirectory() as root:
+        recorder = TakeRecorder(root, "long", fps, mapping_path=MAPPING, devices=mapping.devices)
+        clock = TakeClock(mapping, recorder.frame, 0, fps, encode_muscles=default_muscle_faps)
+        values = rng.uniform(0, 1023, size=6)
+        for i in range(total):
+            values = np.clip(values + rng.normal(0, 8, size=6), 0, 1023)
+            sample = Sample(i * step, "box", {f"ch{c}": float(v) for c, v in enumerate(values)})
+            recorder.sample(sample)
+            clock.apply(sample)
+            if (i + 1) % (total // checkpoints) == 0:
+                resident.append(rss_mb())
+        end = LogEvent(total * step, "frame")
+        recorder.event(end)
+        clock.apply(end)
+        folder = recorder.close()
+        take_mb = sum(p.stat().st_size for p in folder.iterdir()) / 2**20
+    return {"take_seconds": take_seconds, "frames": clock.frames, "samples": total,
+            "wall_s": time.perf_counter() - start, "rss_mb": resident,
+            "rss_growth_mb": resident[-1] - resident[0], "take_mb": take_mb}

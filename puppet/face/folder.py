@@ -1,0 +1,170 @@
+"""A face folder: a face ready for ``--face``, written so that any OBJ viewer shows it and
+facepuppet loads and animates it like the default face. Two commands write one: ``puppet
+face-from-photo`` (a face built from a photo, ``puppet.face.photo``: textured) and ``puppet rig
+MESH --landmarks ... -o FOLDER/`` (any mesh, rigged from its landmarks: untextured).
+
+Files:
+
+* ``face.obj``: ``v x y z r g b`` (vertex colours: the fall-back colours; plain ``v x y z`` when
+  the mesh has none) and triangles in the face's vertex order; a textured face adds ``vt`` one per
+  vertex (``f a/a b/b c/c``) and ``face.mtl``, which names the texture;
+* ``texture.png`` (textured faces only): the photo cut to the head;
+* ``face.json``: what an OBJ cannot say: parts, feature points (FDP id -> xyz and vertex),
+  pivots, contours, where the face came from, and for a textured face the per-vertex texture
+  weight (how much of the photo shows over the vertex colour; see ``puppet.view.renderer``) and the
+  fit's report;
+* ``face.rig``: the auto-rig's rig of the face (``puppet.face.rig.save_rig``).
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from puppet.face.model import Face, FaceFileError, read_obj
+
+FACE_OBJ = "face.obj"
+FACE_MTL = "face.mtl"
+FACE_TEXTURE = "texture.png"
+FACE_JSON = "face.json"
+FACE_RIG = "face.rig"
+FORMAT = "facepuppet-face-folder"
+
+
+@dataclass
+class TexturedFace(Face):
+    """A face with a texture: ``uv`` is per vertex (N, 2) (``triangle_uv`` equals the
+    triangles), ``texture`` (H, W, 3) uint8 sRGB top row first, ``texture_weight`` (N,) 0-1."""
+
+    texture: np.ndarray | None = None
+    texture_weight: np.ndarray | None = None
+    rig_file: Path | None = None  # the folder's face.rig, which ``rig_for_face`` takes
+
+
+def write_face_folder(face: TexturedFace, out: str | os.PathLike, *, source_photo: str,
+                      report: dict) -> Path:
+    """Write the textured ``face`` into the folder ``out`` (created) as face.obj, face.mtl,
+    texture.png and face.json; return the folder."""
+    from puppet.view.renderer import save_png
+
+    folder = Path(out)
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / FACE_OBJ).write_text(_obj_text(face, f"a face from a photo ({face.name}): the MakeHuman hm08 "
+                                                   "default face (CC0) warped"), encoding="utf-8")
+    (folder / FACE_MTL).write_text(f"newmtl face\nKd 1 1 1\nmap_Kd {FACE_TEXTURE}\n", encoding="utf-8")
+    save_png(face.texture, folder / FACE_TEXTURE)
+    meta = _meta(face, source_photo=source_photo, texture_weight=np.round(face.texture_weight, 4).tolist(),
+                 fit=report)
+    (folder / FACE_JSON).write_text(json.dumps(meta), encoding="utf-8")
+    return folder
+
+
+def write_rigged_folder(face: Face, rig, out: str | os.PathLike, *, source_mesh: str) -> Path:
+    """Write a rigged, untextured ``face`` (a mesh given its landmarks) and its ``rig`` into the
+    folder ``out`` (created) as face.obj, face.json and face.rig; return the folder."""
+    from puppet.face.rig import save_rig
+
+    folder = Path(out)
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / FACE_OBJ).write_text(_obj_text(face, f"{face.name}, rigged from {Path(source_mesh).name}"),
+                                   encoding="utf-8")
+    (folder / FACE_JSON).write_text(json.dumps(_meta(face, source_mesh=source_mesh)), encoding="utf-8")
+    save_rig(rig, folder / FACE_RIG)
+    return folder
+
+
+def _meta(face: Face, **extra) -> dict:
+    """face.json: the face's parts, feature points, pivots and contours, and ``extra``."""
+    return {
+        "format": FORMAT, "version": 1, "name": face.name,
+        "parts": {k: v.tolist() for k, v in face.parts.items()},
+        "feature_points": {k: {"xyz": [round(float(c), 7) for c in p], "index": face.feature_vertices.get(k)}
+                           for k, p in face.feature_points.items()},
+        "pivots": {k: [float(c) for c in p] for k, p in face.pivots.items()},
+        "contours": {k: v.tolist() for k, v in face.contours.items()},
+        **extra,
+    }
+
+
+def _obj_text(face: Face, title: str) -> str:
+    """The OBJ file: header, then coloured vertices and triangles; with a texture, the material,
+    per-vertex uv and v/vt triangles."""
+    textured = getattr(face, "texture", None) is not None
+    out = io.StringIO()
+    out.write(f"# facepuppet face folder: {title}\n")
+    if textured:
+        out.write(f"mtllib {FACE_MTL}\nusemtl face\n")
+    if face.colors is not None:
+        np.savetxt(out, np.c_[face.vertices, face.colors], fmt="v %.7f %.7f %.7f %.4f %.4f %.4f")
+    else:
+        np.savetxt(out, face.vertices, fmt="v %.7f %.7f %.7f")
+    t = np.asarray(face.triangles, dtype=np.int64) + 1
+    if textured:
+        np.savetxt(out, face.uv, fmt="vt %.6f %.6f")
+        np.savetxt(out, np.repeat(t, 2, axis=1), fmt="f %d/%d %d/%d %d/%d")
+    else:
+        np.savetxt(out, t, fmt="f %d %d %d")
+    return out.getvalue()
+
+
+def load_face_folder(path: str | os.PathLike) -> TexturedFace:
+    """The face in a face folder (module docstring); errors name the folder and the file."""
+    folder = Path(path)
+    for name in (FACE_OBJ, FACE_JSON):
+        if not (folder / name).is_file():
+            raise FaceFileError(f"face folder {str(folder)!r} has no {name} (make one with `puppet rig MESH "
+                                f"--landmarks POINTS -o {folder}/` or `puppet face-from-photo`)")
+    try:
+        meta = json.loads((folder / FACE_JSON).read_text("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
+        raise FaceFileError(f"{folder / FACE_JSON}: not JSON ({exc})") from None
+    if not isinstance(meta, dict) or meta.get("format") != FORMAT:
+        raise FaceFileError(f"{folder / FACE_JSON}: not a face folder description")
+    mesh = read_obj(folder / FACE_OBJ)
+    positions, triangles, triangle_uv = mesh.triangulated()
+    feature_vertices = {k: int(e["index"]) for k, e in meta["feature_points"].items() if e.get("index") is not None}
+    feature_points = {k: positions[feature_vertices[k]].copy() if k in feature_vertices else np.array(e["xyz"], float)
+                      for k, e in meta["feature_points"].items()}
+    return TexturedFace(
+        name=meta.get("name") or folder.name,
+        vertices=positions,
+        triangles=triangles,
+        parts={k: np.array(v, dtype=np.int32) for k, v in meta["parts"].items()},
+        feature_points=feature_points,
+        feature_vertices=feature_vertices,
+        pivots={k: np.array(v, dtype=np.float64) for k, v in meta["pivots"].items()},
+        contours={k: np.array(v, dtype=np.int32) for k, v in meta["contours"].items()},
+        colors=mesh.colors,
+        **_texture(folder, meta, mesh, positions, triangles, triangle_uv),
+        rig_file=folder / FACE_RIG if (folder / FACE_RIG).is_file() else None,
+    )
+
+
+def _texture(folder: Path, meta: dict, mesh, positions: np.ndarray, triangles: np.ndarray,
+             triangle_uv: np.ndarray | None) -> dict:
+    """The texture fields of a textured folder (texture.png there), else none."""
+    if not (folder / FACE_TEXTURE).is_file():
+        return {}
+    from PIL import Image
+
+    if triangle_uv is None or not np.array_equal(triangle_uv, triangles) or len(mesh.uvs) != len(positions):
+        raise FaceFileError(f"{folder / FACE_OBJ}: expected one texture coordinate per vertex (f a/a b/b c/c)")
+    with Image.open(folder / FACE_TEXTURE) as image:
+        texture = np.asarray(image.convert("RGB"))
+    weight = np.array(meta.get("texture_weight", []), dtype=np.float32)
+    if len(weight) != len(positions):
+        raise FaceFileError(f"{folder / FACE_JSON}: {len(weight)} texture weights for {len(positions)} vertices")
+    return {"uv": mesh.uvs.astype(np.float32), "triangle_uv": triangles.copy(), "texture": texture,
+            "texture_weight": weight}
+
+
+def load_folder_rig(path: str | os.PathLike):
+    """The rig saved in a face folder (``face.rig``)."""
+    from puppet.face.rig import load_rig
+
+    return load_rig(Path(path) / FACE_RIG)

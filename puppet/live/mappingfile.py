@@ -1,0 +1,1279 @@
+"""Mappings: what a puppeteer's controls do to the face, written in YAML, checked before anything opens.
+
+A mapping names the devices to open, shapes every raw channel into a clean -1..1 or 0..1 value,
+and sends the shaped values to targets: FAPs (in FAPU units, as in a .fap file), muscles
+(contraction 0..1), visemes and expressions (MPEG-4 FAP 1 and 2), head and eye rotations::
+
+    # yaml-language-server: $schema=schema.json
+    description: two sliders and a stick
+    devices:
+      box: {url: "serial:///dev/ttyACM0", options: {baudrate: 115200}}
+      pad: {url: "hid://046d:c21d"}
+    channels:
+      box.ch0:                       # device.channel
+        min: 0                       # raw values, calibrated to 0..1 (range: unipolar, the default)
+        max: 1023
+        dead_zone: 0.03              # 0 at the zone's edge, rising linearly to 1 at full scale
+        curve: {type: expo, factor: 0.4}
+        smoothing: {type: one_euro, min_cutoff: 1.0, beta: 0.5, d_cutoff: 1.0}
+      pad.X:
+        range: bipolar               # min / centre / max -> -1 / 0 / 1
+        min: -32768
+        centre: 0
+        max: 32767
+        invert: true
+        rate_limit: 4.0              # shaped units per second
+      pad.A:
+        button: {mode: toggle, threshold: 0.5}
+    targets:
+      - {fap: open_jaw, source: box.ch0, range: [0, 600]}
+      - {muscle: zygomatic_major_l, source: box.ch0, gain: 0.5}
+      - {head: yaw, source: pad.X, range: [-30, 30]}          # degrees, written as FAP 49 in AU
+      - {expression: joy, source: [pad.A, box.ch0], combine: max}
+
+A channel is shaped in this order: calibrate (clamped to the range) -> invert -> button (toggle /
+momentary: the channel becomes 0 or 1) or dead zone -> curve -> smoothing -> rate limit.
+Curves act on the magnitude (a bipolar channel keeps its sign): ``linear``; ``expo`` with
+``factor`` k in 0..1, ``(1 - k) x + k x^3``; ``gamma``, ``x ** gamma``; ``points``, a
+piecewise-linear curve through ``[[0, y0], ..., [1, yn]]`` (x strictly rising, y never falling).
+Smoothing is ``{type: one_euro, min_cutoff, beta, d_cutoff}`` or ``{type: exponential, tau}``
+(seconds), both driven by the samples' timestamps (``puppet.live.filters``).
+
+A target takes one source or a list (``combine: sum`` (default), ``max`` -- the largest
+magnitude, sign kept -- or ``last``, the source fed most recently), multiplies by ``gain``
+(default 1), maps the source domain (0..1 or -1..1; a target's sources must agree) linearly onto
+``range`` and clamps to it (so a bipolar source's centre lands midway: give it a symmetric range,
+``[-200, 200]``, for a face at rest when the control is). ``range`` is required for ``fap``,
+``head``, ``eyes``, ``eye_l`` and ``eye_r``: degrees for the rotations, written as FAPs 48-50 /
+23-26 in AU with each FAP's own positive direction (pitch down, yaw toward the face's left, roll
+toward its right). Muscles (the default face's, ``puppet.face.muscles.MUSCLE_NAMES``; an unknown
+name names the closest) default to [0, 1], a contraction; visemes (blend) and expressions
+(intensity) to [0, 63]. Targets that write the same FAP or muscle add up. One source may feed any number of targets.
+
+Per-device ``options`` are folded into the device URL's query, so ``Mapping.devices`` is just
+{name: URL}. Before its first sample a channel reads 0 (the face at rest). ``pose(t_ns)`` carries
+smoothing and rate limits on to ``t_ns`` with each input held, without keeping anything: devices
+that only report changes (MIDI, HID) still settle between their messages.
+
+Visemes and expressions become the Pose's FAP 1 / FAP 2 fields: the strongest viseme is
+``(select, 0, blend)`` (blended against viseme 0, none), the two strongest expressions are
+``(select1, intensity1, select2, intensity2)``; any weaker ones are expanded into low-level FAPs
+and added to ``Pose.fap``, so the face changes continuously when the order of strengths changes.
+
+Loading is ``yaml.safe_load`` (nothing in a mapping is executed as code) and the whole file is
+checked before a device opens; every problem is reported with the file, line, key path
+(``targets[3].fap``), what was expected and, for names, the closest valid one.
+``mappings/schema.json`` says the same for editors (tests keep the two in step); what a schema
+cannot say (min < centre < max, monotonic points, sources naming declared channels) is checked
+here.
+
+``feed(sample)`` shapes the sample's channels at once (plain Python floats, no per-sample dict or
+YAML walking beyond the sample's own values); ``pose()`` combines the targets into a ``Pose``.
+"""
+
+from __future__ import annotations
+
+import bisect
+import difflib
+import math
+import os
+import re
+import reprlib
+from dataclasses import dataclass, field
+from pathlib import Path
+from urllib.parse import parse_qsl, urlencode, urlsplit
+
+import numpy as np
+import yaml
+
+from devices import BACKENDS, DeviceError
+from devices.base import Sample, Url, table_class
+from puppet.errors import PuppetError
+from puppet.face.model import AU
+from puppet.face.muscles import MUSCLE_NAMES
+from puppet.fap.table import N_FAPS, faps
+from puppet.live.filters import Exponential, OneEuro, RateLimit
+
+# -- the format -------------------------------------------------------------------------------
+
+ROOT_KEYS = ("devices", "channels", "targets", "description")
+DEVICE_KEYS = ("url", "options", "description")
+CHANNEL_KEYS = ("range", "min", "centre", "max", "invert", "dead_zone", "curve", "smoothing",
+                "rate_limit", "button", "description")
+CURVE_KEYS = {"linear": (), "expo": ("factor",), "gamma": ("gamma",), "points": ("points",)}
+SMOOTHING_KEYS = {"one_euro": ("min_cutoff", "beta", "d_cutoff"), "exponential": ("tau",)}
+ONE_EURO_DEFAULTS = {"min_cutoff": 1.0, "beta": 0.0, "d_cutoff": 1.0}
+BUTTON_KEYS = ("mode", "threshold", "release")
+BUTTON_MODES = ("toggle", "momentary")
+RANGES = ("unipolar", "bipolar")
+TARGET_KINDS = ("fap", "muscle", "viseme", "expression", "head", "eyes", "eye_l", "eye_r")
+TARGET_KEYS = TARGET_KINDS + ("source", "combine", "range", "gain", "description")
+COMBINE_MODES = ("sum", "max", "last")
+EXPRESSIONS = {"joy": 1, "sadness": 2, "anger": 3, "fear": 4, "disgust": 5, "surprise": 6}
+VISEMES = range(1, 15)
+HEAD_AXES = {"pitch": (48,), "yaw": (49,), "roll": (50,)}
+EYE_AXES = {"eyes": {"yaw": (23, 24), "pitch": (25, 26)},
+            "eye_l": {"yaw": (23,), "pitch": (25,)},
+            "eye_r": {"yaw": (24,), "pitch": (26,)}}
+DEFAULT_RANGES = {"muscle": (0.0, 1.0), "viseme": (0.0, 63.0), "expression": (0.0, 63.0)}
+NEEDS_RANGE = ("fap", "head", "eyes", "eye_l", "eye_r")
+
+DEVICE_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_-]*\Z")
+SOURCE = re.compile(r"([A-Za-z_][A-Za-z0-9_-]*)\.(\S+)\Z")
+URL = re.compile(r"([A-Za-z][A-Za-z0-9+.-]*):([A-Za-z][A-Za-z0-9+.-]*:)?//")  # serial:loop:// too
+DEG_TO_AU = math.pi / 180.0 / AU
+
+RAW_LIMIT = 1e12        # largest raw value a channel's min / centre / max may name
+RAW_SPAN = 1e-9         # nearest min, centre and max may be (so 1 / span stays finite)
+TARGET_LIMIT = 1e6      # largest target range end or gain (FAPU, degrees, contraction)
+FREQUENCY_LIMIT = 1e3   # Hz: One Euro cutoffs; beta likewise in 1 / (units per second)
+TAU_LIMIT = 3600.0      # seconds
+RATE_LIMIT = 1e6        # shaped units per second
+GAMMA_LIMIT = 100.0
+ALIAS_BUDGET = 10_000   # values a document's YAML aliases may add once expanded
+"""Every number a mapping holds has a sane range (the schema says the same), so that no mapping
+that loads can make a NaN or an infinity anywhere in the shaping: a cutoff of 1e308 Hz, a range
+of +-1e308 or a min and max 1e-320 apart are refused with the file, line and key path."""
+
+
+def fap_names() -> list[str]:
+    """Names a ``fap:`` target accepts (FAPs 3-68: FAP 1 and 2 are the viseme / expression targets)."""
+    return [f.name for f in faps() if f.number > 2]
+
+
+# -- errors -----------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Problem:
+    """One thing wrong in a mapping: where (key path, line) and what."""
+
+    path: str
+    line: int | None
+    message: str
+
+
+class MappingError(PuppetError, ValueError):
+    """A mapping that cannot be used; ``problems`` lists everything wrong, each on its own line."""
+
+    def __init__(self, file: str, problems: list[Problem]) -> None:
+        self.file, self.problems = file, list(problems)
+        super().__init__(str(self))
+
+    def __str__(self) -> str:
+        lines = []
+        for p in self.problems:
+            where = f"{self.file}:{p.line}" if p.line else self.file
+            lines.append(f"{where}: {p.path}: {p.message}" if p.path else f"{where}: {p.message}")
+        return "\n".join(lines)
+
+
+# -- loading ----------------------------------------------------------------------------------
+
+def load_mapping(path: str | os.PathLike) -> Mapping:
+    """Read, check and compile a mapping file; ``MappingError`` lists every problem."""
+    file = str(path)
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise MappingError(file, [Problem("", None, f"cannot read the mapping: {exc}")]) from None
+    return parse_mapping(text, file)
+
+
+def parse_mapping(text: str, file: str = "<mapping>") -> Mapping:
+    """A mapping from YAML text (``file`` names it in errors)."""
+    try:
+        lines, duplicates, added = _lines(text)
+        data = yaml.safe_load(text) if added <= ALIAS_BUDGET else None
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None) or getattr(exc, "context_mark", None)
+        what = " ".join(filter(None, (getattr(exc, "context", None), getattr(exc, "problem", None)))) or str(exc)
+        kind = "YAML syntax error"
+        if isinstance(exc, yaml.constructor.ConstructorError):  # a !!python/... tag, say
+            kind, what = "unsupported YAML", f"{what}; expected plain data (mappings, lists, strings, numbers)"
+        at = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
+        raise MappingError(file, [Problem("", mark.line + 1 if mark else None, f"{kind}{at}: {what}")]) from None
+    except RecursionError:
+        raise MappingError(file, [Problem("", None, "the YAML is nested too deeply")]) from None
+    except ValueError as exc:  # a number PyYAML cannot build (an integer of over 4300 digits)
+        raise MappingError(file, [Problem("", None, f"expected numbers of sane size, found one that is "
+                                                    f"not ({_clip(str(exc), 60)})")]) from None
+    if added > ALIAS_BUDGET:
+        raise MappingError(file, [Problem("", None, f"expected YAML aliases to add at most {ALIAS_BUDGET:,} "
+                                                    f"values when expanded, found more (aliases nested in aliases)")])
+    return Mapping.from_data(data, file, lines=lines, duplicates=duplicates)
+
+
+def _lines(text: str) -> tuple[dict[tuple, int], list[Problem], int]:
+    """Line of every key path (from the composed YAML nodes), the keys written twice, and how
+    many values the document's aliases add when expanded (counted, never expanded)."""
+    root = yaml.compose(text, Loader=yaml.SafeLoader)
+    lines: dict[tuple, int] = {}
+    duplicates: list[Problem] = []
+    seen: set[int] = set()
+    sizes: dict[int, int] = {}
+    budget = ALIAS_BUDGET + 1
+
+    def expanded(node) -> int:
+        if id(node) not in sizes:
+            sizes[id(node)] = 0  # a node inside itself (a recursive alias) counts once
+            sizes[id(node)] = min(1 + sum(expanded(c) for c in _children(node)), budget)
+        return sizes[id(node)]
+
+    def walk(node, path: tuple, line: int) -> None:
+        lines.setdefault(path, line)
+        if id(node) in seen:  # an alias: walked once (no blow-up on nested aliases)
+            return
+        seen.add(id(node))
+        if isinstance(node, yaml.MappingNode):
+            first: dict[str, int] = {}
+            for key, value in node.value:
+                name = key.value if isinstance(key, yaml.ScalarNode) else None
+                key_line = key.start_mark.line + 1
+                if name is not None and name != "<<" and name in first:
+                    duplicates.append(Problem(_format_path(path + (name,)), key_line,
+                                              f"duplicate key {name!r} (first on line {first[name]}): "
+                                              f"expected each key once"))
+                elif name is not None:
+                    first[name] = key_line
+                walk(value, path + (name,), key_line)
+        elif isinstance(node, yaml.SequenceNode):
+            for i, item in enumerate(node.value):
+                walk(item, path + (i,), item.start_mark.line + 1)
+
+    if root is None:
+        return lines, duplicates, 0
+    distinct = _distinct_nodes(root)
+    budget += distinct
+    added = expanded(root) - distinct
+    if added <= ALIAS_BUDGET:
+        walk(root, (), root.start_mark.line + 1)
+    return lines, duplicates, added
+
+
+def _distinct_nodes(root) -> int:
+    """How many nodes a composed YAML document holds, each alias's target once."""
+    seen, stack = {id(root)}, [root]
+    while stack:
+        for child in _children(stack.pop()):
+            if id(child) not in seen:
+                seen.add(id(child))
+                stack.append(child)
+    return len(seen)
+
+
+def _children(node) -> list:
+    """A composed YAML node's keys and values, or items; none for a scalar."""
+    if isinstance(node, yaml.MappingNode):
+        return [n for pair in node.value for n in pair]
+    return node.value if isinstance(node, yaml.SequenceNode) else []
+
+
+def _format_path(path: tuple) -> str:
+    out = ""
+    for part in path:
+        if isinstance(part, int):
+            out += f"[{part}]"
+        elif isinstance(part, str) and re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", part):
+            out += f".{part}" if out else part
+        else:
+            out += f'["{part}"]'
+    return out
+
+
+_SHORT = reprlib.Repr()
+_SHORT.maxlevel, _SHORT.maxlist, _SHORT.maxdict, _SHORT.maxstring, _SHORT.maxother = 2, 6, 4, 60, 60
+_SHORT.maxlong = 40
+
+
+def _clip(text: str, n: int) -> str:
+    return text if len(text) <= n else text[:n - 3] + "..."
+
+
+def _got(value) -> str:
+    """What was found, in a few words: never longer than a line, whatever the value's size."""
+    if value is None:
+        return "nothing"
+    if isinstance(value, bool):
+        return f"{str(value).lower()} (a boolean)"
+    if isinstance(value, dict):
+        return "a mapping" if value else "an empty mapping"
+    if isinstance(value, int) and value.bit_length() > 128:
+        return f"an integer of about {int(value.bit_length() * 0.30103) + 1} digits"
+    text = _SHORT.repr(value)
+    if isinstance(value, list):
+        return text if len(text) <= 40 else f"a list of {len(value)} items"
+    return _clip(text, 60)
+
+
+def _finite(value) -> bool:
+    """A number (not a boolean) that is finite as a float: 1e400 written as an integer is not."""
+    if not _is_number(value):
+        return False
+    try:
+        return math.isfinite(value)
+    except OverflowError:
+        return False
+
+
+def _closest(word, choices) -> str:
+    if not isinstance(word, str):
+        return ""
+    close = difflib.get_close_matches(word, list(choices), n=1, cutoff=0.5)
+    if not close:
+        close = difflib.get_close_matches(word.lower(), [c.lower() for c in choices], n=1, cutoff=0.5)
+        close = [c for c in choices if c.lower() in close]
+    return f"; did you mean {close[0]!r}?" if close else ""
+
+
+def _is_number(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+# -- checking ---------------------------------------------------------------------------------
+
+@dataclass
+class _ChannelSpec:
+    name: str
+    device: str
+    channel: str
+    bipolar: bool
+    low: float
+    centre: float
+    high: float
+    invert: bool = False
+    dead_zone: float = 0.0
+    curve: tuple | None = None          # ("expo", k) | ("gamma", g) | ("points", xs, ys)
+    smoothing: tuple | None = None      # ("one_euro", min_cutoff, beta, d_cutoff) | ("exponential", tau)
+    rate_limit: float | None = None
+    button: tuple | None = None         # (mode, threshold, release)
+
+
+@dataclass
+class _TargetSpec:
+    kind: str
+    key: object                          # FAP number, muscle name, viseme / expression number, axis
+    sources: list[str]
+    combine: str = "sum"
+    range: tuple[float, float] | None = None
+    gain: float = 1.0
+
+
+class _Checker:
+    """Walks the loaded document once, collecting every problem with its path and line."""
+
+    def __init__(self, data, lines: dict[tuple, int] | None) -> None:
+        self.lines = lines or {}
+        self.problems: list[Problem] = []
+        # the declared names, even where their own entries have problems (so that a bad channel
+        # is reported once, not again at every source that names it)
+        top = data if isinstance(data, dict) else {}
+        self.declared_devices = top.get("devices") if isinstance(top.get("devices"), dict) else {}
+        self.declared_channels = top.get("channels") if isinstance(top.get("channels"), dict) else {}
+
+    def error(self, path: tuple, message: str) -> None:
+        line, p = None, path
+        while line is None:
+            line = self.lines.get(p)
+            if not p:
+                break
+            p = p[:-1]
+        self.problems.append(Problem(_format_path(path), line, message))
+
+    def expect(self, path: tuple, expected: str, value, hint: str = "") -> None:
+        self.error(path, f"expected {expected}, got {_got(value)}{hint}")
+
+    # -- small pieces ------------------------------------------------------------------------
+
+    def mapping(self, path: tuple, value, allowed, what: str, required=()) -> dict | None:
+        """``value`` as a dict with string keys among ``allowed``; None if it is no mapping."""
+        if not isinstance(value, dict):
+            self.expect(path, f"a mapping ({what})", value)
+            return None
+        for key in value:
+            if not isinstance(key, str):
+                self.expect(path + (key,), f"a key among {', '.join(allowed)}", key)
+            elif key not in allowed:
+                self.error(path + (key,), f"unknown key {key!r} in {what}: expected one of "
+                                          f"{', '.join(allowed)}{_closest(key, allowed)}")
+        for key in required:
+            if key not in value:
+                self.error(path, f"missing key {key!r}: {what} needs {', '.join(required)}")
+        return value
+
+    def number(self, path: tuple, value, low=None, high=None, low_open=False, high_open=False,
+               expected: str | None = None) -> float | None:
+        ok = _finite(value)
+        if ok and low is not None:
+            ok = value > low if low_open else value >= low
+        if ok and high is not None:
+            ok = value < high if high_open else value <= high
+        if not ok:
+            if expected is None:
+                expected = "a number"
+                if low is not None and high is not None:
+                    expected += f" from {low:g} to {high:g}" + (" (exclusive)" if low_open or high_open else "")
+                elif low is not None:
+                    expected = f"a number {'>' if low_open else '>='} {low:g}"
+            self.expect(path, expected, value)
+            return None
+        return float(value)
+
+    def raw_number(self, path: tuple, value) -> float | None:
+        """A raw device value (a channel's min, centre or max)."""
+        return self.number(path, value, -RAW_LIMIT, RAW_LIMIT,
+                           expected=f"a raw value from {-RAW_LIMIT:g} to {RAW_LIMIT:g}")
+
+    def choice(self, path: tuple, value, choices, what: str):
+        if isinstance(value, str) and value in choices:
+            return value
+        self.expect(path, f"{what}: one of {', '.join(map(str, choices))}", value, _closest(value, choices))
+        return None
+
+    def string(self, path: tuple, value) -> str | None:
+        if isinstance(value, str):
+            return value
+        self.expect(path, "a string", value)
+        return None
+
+    # -- the document ------------------------------------------------------------------------
+
+    def root(self, data) -> tuple[dict, dict, list] | None:
+        if not isinstance(data, dict):
+            self.expect((), "a mapping with the keys devices, channels and targets at the top of the file", data)
+            return None
+        self.mapping((), data, ROOT_KEYS, "a mapping file", required=("devices", "channels", "targets"))
+        if "description" in data:
+            self.string(("description",), data["description"])
+        devices = self.devices(data["devices"]) if "devices" in data else {}
+        channels = self.channels(data["channels"]) if "channels" in data else {}
+        targets = self.targets(data["targets"], channels) if "targets" in data else []
+        return devices, channels, targets
+
+    def devices(self, value) -> dict[str, str]:
+        path = ("devices",)
+        if not isinstance(value, dict) or not value:
+            self.expect(path, "a mapping of device name -> {url: ...} with at least one device", value)
+            return {}
+        out = {}
+        for name, spec in value.items():
+            where = path + (name,)
+            if not isinstance(name, str) or not DEVICE_NAME.match(name):
+                self.expect(where, "a device name of letters, digits, '_' and '-' (no dots)", name)
+                continue
+            spec = self.mapping(where, spec, DEVICE_KEYS, f"device {name!r}", required=("url",))
+            if spec is None:
+                continue
+            if "description" in spec:
+                self.string(where + ("description",), spec["description"])
+            url = spec.get("url")
+            m = URL.match(url) if isinstance(url, str) else None
+            if "url" in spec and m is None:
+                self.expect(where + ("url",), "a device URL scheme://..., e.g. 'serial:///dev/ttyACM0' "
+                                              "or 'serial:loop://'", url)
+                url = None
+            elif m is not None and m.group(1) not in BACKENDS:
+                self.error(where + ("url",), f"unknown device URL scheme {m.group(1)!r}: expected one of "
+                                             f"{', '.join(sorted(BACKENDS))}{_closest(m.group(1), BACKENDS)}")
+                url = None
+            options = spec.get("options", {})
+            if not isinstance(options, dict):
+                self.expect(where + ("options",), "a mapping of option -> string, number or boolean", options)
+                options = {}
+            good = {}
+            for key, option in options.items():
+                if not isinstance(key, str) or not (isinstance(option, str) or _finite(option)
+                                                    or isinstance(option, bool)):
+                    self.expect(where + ("options", key), "an option name with a string, number or boolean", option)
+                else:
+                    good[key] = option
+            if url is not None:
+                out[name] = self.url_with_options(where, url, good)
+                self.device_options(where, out[name], good)
+        return out
+
+    def device_options(self, where: tuple, url: str, options: dict) -> None:
+        """Every option of the device URL (its query and ``options``) is one its backend reads."""
+        try:
+            parsed = Url.parse(url)
+            backend = table_class(BACKENDS[parsed.scheme])
+        except (ImportError, DeviceError):  # a missing optional library is said when the device opens
+            return
+        for key in parsed.options:
+            problem = backend.unknown_option(parsed, key)
+            if problem:
+                self.error(where + (("options", key) if key in options else ("url",)), problem)
+
+    def url_with_options(self, where: tuple, url: str, options: dict) -> str:
+        """The URL with ``options`` folded into its query (an option given twice is an error)."""
+        if not options:
+            return url
+        parts = urlsplit(url)
+        query = dict(parse_qsl(parts.query))
+        extra = []
+        for key, value in options.items():
+            if key in query:
+                self.error(where + ("options", key), f"option {key!r} is also in the url: expected it once")
+                continue
+            extra.append((key, str(value).lower() if isinstance(value, bool) else str(value)))
+        if not extra:
+            return url
+        base, _, fragment = url.partition("#")
+        return base + ("&" if parts.query else "?") + urlencode(extra) + ("#" + fragment if fragment else "")
+
+    def channels(self, value) -> dict[str, _ChannelSpec]:
+        path = ("channels",)
+        if not isinstance(value, dict):
+            self.expect(path, "a mapping of device.channel -> channel options", value)
+            return {}
+        out = {}
+        for name, spec in value.items():
+            where = path + (name,)
+            m = SOURCE.match(name) if isinstance(name, str) else None
+            if m is None:
+                self.expect(where, "a channel named device.channel (e.g. box.ch0)", name)
+                continue
+            if m.group(1) not in self.declared_devices:
+                self.error(where, f"device {m.group(1)!r} is not defined: expected one of the devices "
+                                  f"({', '.join(map(str, self.declared_devices))})"
+                                  f"{_closest(m.group(1), self.declared_devices)}")
+            parsed = self.channel(where, name, m.group(1), m.group(2), {} if spec is None else spec)
+            if parsed is not None:
+                out[name] = parsed
+        return out
+
+    def channel(self, where: tuple, name: str, device: str, channel: str, spec) -> _ChannelSpec | None:
+        spec = self.mapping(where, spec, CHANNEL_KEYS, f"channel {name!r}")
+        if spec is None:
+            return None
+        before = len(self.problems)
+        polarity = spec.get("range", "unipolar")
+        if "range" in spec:
+            polarity = self.choice(where + ("range",), polarity, RANGES, "a channel range")
+        bipolar = polarity == "bipolar"
+        low = self.raw_number(where + ("min",), spec["min"]) if "min" in spec else (-1.0 if bipolar else 0.0)
+        high = self.raw_number(where + ("max",), spec["max"]) if "max" in spec else 1.0
+        centre = None
+        if "centre" in spec:
+            centre = self.raw_number(where + ("centre",), spec["centre"])
+            if polarity == "unipolar":
+                self.error(where + ("centre",), "centre applies to a bipolar channel: expected range: bipolar "
+                                                "with centre, or no centre")
+        if low is not None and high is not None:
+            if not low < high:
+                self.error(where + ("max",), f"expected max greater than min ({low:g}), got {high:g} "
+                                             f"(use invert: true for a reversed control)")
+            elif high - low < RAW_SPAN:
+                self.error(where + ("max",), f"expected max at least {RAW_SPAN:g} above min ({low:g}), got {high:g}")
+            elif centre is not None and bipolar and not low < centre < high:
+                self.error(where + ("centre",), f"expected centre between min ({low:g}) and max ({high:g}), "
+                                                f"got {centre:g}")
+            elif centre is not None and bipolar and min(centre - low, high - centre) < RAW_SPAN:
+                self.error(where + ("centre",), f"expected centre at least {RAW_SPAN:g} from min ({low:g}) "
+                                                f"and max ({high:g}), got {centre:g}")
+        invert = spec.get("invert", False)
+        if not isinstance(invert, bool):
+            self.expect(where + ("invert",), "true or false", invert)
+        dead = 0.0
+        if "dead_zone" in spec:
+            dead = self.number(where + ("dead_zone",), spec["dead_zone"], 0.0, 1.0, high_open=True,
+                               expected="a number from 0 to 1 (excluding 1): the fraction of the "
+                                        "calibrated range that reads 0")
+        curve = self.curve(where + ("curve",), spec["curve"], bipolar) if "curve" in spec else None
+        smoothing = self.smoothing(where + ("smoothing",), spec["smoothing"]) if "smoothing" in spec else None
+        rate = None
+        if "rate_limit" in spec:
+            rate = self.number(where + ("rate_limit",), spec["rate_limit"], 0.0, RATE_LIMIT, low_open=True,
+                               expected=f"a number > 0 and <= {RATE_LIMIT:g} (units per second)")
+        button = self.button(where + ("button",), spec["button"]) if "button" in spec else None
+        if "button" in spec:
+            for key in ("dead_zone", "curve"):
+                if key in spec:
+                    self.error(where + (key,), f"a button channel is 0 or 1: expected no {key} with button")
+        if "description" in spec:
+            self.string(where + ("description",), spec["description"])
+        if len(self.problems) > before:
+            return None
+        if centre is None:
+            centre = (low + high) / 2
+        return _ChannelSpec(name, device, channel, bipolar, low, centre, high, invert, dead, curve,
+                            smoothing, rate, button)
+
+    def curve(self, where: tuple, value, bipolar: bool) -> tuple | None:
+        kind = value.get("type") if isinstance(value, dict) else None
+        if not isinstance(value, dict):
+            self.expect(where, f"a mapping with a type ({', '.join(CURVE_KEYS)})", value)
+            return None
+        if "type" not in value:
+            self.error(where, f"missing key 'type': expected a curve type, one of {', '.join(CURVE_KEYS)}")
+            return None
+        if self.choice(where + ("type",), kind, CURVE_KEYS, "a curve type") is None:
+            return None
+        keys = ("type",) + CURVE_KEYS[kind]
+        if self.mapping(where, value, keys, f"a {kind} curve", required=keys) is None:
+            return None
+        if kind == "linear":
+            return None
+        if kind == "expo":
+            k = self.number(where + ("factor",), value.get("factor"), 0.0, 1.0,
+                            expected="a number from 0 (linear) to 1 (cubic)") if "factor" in value else None
+            return None if k is None else ("expo", k)
+        if kind == "gamma":
+            g = self.number(where + ("gamma",), value.get("gamma"), 0.0, GAMMA_LIMIT, low_open=True,
+                            expected=f"a number > 0 and <= {GAMMA_LIMIT:g}") if "gamma" in value else None
+            return None if g is None else ("gamma", g)
+        return self.points(where + ("points",), value.get("points"), bipolar) if "points" in value else None
+
+    def points(self, where: tuple, value, bipolar: bool) -> tuple | None:
+        expected = "a list of at least two [x, y] pairs, each number from 0 to 1"
+        if not isinstance(value, list) or len(value) < 2:
+            self.expect(where, expected, value)
+            return None
+        xs, ys = [], []
+        for i, pair in enumerate(value):
+            if not (isinstance(pair, list) and len(pair) == 2
+                    and all(_finite(v) and 0 <= v <= 1 for v in pair)):
+                self.expect(where + (i,), "an [x, y] pair of numbers from 0 to 1", pair)
+                return None
+            xs.append(float(pair[0]))
+            ys.append(float(pair[1]))
+        if xs[0] != 0.0 or xs[-1] != 1.0:
+            self.error(where, f"expected the points to run from x = 0 to x = 1, got x from {xs[0]:g} to {xs[-1]:g}")
+            return None
+        for i in range(1, len(xs)):
+            if not xs[i] > xs[i - 1]:
+                self.error(where + (i,), f"expected x strictly rising (a monotonic curve), got x = {xs[i]:g} "
+                                         f"after x = {xs[i - 1]:g}")
+                return None
+            if ys[i] < ys[i - 1]:
+                self.error(where + (i,), f"expected y never falling (a monotonic curve), got y = {ys[i]:g} "
+                                         f"after y = {ys[i - 1]:g}")
+                return None
+        if bipolar and ys[0] != 0.0:
+            self.error(where + (0,), f"expected [0, 0] first on a bipolar channel (the curve acts on the "
+                                     f"magnitude, so the centre must stay 0), got [0, {ys[0]:g}]")
+            return None
+        return ("points", tuple(xs), tuple(ys))
+
+    def smoothing(self, where: tuple, value) -> tuple | None:
+        if not isinstance(value, dict):
+            self.expect(where, f"a mapping with a type ({', '.join(SMOOTHING_KEYS)})", value)
+            return None
+        if "type" not in value:
+            self.error(where, f"missing key 'type': expected a smoothing type, one of {', '.join(SMOOTHING_KEYS)}")
+            return None
+        kind = self.choice(where + ("type",), value["type"], SMOOTHING_KEYS, "a smoothing type")
+        if kind is None:
+            return None
+        keys = ("type",) + SMOOTHING_KEYS[kind]
+        required = ("type", "tau") if kind == "exponential" else ("type",)
+        if self.mapping(where, value, keys, f"{kind} smoothing", required=required) is None:
+            return None
+        if kind == "exponential":
+            tau = self.number(where + ("tau",), value["tau"], 0.0, TAU_LIMIT, low_open=True,
+                              expected=f"a time constant in seconds > 0 and <= {TAU_LIMIT:g}") if "tau" in value else None
+            return None if tau is None else ("exponential", tau)
+        params = []
+        for key in SMOOTHING_KEYS["one_euro"]:
+            v = value.get(key, ONE_EURO_DEFAULTS[key])
+            params.append(self.number(where + (key,), v, 0.0, FREQUENCY_LIMIT, low_open=key != "beta",
+                                      expected=f"a number >= 0 and <= {FREQUENCY_LIMIT:g}" if key == "beta"
+                                      else f"a frequency in Hz > 0 and <= {FREQUENCY_LIMIT:g}"))
+        return None if None in params else ("one_euro", *params)
+
+    def button(self, where: tuple, value) -> tuple | None:
+        spec = self.mapping(where, value, BUTTON_KEYS, "a button", required=("mode",))
+        if spec is None or "mode" not in spec:
+            return None
+        mode = self.choice(where + ("mode",), spec["mode"], BUTTON_MODES, "a button mode")
+        threshold = self.number(where + ("threshold",), spec.get("threshold", 0.5), -1.0, 1.0,
+                                expected="a number from -1 to 1 (a shaped value)")
+        release = self.number(where + ("release",), spec["release"], -1.0, 1.0,
+                              expected="a number from -1 to 1 (a shaped value)") if "release" in spec else threshold
+        if threshold is not None and release is not None and release > threshold:
+            self.error(where + ("release",), f"expected release <= threshold ({threshold:g}), got {release:g}")
+            return None
+        if None in (mode, threshold, release):
+            return None
+        return (mode, threshold, release)
+
+    def targets(self, value, channels: dict) -> list[_TargetSpec]:
+        path = ("targets",)
+        if not isinstance(value, list) or not value:
+            self.expect(path, "a list of targets (at least one)", value)
+            return []
+        out = []
+        for i, spec in enumerate(value):
+            target = self.target(path + (i,), spec, channels)
+            if target is not None:
+                out.append(target)
+        return out
+
+    def target(self, where: tuple, spec, channels: dict) -> _TargetSpec | None:
+        spec = self.mapping(where, spec, TARGET_KEYS, "a target")
+        if spec is None:
+            return None
+        before = len(self.problems)
+        kinds = [k for k in TARGET_KINDS if k in spec]
+        if len(kinds) != 1:
+            got = f"{' and '.join(kinds)}" if kinds else "none"
+            self.error(where, f"expected exactly one of {', '.join(TARGET_KINDS)} in a target, got {got}")
+            kind, key = None, None
+        else:
+            kind = kinds[0]
+            key = self.target_key(where + (kind,), kind, spec[kind])
+        sources = self.sources(where + ("source",), spec.get("source"), channels) if "source" in spec else None
+        if "source" not in spec:
+            self.error(where, "missing key 'source': expected a source device.channel or a list of them")
+        combine = self.choice(where + ("combine",), spec["combine"], COMBINE_MODES, "a combine mode") \
+            if "combine" in spec else "sum"
+        gain = self.number(where + ("gain",), spec["gain"], -TARGET_LIMIT, TARGET_LIMIT) if "gain" in spec else 1.0
+        rng = None
+        if "range" in spec:
+            r = spec["range"]
+            if isinstance(r, list) and len(r) == 2 and all(_finite(v) and abs(v) <= TARGET_LIMIT for v in r):
+                rng = (float(r[0]), float(r[1]))
+            else:
+                unit = " in degrees" if kind in NEEDS_RANGE[1:] else " in FAPU units" if kind == "fap" else ""
+                self.expect(where + ("range",), f"two numbers [low, high]{unit}, each from {-TARGET_LIMIT:g} "
+                                                f"to {TARGET_LIMIT:g}", r)
+        elif kind in NEEDS_RANGE:
+            unit = "degrees" if kind != "fap" else "FAPU units"
+            self.error(where, f"missing key 'range': expected range: [low, high] in {unit} for a {kind}: target")
+        if "description" in spec:
+            self.string(where + ("description",), spec["description"])
+        if sources:
+            polarities = {channels[s].bipolar for s in sources}
+            if len(polarities) > 1:
+                self.error(where + ("source",), "expected sources that are all bipolar or all unipolar, got "
+                           + ", ".join(f"{s} ({'bipolar' if channels[s].bipolar else 'unipolar'})" for s in sources))
+        if len(self.problems) > before or kind is None or key is None or not sources:
+            return None
+        return _TargetSpec(kind, key, sources, combine, rng or DEFAULT_RANGES.get(kind), gain)
+
+    def target_key(self, where: tuple, kind: str, value):
+        if isinstance(value, float) and value.is_integer():  # 3.0 is the number 3, as in JSON
+            value = int(value)
+        if kind == "fap":
+            names = fap_names()
+            if isinstance(value, int) and not isinstance(value, bool):
+                if 3 <= value <= N_FAPS:
+                    return value
+                if value in (1, 2):
+                    self.error(where, f"FAP {value} is not a value: expected a FAP 3-68, and a "
+                                      f"{'viseme' if value == 1 else 'expression'}: target for FAP {value}")
+                    return None
+            elif isinstance(value, str):
+                if value in names:
+                    return names.index(value) + 3
+                if value in ("viseme", "expression"):
+                    self.error(where, f"FAP {value!r} is not a value: expected a FAP 3-68, and a {value}: target")
+                    return None
+            self.expect(where, "a FAP name or number 3-68", value, _closest(value, names))
+            return None
+        if kind == "muscle":
+            if value in MUSCLE_NAMES:
+                return value
+            self.expect(where, "a muscle of the default face (puppet.face.muscles.MUSCLE_NAMES)", value,
+                        _closest(value, MUSCLE_NAMES))
+            return None
+        if kind == "viseme":
+            if isinstance(value, int) and not isinstance(value, bool) and value in VISEMES:
+                return value
+            self.expect(where, "a viseme number 1-14", value)
+            return None
+        if kind == "expression":
+            if isinstance(value, int) and not isinstance(value, bool) and 1 <= value <= 6:
+                return value
+            if isinstance(value, str) and value in EXPRESSIONS:
+                return EXPRESSIONS[value]
+            self.expect(where, f"an expression number 1-6 or name ({', '.join(EXPRESSIONS)})", value,
+                        _closest(value, EXPRESSIONS))
+            return None
+        axes = HEAD_AXES if kind == "head" else EYE_AXES[kind]
+        return self.choice(where, value, axes, f"a {kind} axis")
+
+    def sources(self, where: tuple, value, channels: dict) -> list[str] | None:
+        items = [value] if isinstance(value, str) else value
+        if not isinstance(items, list) or not items:
+            self.expect(where, "a source device.channel or a list of them", value)
+            return None
+        out = []
+        for i, source in enumerate(items):
+            at = where if isinstance(value, str) else where + (i,)
+            m = SOURCE.match(source) if isinstance(source, str) else None
+            if m is None:
+                self.expect(at, "a source named device.channel (e.g. box.ch0)", source)
+            elif m.group(1) not in self.declared_devices:
+                self.error(at, f"source {source!r} names device {m.group(1)!r}, which is not defined: expected "
+                               f"one of the devices ({', '.join(map(str, self.declared_devices))})"
+                               f"{_closest(m.group(1), self.declared_devices)}")
+            elif source not in channels:
+                if source not in self.declared_channels:
+                    self.error(at, f"source {source!r} is not a channel of the mapping: expected one of "
+                                   f"the channels{_closest(source, self.declared_channels)} (add it under channels)")
+            else:
+                out.append(source)
+        return out if len(out) == len(items) else None
+
+
+def _check(data, file: str, lines=None, duplicates=()) -> tuple[dict, dict, list]:
+    checker = _Checker(data, lines)
+    checker.problems.extend(duplicates)
+    result = checker.root(data)
+    if checker.problems:
+        checker.problems.sort(key=lambda p: (p.line or 0))
+        raise MappingError(file, checker.problems)
+    return result
+
+
+# -- the compiled mapping ---------------------------------------------------------------------
+
+@dataclass
+class Pose:
+    """One frame for the face: 68 FAP values (FAPU; index 0 = FAP 1, FAP 1 and 2 left 0), FAP 1 and
+    FAP 2 as ``viseme`` (select1, select2, blend) and ``expression`` (select1, intensity1,
+    select2, intensity2), and muscle contractions 0..1 by name. ``Runtime.pose(pose.fap,
+    viseme=pose.viseme, expression=pose.expression)`` draws it."""
+
+    fap: np.ndarray
+    viseme: tuple | None = None
+    expression: tuple | None = None
+    muscles: dict[str, float] = field(default_factory=dict)
+    t_ns: int | None = None
+
+
+@dataclass(frozen=True)
+class ChannelState:
+    """What a monitor shows for one channel: the last raw value (None before any), the shaped
+    value, the targets it drives, and where the raw value sits in the channel's calibrated range
+    (0 at ``min``, 1 at ``max``; None before any)."""
+
+    name: str
+    raw: float | None
+    value: float
+    targets: tuple[str, ...]
+    raw_fraction: float | None = None
+
+
+def _curve_function(curve: tuple | None):
+    """The curve as a function of the magnitude 0..1 (None for linear)."""
+    if curve is None:
+        return None
+    if curve[0] == "expo":
+        k = curve[1]
+        return lambda m: m * ((1.0 - k) + k * m * m)
+    if curve[0] == "gamma":
+        g = curve[1]
+        return lambda m: m ** g
+    xs, ys = curve[1], curve[2]
+    last = len(xs) - 2
+
+    def points(m: float) -> float:
+        i = bisect.bisect_right(xs, m) - 1
+        i = 0 if i < 0 else last if i > last else i
+        t = (m - xs[i]) / (xs[i + 1] - xs[i])   # each step is monotonic in m, however close the xs
+        y = ys[i] + t * (ys[i + 1] - ys[i])
+        return ys[i] if y < ys[i] else ys[i + 1] if y > ys[i + 1] else y
+
+    return points
+
+
+class _Channel:
+    """One source channel, shaped in place on every sample (plain floats, no allocation)."""
+
+    __slots__ = ("name", "bipolar", "low", "centre", "k", "k_low", "k_high", "invert", "dead",
+                 "curve", "button", "threshold", "release", "pressed", "latched", "smoother",
+                 "limiter", "timed", "raw", "pre", "value", "out", "t_ns", "seq", "targets")
+
+    def __init__(self, spec: _ChannelSpec) -> None:
+        self.name = spec.name
+        self.bipolar = spec.bipolar
+        self.low, self.centre = spec.low, spec.centre
+        self.k = 1.0 / (spec.high - spec.low)
+        self.k_low = 1.0 / (spec.centre - spec.low)
+        self.k_high = 1.0 / (spec.high - spec.centre)
+        self.invert = spec.invert
+        self.dead = spec.dead_zone
+        self.curve = _curve_function(spec.curve)
+        self.button = spec.button[0] if spec.button else None
+        self.threshold, self.release = (spec.button[1], spec.button[2]) if spec.button else (0.0, 0.0)
+        if spec.smoothing is None:
+            self.smoother = None
+        elif spec.smoothing[0] == "one_euro":
+            self.smoother = OneEuro(*spec.smoothing[1:])
+        else:
+            self.smoother = Exponential(spec.smoothing[1])
+        self.limiter = RateLimit(spec.rate_limit) if spec.rate_limit else None
+        self.timed = self.smoother is not None or self.limiter is not None
+        self.targets: list[str] = []
+        self.reset()
+
+    def reset(self) -> None:
+        self.raw = None
+        self.pre = self.value = self.out = 0.0
+        self.t_ns = None
+        self.seq = -1
+        self.pressed = self.latched = False
+        for f in (self.smoother, self.limiter):
+            if f is not None:
+                f.reset()
+
+    def update(self, raw: float, t_ns: int, seq: int) -> None:
+        self.raw = raw
+        if self.bipolar:
+            d = raw - self.centre
+            x = d * self.k_high if d >= 0.0 else d * self.k_low
+            x = 1.0 if x > 1.0 else -1.0 if x < -1.0 else x
+            if self.invert:
+                x = -x
+        else:
+            x = (raw - self.low) * self.k
+            x = 1.0 if x > 1.0 else 0.0 if x < 0.0 else x
+            if self.invert:
+                x = 1.0 - x
+        if self.button is not None:
+            if self.pressed:
+                if x < self.release:
+                    self.pressed = False
+            elif x >= self.threshold:
+                self.pressed = True
+                self.latched = not self.latched
+            x = 1.0 if (self.latched if self.button == "toggle" else self.pressed) else 0.0
+        else:
+            m = -x if x < 0.0 else x
+            if self.dead:
+                m = 0.0 if m <= self.dead else (m - self.dead) / (1.0 - self.dead)
+            if self.curve is not None:
+                m = self.curve(m)
+            x = -m if x < 0.0 else m
+        self.pre = x
+        if self.smoother is not None:
+            x = self.smoother.step(x, t_ns)
+        if self.limiter is not None:
+            x = self.limiter.step(x, t_ns)
+        self.value = self.out = x
+        self.t_ns = t_ns
+        self.seq = seq
+
+    _STATE = ("raw", "pre", "value", "out", "t_ns", "seq", "pressed", "latched", "centre", "k_low", "k_high")
+
+    def recentre(self, centre: float) -> bool:
+        """Make ``centre`` the rest point of a bipolar channel (a stick that drifted); False when
+        it is not strictly inside the channel's range (nothing changes)."""
+        high = self.low + 1.0 / self.k
+        if not (self.bipolar and self.low < centre < high):
+            return False
+        self.centre = centre
+        self.k_low, self.k_high = 1.0 / (centre - self.low), 1.0 / (high - centre)
+        return True
+
+    def snapshot(self) -> dict:
+        """Everything ``update`` has built up, as JSON-able data (see ``Mapping.snapshot``)."""
+        data = {key: getattr(self, key) for key in self._STATE}
+        for key in ("smoother", "limiter"):
+            f = getattr(self, key)
+            data[key] = None if f is None else f.snapshot()
+        return data
+
+    def restore(self, data: dict) -> None:
+        for key in self._STATE:
+            setattr(self, key, data[key])
+        for key in ("smoother", "limiter"):
+            f = getattr(self, key)
+            if f is not None and data.get(key) is not None:
+                f.restore(data[key])
+
+    def preview(self, t_ns: int) -> float:
+        """The value a sample repeating the last input at ``t_ns`` would give (nothing is kept)."""
+        x = self.pre
+        if self.smoother is not None:
+            x = self.smoother.peek(x, t_ns)
+        if self.limiter is not None:
+            x = self.limiter.peek(x, t_ns)
+        return x
+
+
+_SUM, _MAX, _LAST = 0, 1, 2
+
+
+class _Guard:
+    """Targets whose value came out NaN (a corrupt restored state, say): each holds its last good
+    value; ``count`` counts such evaluations and ``first`` says what happened the first time."""
+
+    __slots__ = ("count", "first")
+
+    def __init__(self) -> None:
+        self.count, self.first = 0, None
+
+    def held(self, target: _Target) -> float:
+        self.count += 1
+        if self.first is None:
+            self.first = (f"{target.label} came out as NaN; its last good value ({target.last:g}) is held "
+                          f"(sources: {', '.join(s.name for s in target.sources)})")
+        return target.last
+
+
+class _Target:
+    """One target compiled: its sources, the affine map from their domain onto the range, a clamp."""
+
+    __slots__ = ("kind", "key", "slots", "sources", "mode", "gain", "x0", "scale", "low", "cmin", "cmax",
+                 "label", "last", "guard")
+
+    def __init__(self, spec: _TargetSpec, sources: list[_Channel], bipolar: bool, guard: _Guard) -> None:
+        self.kind, self.key = spec.kind, spec.key
+        self.guard = guard
+        self.sources = tuple(sources)
+        self.mode = (_SUM, _MAX, _LAST)[COMBINE_MODES.index(spec.combine)]
+        self.gain = spec.gain
+        low, high = spec.range
+        if spec.kind in ("head", "eyes", "eye_l", "eye_r"):
+            low, high = low * DEG_TO_AU, high * DEG_TO_AU
+        if spec.kind == "fap":
+            self.slots = (spec.key - 1,)
+        elif spec.kind == "head":
+            self.slots = tuple(n - 1 for n in HEAD_AXES[spec.key])
+        elif spec.kind in EYE_AXES:
+            self.slots = tuple(n - 1 for n in EYE_AXES[spec.kind][spec.key])
+        else:
+            self.slots = ()
+        self.x0 = -1.0 if bipolar else 0.0
+        self.scale = (high - low) / (1.0 - self.x0)
+        self.low = low
+        self.cmin, self.cmax = min(low, high), max(low, high)
+        if spec.kind == "muscle":
+            self.cmin, self.cmax = max(self.cmin, 0.0), min(self.cmax, 1.0)
+        elif spec.kind in ("viseme", "expression"):
+            self.cmin, self.cmax = max(self.cmin, 0.0), min(self.cmax, 63.0)
+        name = ""
+        if spec.kind == "fap":
+            name = faps()[spec.key - 1].name
+        elif spec.kind == "expression":
+            name = next(k for k, v in EXPRESSIONS.items() if v == spec.key)
+        self.label = f"{spec.kind} {spec.key}" + (f" {name}" if name else "")
+        rest = low - self.x0 * self.scale  # every source at 0: the value before any sample
+        self.last = self.cmin if rest < self.cmin else self.cmax if rest > self.cmax else rest
+
+    def evaluate(self) -> float:
+        sources = self.sources
+        if len(sources) == 1:
+            x = sources[0].out
+        elif self.mode == _SUM:
+            x = 0.0
+            for s in sources:
+                x += s.out
+        elif self.mode == _MAX:
+            x = 0.0
+            for s in sources:
+                v = s.out
+                if (v if v >= 0.0 else -v) > (x if x >= 0.0 else -x):
+                    x = v
+        else:
+            best = sources[0]
+            for s in sources:
+                if s.seq > best.seq:
+                    best = s
+            x = best.out
+        v = self.low + (self.gain * x - self.x0) * self.scale
+        v = self.cmin if v < self.cmin else self.cmax if v > self.cmax else v
+        if v != v:  # NaN (the clamp lets it through): hold the last good value, and say so
+            return self.guard.held(self)
+        self.last = v
+        return v
+
+
+class Mapping:
+    """A checked, compiled mapping: ``feed`` Samples in, take ``pose()`` out.
+
+    ``devices`` is {name: URL} (per-device options folded into the URL's query) for the session
+    to open; Samples whose ``device`` is one of these names are shaped, others are ignored."""
+
+    def __init__(self, file: str, devices: dict[str, str], channels: dict[str, _ChannelSpec],
+                 targets: list[_TargetSpec], description: str = "") -> None:
+        self.file = file
+        self.description = description
+        self.devices = dict(devices)
+        self.bad_values = 0
+        self._seq = 0
+        self._specs = dict(channels)
+        self._channels = {name: _Channel(spec) for name, spec in channels.items()}
+        self._by_device: dict[str, dict[str, _Channel]] = {}
+        for spec in channels.values():
+            self._by_device.setdefault(spec.device, {})[spec.channel] = self._channels[spec.name]
+        self._timed = tuple(c for c in self._channels.values() if c.timed)
+        self._guard = _Guard()
+        compiled = []
+        for spec in targets:
+            sources = [self._channels[s] for s in spec.sources]
+            target = _Target(spec, sources, sources[0].bipolar, self._guard)
+            compiled.append(target)
+            for s in sources:
+                if target.label not in s.targets:
+                    s.targets.append(target.label)
+        self._faps = tuple(t for t in compiled if t.slots)
+        self._muscles = tuple(t for t in compiled if t.kind == "muscle")
+        self._visemes = tuple(t for t in compiled if t.kind == "viseme")
+        self._expressions = tuple(t for t in compiled if t.kind == "expression")
+        self.muscle_names = tuple(dict.fromkeys(t.key for t in self._muscles))
+        self._shapes = None
+        if self._visemes or self._expressions:
+            from puppet.runtime.fapengine import high_level_faps
+
+            self._shapes = high_level_faps()
+
+    @classmethod
+    def from_data(cls, data, file: str = "<mapping>", *, lines: dict | None = None,
+                  duplicates=()) -> Mapping:
+        """Check and compile an already-loaded document (a dict as ``yaml.safe_load`` gives)."""
+        devices, channels, targets = _check(data, file, lines, duplicates)
+        return cls(file, devices, channels, targets, data.get("description", ""))
+
+    # -- the hot path --------------------------------------------------------------------------
+
+    def feed(self, sample) -> None:
+        """Shape the channels of one Sample (``t_ns``, ``device``, ``values``); filters use ``t_ns``."""
+        channels = self._by_device.get(sample.device)
+        if channels is None:
+            return
+        t_ns = sample.t_ns
+        for name, raw in sample.values.items():
+            channel = channels.get(name)
+            if channel is None:
+                continue
+            try:
+                raw = float(raw)
+            except (TypeError, ValueError, OverflowError):
+                self.bad_values += 1
+                continue
+            if raw != raw:  # NaN (the cheapest test for it): garbage from the device, skipped
+                self.bad_values += 1
+                continue
+            self._seq += 1
+            channel.update(raw, t_ns, self._seq)
+
+    def pose(self, t_ns: int | None = None) -> Pose:
+        """The Pose for the channels as last fed; with ``t_ns``, smoothing and rate limits are
+        carried on to that time with each input held (without changing the state), so the face
+        settles between the samples of devices that only report changes."""
+        if t_ns is None:
+            for c in self._timed:
+                c.out = c.value
+        else:
+            for c in self._timed:
+                c.out = c.preview(t_ns) if c.t_ns is not None and t_ns > c.t_ns else c.value
+        fap = np.zeros(N_FAPS)
+        for t in self._faps:
+            v = t.evaluate()
+            for i in t.slots:
+                fap[i] += v
+        muscles = dict.fromkeys(self.muscle_names, 0.0)
+        for t in self._muscles:
+            muscles[t.key] += t.evaluate()
+        for name, v in muscles.items():
+            muscles[name] = 0.0 if v < 0.0 else 1.0 if v > 1.0 else v
+        viseme = self._viseme(fap) if self._visemes else None
+        expression = self._expression(fap) if self._expressions else None
+        return Pose(fap, viseme, expression, muscles, t_ns)
+
+    def _strengths(self, targets) -> list[tuple[float, int]]:
+        """(strength 0..63, select) per distinct select, strongest first (ties: target order)."""
+        by_key: dict[int, float] = {}
+        for t in targets:
+            by_key[t.key] = by_key.get(t.key, 0.0) + t.evaluate()
+        order = sorted(by_key.items(), key=lambda kv: -kv[1])
+        return [(min(v, 63.0), k) for k, v in order]
+
+    def _viseme(self, fap: np.ndarray) -> tuple:
+        ranked = self._strengths(self._visemes)
+        w, select = ranked[0]
+        for weaker, other in ranked[1:]:
+            if weaker > 0.0:
+                fap += self._shapes["visemes"][other] * (weaker / 63.0)
+        return (select, 0, w) if w > 0.0 else (0, 0, 0.0)
+
+    def _expression(self, fap: np.ndarray) -> tuple:
+        ranked = self._strengths(self._expressions) + [(0.0, 0)]
+        (i1, s1), (i2, s2) = ranked[0], ranked[1]
+        for weaker, other in ranked[2:]:
+            if weaker > 0.0:
+                fap += self._shapes["expressions"][other] * (weaker / 63.0)
+        return (s1 if i1 > 0 else 0, i1, s2 if i2 > 0 else 0, i2)
+
+    @property
+    def held_values(self) -> int:
+        """How many target values came out NaN and were replaced by the target's last good one."""
+        return self._guard.count
+
+    @property
+    def held_problem(self) -> str | None:
+        """What the first such value was (None while there has been none), for a one-line report."""
+        return None if self._guard.first is None else f"{self.file}: {self._guard.first}"
+
+    # -- for people --------------------------------------------------------------------------
+
+    def channels(self) -> list[ChannelState]:
+        """Every channel: raw value, shaped value and the targets it drives (for a monitor)."""
+        return [ChannelState(c.name, c.raw, c.value, tuple(c.targets), None if c.raw is None else (c.raw - c.low) * c.k)
+                for c in self._channels.values()]
+
+    def drives(self, channel: str) -> tuple[set[int], set[str]]:
+        """What a channel (``device.channel``) moves: its FAP slots (0-based) and the high-level
+        kinds (``viseme``, ``expression``, ``muscle``) among its targets."""
+        if channel not in self._channels:
+            raise KeyError(f"{self.file}: no channel {channel!r}; channels: {', '.join(self._channels)}")
+        c = self._channels[channel]
+        slots: set[int] = set()
+        kinds: set[str] = set()
+        for t in (*self._faps, *self._muscles, *self._visemes, *self._expressions):
+            if c in t.sources:
+                slots.update(t.slots)
+                if t.kind in ("viseme", "expression", "muscle"):
+                    kinds.add(t.kind)
+        return slots, kinds
+
+    def resting(self) -> dict[str, float]:
+        """The last raw value of every bipolar channel that has one: where its stick rests when
+        the performer lets go (what ``recentre`` takes to undo drift)."""
+        return {name: c.raw for name, c in self._channels.items() if c.bipolar and c.raw is not None}
+
+    def recentre(self, centres: dict[str, float]) -> dict[str, float]:
+        """Make ``centres`` {channel: raw} the rest points of those bipolar channels; returns the
+        ones taken (a centre outside its channel's range is not)."""
+        return {name: raw for name, raw in centres.items()
+                if name in self._channels and self._channels[name].recentre(raw)}
+
+    def reset(self) -> None:
+        """Every channel back to rest (no sample seen, filters empty, buttons released)."""
+        for c in self._channels.values():
+            c.reset()
+        self._seq = 0
+
+    def snapshot(self) -> dict:
+        """The state the fed Samples left (raw and shaped values, filters, buttons), JSON-able
+        and exact: a take keeps it from its first frame, so replaying the take's log from it
+        gives the same poses as the live session did."""
+        return {"seq": self._seq, "channels": {name: c.snapshot() for name, c in self._channels.items()}}
+
+    def restore(self, snapshot: dict, recorded: Mapping | None = None) -> None:
+        """Take up a ``snapshot`` made by ``recorded`` (default: this mapping): exactly for every
+        channel shaped the same in both, and for the others by feeding their last raw input
+        again (their filters start settled on it). A re-mapped take starts from where the
+        performer's hands were."""
+        self.reset()
+        self._seq = snapshot["seq"]
+        specs = self._specs if recorded is None else recorded._specs
+        readings: dict[tuple[int, str], dict[str, float]] = {}
+        for name, data in snapshot["channels"].items():
+            channel = self._channels.get(name)
+            if channel is None:
+                continue
+            if specs.get(name) == self._specs[name]:
+                channel.restore(data)
+            elif data["raw"] is not None and data["t_ns"] is not None:
+                device, _, source = name.partition(".")
+                readings.setdefault((data["t_ns"], device), {})[source] = data["raw"]
+        for (t_ns, device), values in sorted(readings.items()):
+            self.feed(Sample(t_ns, device, values))
+
+    def __repr__(self) -> str:
+        return (f"Mapping({self.file!r}: {len(self.devices)} devices, {len(self._channels)} channels, "
+                f"{len(self._faps) + len(self._muscles) + len(self._visemes) + len(self._expressions)} targets)")

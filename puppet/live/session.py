@@ -1,0 +1,368 @@
+"""The live session: devices in, a deformed face out, once per frame, with an optional take.
+
+``LiveSession(mapping_path)`` loads the mapping, opens every device it names (``open_device``;
+``devices=`` replaces some or all of them by name, for tests) and starts their reader threads.
+``session.frame()`` is one turn of the live loop:
+
+1. drain every device (``Device.drain`` never blocks and empties the queue, so nothing queued
+   grows however slowly the loop runs), merging the devices' Samples in timestamp order;
+2. feed each Sample to the mapping (and, while recording, to the take's raw log; frame ticks
+   that fall before a Sample are written first, see *Recording*);
+3. take the mapping's Pose at ``now`` and deform the face into buffers allocated once
+   (``Frame.vertices`` / ``Frame.normals`` *are* those buffers: copy them to keep a frame).
+
+Holding the pose
+    While every device is OPEN the Pose is taken at ``now``, so smoothing settles between
+    samples. While any device is not OPEN (LOST, or OPENING between reconnection attempts) the
+    pose time is frozen at the last frame taken with every device open: the lost device's
+    channels (no new samples) give exactly the values of that frame, so the face holds still
+    instead of drifting on filter previews; other devices' new samples still come through at
+    their filtered values. When the device is back (OPEN) the clock runs again.
+
+Recording
+    ``start_recording()`` opens a ``TakeRecorder`` and a ``TakeClock`` (``puppet.live.takeclock``):
+    tick k of the take is at ``t0 + k / fps`` (t0: the clock when recording started), written
+    *between* the Samples, so the .fap has exactly ``fps`` frames per second of take time
+    whatever the loop rate, and a slow loop still writes the poses the performer made. Every
+    Sample goes to the take's raw log, and so does every other thing that decides a frame --
+    a device lost (``hold``: the gap in the take) or back (``resume``), the neutral key
+    (``reset``), a loop frame that wrote ticks (``frame``) -- together with the mapping's state
+    at t0 in the take's metadata, so that ``puppet.live.retake`` rebuilds the .fap exactly.
+    ``layer=`` (a ``takeclock.Layer``) records a pass over an earlier take: the face shows and
+    the take gets the base take's frames with the armed FAPs replaced by the live pose.
+Faults
+    A write to the take that fails in any way ends the take, marked incomplete with the error
+    (``record_error``), and the live face goes on; a frame that fails while recording ends the
+    take the same way before the error goes on up, so a take is only ever marked complete when
+    it was stopped normally. A mapping value that comes out NaN (``Mapping.held_values``) holds
+    its last good value, in the face and the take, and is reported once (``pose_error`` and a
+    warning), not per frame.
+Muscles
+    ``Pose.muscles`` is drawn with the FAPs in one frame (the runtime's control-point mode,
+    ``Runtime.deform(..., muscles=)``), and a take writes it as the FAPs the muscles' motion
+    measures (``Runtime.muscle_faps``, see ``puppet.live.takeclock``). A mapping naming a muscle this
+    face lacks is refused before any device opens.
+
+``measure_latency(session, renderer, seconds)`` times input-to-frame latency: from the newest
+Sample's timestamp (``time.monotonic_ns()`` right after the device's read returned) to the mesh
+being ready, and to the frame drawn and read back (``renderer.render``).
+"""
+
+from __future__ import annotations
+
+import heapq
+import os
+import statistics
+import time
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from devices import Device, State, open_device
+from devices.base import Sample
+from puppet.io.samplelog import LogEvent
+from puppet.io.takes import TakeError, TakeRecorder, take_fap
+from puppet.live.mappingfile import Pose, load_mapping
+from puppet.live.takeclock import Layer, TakeClock
+from puppet.runtime.runtime import Runtime
+
+
+@dataclass
+class Frame:
+    """One frame of the live loop. ``vertices`` and ``normals`` are the session's buffers,
+    overwritten by the next frame; ``newest_sample_ns`` is the newest Sample ever fed (None before
+    any); ``n_samples`` how many Samples this frame fed, ``sample_ns`` their timestamps."""
+
+    vertices: np.ndarray
+    normals: np.ndarray
+    pose: Pose
+    t_ns: int
+    newest_sample_ns: int | None
+    states: dict[str, State] = field(default_factory=dict)
+    n_samples: int = 0
+    sample_ns: tuple[int, ...] = ()
+
+
+class LiveSession:
+    """Devices -> mapping -> face runtime, one ``frame()`` at a time; optionally recording a take."""
+
+    def __init__(self, mapping_path: str | os.PathLike, *, face=None,
+                 devices: dict[str, Device] | None = None, record_root: str | os.PathLike | None = None,
+                 take_name: str = "take", fps: int = 30, layer_over: str | os.PathLike | None = None,
+                 arm: list[str] | tuple[str, ...] = ()) -> None:
+        self.mapping_path = Path(mapping_path)
+        self.mapping = load_mapping(mapping_path)  # checked before anything opens
+        self.layer = None if layer_over is None else Layer.armed(take_fap(layer_over), self.mapping, arm)
+        if isinstance(face, Runtime):
+            self.runtime = face
+        else:
+            if face is None:
+                from puppet.face.model import load_face
+
+                face = load_face()
+            self.runtime = Runtime(face)
+        missing = [m for m in self.mapping.muscle_names if m not in self.runtime.muscle_names]
+        if missing:
+            raise ValueError(f"{self.mapping_path}: this face has no muscle {missing[0]!r} "
+                             f"(it has {', '.join(self.runtime.muscle_names) or 'none'})")
+        self.record_root = Path(record_root) if record_root is not None else Path("takes")
+        self.take_name, self.fps = take_name, fps
+
+        overrides = dict(devices or {})
+        for name, device in overrides.items():
+            if device.name != name:
+                raise ValueError(f"device override {name!r}: the device is named {device.name!r}, so its "
+                                 f"Samples would not reach the mapping's {name!r} channels")
+        self.devices: dict[str, Device] = {}
+        self.urls: dict[str, str] = {}
+        try:
+            for name, url in self.mapping.devices.items():
+                self.devices[name] = overrides.pop(name) if name in overrides else open_device(url, name)
+            for name, device in overrides.items():  # extra devices: read (and logged), not mapped
+                self.devices[name] = device
+            for name, device in self.devices.items():
+                self.urls[name] = device.url or f"override:{type(device).__name__}"
+            for device in self.devices.values():
+                device.start()
+        except BaseException:
+            self._close_devices()
+            raise
+
+        self._vertices = np.empty_like(self.runtime.rest)
+        self._normals = np.empty_like(self.runtime.rest)
+        self._hold_ns: int | None = None    # pose time of the last frame with every device open
+        self._held = False                  # whether the pose is held (a device away)
+        self._last_pose_ns: int | None = None
+        self._have_mesh = False
+        self._reset_at: int | None = None   # the neutral key, applied at the next frame
+        self._recentre_at: int | None = None  # the recalibrate key, likewise
+        self.newest_sample_ns: int | None = None
+        self.samples_fed = 0
+        self.frames = 0
+        self._recorder = None
+        self._clock: TakeClock | None = None
+        self.record_error: str | None = None  # why the last take stopped on its own
+        self.pose_error: str | None = None    # the first mapping value held because it was NaN
+
+    # -- the live loop ----------------------------------------------------------------------
+
+    def frame(self, now_ns: int | None = None) -> Frame:
+        """Drain, map, deform: one frame at ``now_ns`` (default: ``time.monotonic_ns()``)."""
+        try:
+            return self._frame(now_ns)
+        except BaseException as exc:
+            if self._recorder is not None:  # never leave a take that failed looking complete
+                self._end_take(f"the live loop failed: {type(exc).__name__}: {exc}")
+            raise
+
+    def _frame(self, now_ns: int | None) -> Frame:
+        states = self.states
+        batches = [d.drain() for d in self.devices.values()]
+        now = time.monotonic_ns() if now_ns is None else int(now_ns)
+        if all(s is State.OPEN for s in states.values()):
+            pose_ns = now
+            self._hold_ns = now
+            if self._held:
+                self._held = False
+                self._apply(LogEvent(now, "resume"))
+        else:
+            pose_ns = now if self._hold_ns is None else min(now, self._hold_ns)
+            if not self._held and self._hold_ns is not None:
+                self._held = True
+                away = {n: s.name.lower() for n, s in states.items() if s is not State.OPEN}
+                self._apply(LogEvent(self._hold_ns, "hold", {"states": away}))
+        if self._reset_at is not None:
+            self._apply(LogEvent(self._reset_at, "reset"))
+            self._reset_at = None
+        if self._recentre_at is not None:
+            self._apply(LogEvent(self._recentre_at, "recentre", {"centres": self.mapping.resting()}))
+            self._recentre_at = None
+
+        if len(batches) == 1:
+            samples = batches[0]
+        else:
+            samples = list(heapq.merge(*batches, key=lambda s: s.t_ns))
+        for sample in samples:
+            self._apply(sample)
+            if self.newest_sample_ns is None or sample.t_ns > self.newest_sample_ns:
+                self.newest_sample_ns = sample.t_ns
+        self.samples_fed += len(samples)
+        if self._clock is not None and self._clock.due(now):
+            self._apply(LogEvent(now, "frame"))
+
+        pose = self.mapping.pose(pose_ns)
+        if self.pose_error is None and self.mapping.held_values:
+            self.pose_error = self.mapping.held_problem
+            warnings.warn(self.pose_error, RuntimeWarning, stacklevel=2)
+        if samples or pose_ns != self._last_pose_ns or not self._have_mesh or self.layer is not None:
+            fap, viseme, expression = pose.fap, pose.viseme, pose.expression
+            if self.layer is not None:
+                fap, viseme, expression = self._layered(now, pose)
+            d, motions = self.runtime.fap_controls(fap, viseme=viseme, expression=expression)
+            self.runtime.deform_with_normals(d, motions, out=self._vertices, normals_out=self._normals,
+                                             muscles=pose.muscles)
+            self._have_mesh = True
+        # else: nothing changed since the last frame (a held pose): the buffers already hold it
+        self._last_pose_ns = pose_ns
+        self.frames += 1
+        return Frame(self._vertices, self._normals, pose, now, self.newest_sample_ns, states, len(samples),
+                     tuple(sample.t_ns for sample in samples))
+
+    def neutral(self, now_ns: int | None = None) -> None:
+        """Every channel back to rest (the neutral key), at the next frame (and so in the take)."""
+        self._reset_at = time.monotonic_ns() if now_ns is None else int(now_ns)
+
+    def recentre(self, now_ns: int | None = None) -> None:
+        """Re-centre the bipolar channels where they are now (the recalibrate key: sticks let go
+        of), at the next frame; the take logs the new centres."""
+        self._recentre_at = time.monotonic_ns() if now_ns is None else int(now_ns)
+
+    def _apply(self, entry: Sample | LogEvent) -> None:
+        """One Sample or event: into the take (its log and its clock) while recording. A write
+        that fails (disk full, the folder gone) ends the take, marked incomplete, and the live
+        face goes on: ``record_error`` says what happened."""
+        if self._clock is not None:
+            try:
+                if isinstance(entry, Sample):
+                    self._recorder.sample(entry)
+                else:
+                    self._recorder.event(entry)
+                self._clock.apply(entry)
+                return
+            except OSError as exc:
+                self._end_take(str(exc.strerror or exc))
+            except Exception as exc:  # noqa: BLE001 -- any failed write ends the take, not the face
+                self._end_take(f"{type(exc).__name__}: {exc}")
+        if isinstance(entry, Sample):
+            self.mapping.feed(entry)
+        elif entry.kind == "reset":
+            self.mapping.reset()
+        elif entry.kind == "recentre":
+            self.mapping.recentre(entry.data["centres"])
+
+    def _end_take(self, why: str) -> None:
+        """End the take now, marked incomplete with ``why`` (``record_error``)."""
+        recorder, self._recorder, self._clock = self._recorder, None, None
+        self.record_error = f"{recorder.folder}: recording stopped after {recorder.frames} frames: {why}"
+        recorder.abandon(self.record_error)
+
+    def _layered(self, now: int, pose: Pose):
+        """The layered pass as shown: the base take where the take is now (its start before)."""
+        k = 0
+        if self._clock is not None:
+            k = max(0, (now - self._clock.t0_ns) * self.fps // 1_000_000_000)
+        return self.layer.merge(k, pose)
+
+    @property
+    def states(self) -> dict[str, State]:
+        return {name: d.state for name, d in self.devices.items()}
+
+    # -- recording --------------------------------------------------------------------------
+
+    @property
+    def recording(self) -> bool:
+        return self._recorder is not None
+
+    def start_recording(self, now_ns: int | None = None):
+        """Start a take under ``record_root`` (its first frame is at ``now_ns``, default now)."""
+        if self._recorder is not None:
+            raise RuntimeError("already recording")
+        t0 = time.monotonic_ns() if now_ns is None else int(now_ns)
+        hold_ns = self._hold_ns if self._held else None
+        layer = None
+        if self.layer is not None:  # shown and recorded from the base's start, each its own stream
+            self.layer, layer = self.layer.restarted(), self.layer.restarted()
+        extra = {"t0_ns": t0, "hold_ns": hold_ns, "mapping_state": self.mapping.snapshot(),
+                 "wire": {name: d.wire_info() for name, d in self.devices.items()},
+                 "layer": None if layer is None else layer.spec()}
+        try:
+            self._recorder = TakeRecorder(self.record_root, self.take_name, self.fps,
+                                          mapping_path=self.mapping_path, devices=self.urls, extra=extra)
+        except OSError as exc:
+            raise TakeError(f"{self.record_root}: cannot make a take folder there: {exc.strerror or exc}") from exc
+        self.record_error = None
+        self._clock = TakeClock(self.mapping, self._recorder.frame, t0, self.fps, hold_ns=hold_ns, layer=layer,
+                                encode_muscles=self.runtime.muscle_faps)
+        return self._recorder.folder
+
+    def stop_recording(self) -> Path:
+        """Finish the take (frames up to the last ``frame()``); returns its folder."""
+        if self._recorder is None:
+            raise RuntimeError("not recording")
+        recorder, self._recorder, self._clock = self._recorder, None, None
+        if self.layer is not None:  # the next pass shows the base from its start again
+            self.layer = self.layer.restarted()
+        return recorder.close()
+
+    # -- closing ----------------------------------------------------------------------------
+
+    def close(self) -> None:
+        """Finish any take and close every device (each one, even if another fails)."""
+        try:
+            if self._recorder is not None:
+                self.stop_recording()
+        finally:
+            self._close_devices()
+
+    def _close_devices(self) -> None:
+        errors = []
+        for device in self.devices.values():
+            try:
+                device.close()
+            except Exception as exc:  # noqa: BLE001 -- close the rest, then report
+                errors.append(exc)
+        if errors:
+            raise errors[0]
+
+    def __enter__(self) -> LiveSession:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+# -- latency ----------------------------------------------------------------------------------
+
+def _ms_stats(values_ns: list[int]) -> dict:
+    """Median and 99th percentile, in milliseconds (NaN when nothing was measured)."""
+    if not values_ns:
+        return {"median": float("nan"), "p99": float("nan")}
+    ms = sorted(v / 1e6 for v in values_ns)
+    return {"median": statistics.median(ms), "p99": ms[min(len(ms) - 1, int(np.ceil(0.99 * len(ms))) - 1)]}
+
+
+def measure_latency(session: LiveSession, renderer, seconds: float = 3.0) -> dict:
+    """Run the live loop for ``seconds``, rendering every frame offscreen, and time it.
+
+    Every Sample is measured from its timestamp to the first frame that shows it:
+    ``sample_to_drawn_ms`` until that frame is drawn and read back (``renderer.render``),
+    ``sample_to_mesh_ms`` until its vertices and normals are ready, before drawing;
+    ``frame_work_ms`` is a frame's own work from taking the Samples in to the mesh ready, and
+    ``draw_ms`` its drawing and read-back: a Sample waits for the frame being drawn when it
+    arrives, then for its own. Medians and 99th percentiles. The device's own transport (USB, the pty) comes before the Sample's
+    timestamp and is not included.
+    """
+    if renderer.camera is None:
+        renderer.frame(session.runtime.rest)
+    renderer.render(session.runtime.rest, session.runtime.rest_normals)  # warm-up (shaders, buffers)
+    drawn, mesh, work, draw = [], [], [], []
+    frames = 0
+    start = time.monotonic_ns()
+    end = start + int(seconds * 1e9)
+    while time.monotonic_ns() < end:
+        f = session.frame()
+        ready = time.monotonic_ns()
+        renderer.render(f.vertices, f.normals)
+        done = time.monotonic_ns()
+        frames += 1
+        draw.append(done - ready)
+        if f.sample_ns:
+            drawn.extend(done - t for t in f.sample_ns)
+            mesh.extend(ready - t for t in f.sample_ns)
+            work.append(ready - f.t_ns)
+    elapsed = (time.monotonic_ns() - start) / 1e9
+    return {"sample_to_drawn_ms": _ms_stats(drawn), "sample_to_mesh_ms": _ms_stats(mesh),
+            "frame_work_ms": _ms_stats(work), "draw_ms": _ms_stats(draw), "fps": frames / elapsed if elapsed else 0.0,
+            "frames": frames, "samples": len(drawn)}

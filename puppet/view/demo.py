@@ -1,0 +1,55 @@
+"""The main job on the embedded default face: replay the shipped demo take to a video.
+
+``demo_take.fap`` (made by ``tools/make_demo_take.py``) says a short sentence in visemes with a
+growing smile, blinks, glances and head motion. The demo renders it to MP4 and also writes a
+still of the frame with the mouth open widest beside the neutral face, for a quick look without
+a player.
+"""
+
+from __future__ import annotations
+
+import importlib.resources
+from pathlib import Path
+
+import numpy as np
+
+from puppet.view.renderer import Renderer, save_png, write_video
+from puppet.view.rendertake import FapPlayback, frame_head
+
+
+def demo_take() -> Path:
+    """Path of the demo take shipped in the package."""
+    return Path(str(importlib.resources.files("puppet").joinpath("data", "demo_take.fap")))
+
+
+def run_demo(out: Path, size: tuple[int, int] = (640, 480), view: str = "three_quarter") -> list[Path]:
+    """Render the demo take to ``out/demo_take.mp4`` and ``out/demo_still.png``; return the paths."""
+    out.mkdir(parents=True, exist_ok=True)
+    playback = FapPlayback(demo_take())
+    face = playback.face
+    neutral = face.vertices
+    with Renderer.for_face(face, width=size[0], height=size[1]) as renderer:
+        frame_head(renderer, face, view)
+        still = _Still(face.feature_vertices["2.2"], face.feature_vertices["2.3"])
+        frames = (still.keep(renderer.render(v, n), v) for v, n in playback)
+        video = out / "demo_take.mp4"
+        write_video(frames, video, playback.fps)
+        rest = renderer.render(neutral.astype(np.float32))
+    picture = out / "demo_still.png"
+    save_png(np.hstack([rest, still.image]), picture)
+    return [video, picture]
+
+
+class _Still:
+    """Keeps the rendered frame with the widest vertical gap between the inner lips (2.2, 2.3)."""
+
+    def __init__(self, upper_lip: int, lower_lip: int) -> None:
+        self.lips = (upper_lip, lower_lip)
+        self.best = -1.0
+        self.image: np.ndarray | None = None
+
+    def keep(self, image: np.ndarray, vertices: np.ndarray) -> np.ndarray:
+        gap = float(vertices[self.lips[0], 1] - vertices[self.lips[1], 1])
+        if gap > self.best:
+            self.best, self.image = gap, image
+        return image

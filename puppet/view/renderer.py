@@ -1,0 +1,771 @@
+"""Offscreen OpenGL renderer for the deforming face, built on moderngl.
+
+The face's topology, albedo and materials never change while it is puppeteered; only vertex
+positions (and therefore normals) do. So the renderer uploads colours, materials and triangle
+indices once into static buffers and, each frame, writes positions and normals into one dynamic
+vertex buffer of fixed size (``Buffer.write``, no reallocation) before drawing and reading the
+image back.
+
+Shading aims to be realistic enough to judge facial motion, not photoreal: per-frame vertex
+normals; a three-light studio rig (warm key, cool fill, rim) attached to the camera; wrapped
+(half-Lambert-like) diffuse whose extra light near the terminator is tinted red, imitating light
+scattered under skin; a normalised Blinn-Phong specular lobe with Schlick Fresnel whose strength
+and sharpness follow a per-vertex ``specular`` material (low for skin, high for wet eyes and
+teeth); and a sky/ground hemisphere ambient. Lighting is computed in linear space and encoded to
+sRGB on output. Back faces are drawn with flipped normals, because the mouth interior is seen
+from inside the mesh.
+
+Optionally the albedo comes from a texture (a face built from a photo, ``puppet.face.photo``):
+per-vertex texture coordinates and a per-vertex texture weight that mixes the texture's colour
+over the vertex colour (0 keeps the vertex colour: where the photo does not see the surface).
+Without a texture the weight is 0 everywhere and the colour path is the per-vertex one.
+
+Coordinates follow the face: +x the face's own left, +y up, +z toward the viewer.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import itertools
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Protocol
+
+import moderngl
+import numpy as np
+
+from puppet.runtime.normals import VertexNormals
+
+SKIN_SRGB = (0.80, 0.62, 0.53)
+"""Albedo (sRGB, 0-1) used where a mesh has no colours."""
+
+SKIN_SPECULAR = 0.3
+"""Default per-vertex specular strength: a soft sheen. Eyes and teeth want about 1."""
+
+DEFAULT_FOV = 27.0
+"""Vertical field of view in degrees of ``Renderer.frame``: a portrait lens, little distortion."""
+
+VIEW_DIRECTIONS = {
+    "front": (0.0, 0.0, 1.0),
+    "three_quarter": (np.sin(np.pi / 4), 0.0, np.cos(np.pi / 4)),
+    "profile": (1.0, 0.0, 0.0),
+}
+"""Unit directions from the framed object toward the camera, in the face frame. The angled
+views look at the face's own left side (+x)."""
+
+# Studio rig in camera space (x right, y up, z from the subject toward the camera): direction
+# toward each light and its linear colour. Rotated into the world whenever the camera moves.
+_LIGHT_DIRECTIONS_CAMERA = np.array(
+    [
+        [-0.65, 0.50, 0.57],  # key: upper left of the camera, warm
+        [0.80, 0.05, 0.60],  # fill: right, cool and weak
+        [0.35, 0.60, -0.72],  # rim: behind and above, outlines the silhouette
+    ]
+)
+_LIGHT_COLORS = np.array(
+    [
+        [1.30, 1.18, 1.05],
+        [0.20, 0.24, 0.31],
+        [0.85, 0.85, 0.90],
+    ]
+)
+_SKY_COLOR = (0.11, 0.12, 0.14)
+_GROUND_COLOR = (0.05, 0.04, 0.035)
+
+# The mesh shaders are one source compiled in two variants: ``TEXTURED`` mixes a texture over the
+# vertex albedo; without it no texture is sampled and the uv + weight varying is gone. Varyings
+# are packed into vec4s (albedo + specular strength share one), so an untextured triangle sets up
+# three of them, which is most of a software rasteriser's per-triangle cost.
+_MESH_VERTEX_SHADER = """
+uniform mat4 view_projection;
+in vec3 in_position;
+in vec3 in_normal;
+in vec4 in_material;  // linear albedo, specular strength
+out vec3 v_position;
+out vec3 v_normal;
+out vec4 v_material;
+#ifdef TEXTURED
+in vec3 in_surface;   // uv, texture weight
+out vec3 v_surface;
+#endif
+
+void main() {
+    v_position = in_position;
+    v_normal = in_normal;
+    v_material = in_material;
+#ifdef TEXTURED
+    v_surface = in_surface;
+#endif
+    gl_Position = view_projection * vec4(in_position, 1.0);
+}
+"""
+
+_MESH_FRAGMENT_SHADER = """
+const int N_LIGHTS = 3;
+const float WRAP = 0.5;                           // how far light wraps past the terminator
+const vec3 SCATTER_TINT = vec3(1.0, 0.38, 0.26);  // colour of the wrapped (scattered) light
+const float F0 = 0.04;                            // dielectric reflectance at normal incidence
+
+uniform vec3 light_direction[N_LIGHTS];  // world space, unit, toward the light
+uniform vec3 light_color[N_LIGHTS];      // linear
+uniform vec3 eye;
+uniform vec3 sky_color;
+uniform vec3 ground_color;
+
+in vec3 v_position;
+in vec3 v_normal;
+in vec4 v_material;
+#ifdef TEXTURED
+uniform sampler2D albedo_map;  // sRGB
+in vec3 v_surface;
+#endif
+out vec4 f_color;
+
+// Lambert plus the extra light of wrapped diffuse, tinted: skin's reddish terminator.
+vec3 skin_diffuse(float n_dot_l) {
+    float lambert = max(n_dot_l, 0.0);
+    float wrapped = max((n_dot_l + WRAP) / (1.0 + WRAP), 0.0);
+    return vec3(lambert) + SCATTER_TINT * (wrapped - lambert);
+}
+
+// Normalised Blinn-Phong with Schlick Fresnel; strength also sharpens the lobe.
+float specular(vec3 n, vec3 l, vec3 v, float strength) {
+    vec3 h = normalize(l + v);
+    float shininess = mix(24.0, 512.0, strength * strength);
+    float fresnel = F0 + (1.0 - F0) * pow(1.0 - max(dot(h, v), 0.0), 5.0);
+    float lobe = (shininess + 8.0) / 8.0 * pow(max(dot(n, h), 0.0), shininess);
+    return strength * fresnel * lobe * max(dot(n, l), 0.0);
+}
+
+vec3 srgb_decode(vec3 c) {
+    return mix(c / 12.92, pow((c + 0.055) / 1.055, vec3(2.4)), step(0.04045, c));
+}
+
+vec3 srgb_encode(vec3 c) {
+    c = clamp(c, 0.0, 1.0);
+    return mix(c * 12.92, 1.055 * pow(c, vec3(1.0 / 2.4)) - 0.055, step(0.0031308, c));
+}
+
+void main() {
+    vec3 n = normalize(v_normal);
+    if (!gl_FrontFacing) {
+        n = -n;
+    }
+    vec3 v = normalize(eye - v_position);
+    vec3 albedo = v_material.rgb;
+#ifdef TEXTURED
+    albedo = mix(albedo, srgb_decode(texture(albedo_map, v_surface.xy).rgb), v_surface.z);
+#endif
+    vec3 color = albedo * mix(ground_color, sky_color, 0.5 + 0.5 * n.y);
+    for (int i = 0; i < N_LIGHTS; ++i) {
+        vec3 l = light_direction[i];
+        vec3 diffuse = albedo * skin_diffuse(dot(n, l));
+        color += light_color[i] * (diffuse + specular(n, l, v, v_material.a));
+    }
+    f_color = vec4(srgb_encode(color), 1.0);
+}
+"""
+
+# FXAA-style post pass (after Lottes' FXAA 3 "console" variant): where the luma of the four
+# diagonal neighbours shows an edge, blend along the edge's direction; elsewhere, where the local
+# contrast is under a threshold, the pixel passes through unchanged, so flat shading is untouched.
+_FXAA_FRAGMENT_SHADER = """
+#version 330
+const float REDUCE_MIN = 1.0 / 128.0;
+const float REDUCE_MUL = 1.0 / 8.0;
+const float SPAN_MAX = 8.0;
+const float EDGE_THRESHOLD = 1.0 / 8.0;
+const float EDGE_THRESHOLD_MIN = 1.0 / 32.0;
+const vec3 LUMA = vec3(0.299, 0.587, 0.114);
+
+uniform sampler2D scene;
+out vec4 f_color;
+
+void main() {
+    ivec2 p = ivec2(gl_FragCoord.xy);
+    ivec2 last = textureSize(scene, 0) - 1;  // neighbours past the border repeat it
+    vec3 rgb_m = texelFetch(scene, p, 0).rgb;
+    float nw = dot(texelFetch(scene, clamp(p + ivec2(-1, -1), ivec2(0), last), 0).rgb, LUMA);
+    float ne = dot(texelFetch(scene, clamp(p + ivec2(1, -1), ivec2(0), last), 0).rgb, LUMA);
+    float sw = dot(texelFetch(scene, clamp(p + ivec2(-1, 1), ivec2(0), last), 0).rgb, LUMA);
+    float se = dot(texelFetch(scene, clamp(p + ivec2(1, 1), ivec2(0), last), 0).rgb, LUMA);
+    float m = dot(rgb_m, LUMA);
+    float luma_min = min(m, min(min(nw, ne), min(sw, se)));
+    float luma_max = max(m, max(max(nw, ne), max(sw, se)));
+    if (luma_max - luma_min < max(EDGE_THRESHOLD_MIN, luma_max * EDGE_THRESHOLD)) {
+        f_color = vec4(rgb_m, 1.0);
+        return;
+    }
+    vec2 px = 1.0 / vec2(last + 1);
+    vec2 uv = gl_FragCoord.xy * px;
+    vec2 dir = vec2(-((nw + ne) - (sw + se)), (nw + sw) - (ne + se));
+    float reduce = max((nw + ne + sw + se) * 0.25 * REDUCE_MUL, REDUCE_MIN);
+    dir = clamp(dir / (min(abs(dir.x), abs(dir.y)) + reduce), -SPAN_MAX, SPAN_MAX) * px;
+    vec3 rgb_a = 0.5 * (texture(scene, uv + dir * (1.0 / 3.0 - 0.5)).rgb
+                      + texture(scene, uv + dir * (2.0 / 3.0 - 0.5)).rgb);
+    vec3 rgb_b = 0.5 * rgb_a + 0.25 * (texture(scene, uv - 0.5 * dir).rgb
+                                     + texture(scene, uv + 0.5 * dir).rgb);
+    float luma_b = dot(rgb_b, LUMA);
+    f_color = vec4((luma_b < luma_min || luma_b > luma_max) ? rgb_a : rgb_b, 1.0);
+}
+"""
+
+# Full-screen triangle from gl_VertexID: a vertical grey gradient with a soft vignette, sRGB.
+_BACKGROUND_VERTEX_SHADER = """
+#version 330
+out vec2 v_uv;
+
+void main() {
+    vec2 corner = vec2((gl_VertexID << 1) & 2, gl_VertexID & 2);
+    v_uv = corner;
+    gl_Position = vec4(corner * 2.0 - 1.0, 1.0, 1.0);
+}
+"""
+
+_BACKGROUND_FRAGMENT_SHADER = """
+#version 330
+in vec2 v_uv;
+out vec4 f_color;
+
+void main() {
+    vec3 top = vec3(0.50, 0.51, 0.53);
+    vec3 bottom = vec3(0.26, 0.265, 0.28);
+    vec3 color = mix(bottom, top, v_uv.y);
+    float vignette = 1.0 - 0.25 * dot(v_uv - 0.5, v_uv - 0.5);
+    f_color = vec4(color * vignette, 1.0);
+}
+"""
+
+
+SOFTWARE_RASTERISERS = ("llvmpipe", "softpipe", "swrast", "swiftshader", "lavapipe")
+"""Substrings of ``GL_RENDERER`` (lower case) that name a CPU rasteriser: Mesa's llvmpipe,
+softpipe and swrast, Google's SwiftShader, Mesa's Vulkan lavapipe under Zink."""
+
+ANTIALIAS_MODES = ("fxaa", "none")
+"""Screen-space antialiasing after drawing: an FXAA-style post pass, or nothing."""
+
+
+def software_rasteriser(ctx: moderngl.Context) -> bool:
+    """Whether ``ctx`` draws on the CPU (``SOFTWARE_RASTERISERS``), where every sample costs."""
+    renderer = str(ctx.info.get("GL_RENDERER", "")).lower()
+    return any(name in renderer for name in SOFTWARE_RASTERISERS)
+
+
+def choose_antialias(
+    ctx: moderngl.Context, samples: int | None = None, antialias: str | None = None
+) -> tuple[int, str]:
+    """The (MSAA samples, post pass) a renderer on ``ctx`` uses: the one place defaults are set.
+
+    On a GPU, 4x MSAA and no post pass: the hardware resolves samples almost for free. On a
+    software rasteriser, no MSAA and the FXAA pass: llvmpipe shades and resolves every sample
+    on the CPU (4x cost 35 ms of a 52 ms frame at 640x480, and 2x as much as 4x), while the
+    post pass costs about one full-screen texture pass. Either value may be given to override
+    it; giving only ``samples`` > 1 turns the post pass off (MSAA already smooths edges).
+    """
+    if antialias is not None and antialias not in ANTIALIAS_MODES:
+        raise ValueError(f"antialias {antialias!r}: expected one of {ANTIALIAS_MODES}")
+    software = software_rasteriser(ctx)
+    if samples is None:
+        samples = 0 if software or antialias == "fxaa" else 4
+    if antialias is None:
+        antialias = "fxaa" if software and samples <= 1 else "none"
+    samples = min(int(samples), ctx.max_samples) if samples > 1 else 0
+    return samples, antialias
+
+
+class FaceLike(Protocol):
+    """What ``render_face`` needs of a face: rest vertices, triangles and optional colours."""
+
+    vertices: np.ndarray
+    triangles: np.ndarray
+    colors: np.ndarray | None
+
+
+@dataclass(frozen=True)
+class Camera:
+    """A perspective pin-hole camera: position, aim, vertical field of view and clip planes."""
+
+    eye: np.ndarray
+    target: np.ndarray
+    up: np.ndarray
+    fov: float
+    near: float
+    far: float
+
+    def basis(self) -> np.ndarray:
+        """Rows: the camera's right, up and back (target-to-eye) unit axes in world space."""
+        back = _unit(self.eye - self.target)
+        right = _unit(np.cross(self.up, back))
+        return np.stack([right, np.cross(back, right), back])
+
+    def view_matrix(self) -> np.ndarray:
+        """World-to-camera rigid transform (4x4)."""
+        view = np.eye(4)
+        view[:3, :3] = self.basis()
+        view[:3, 3] = -view[:3, :3] @ self.eye
+        return view
+
+    def projection_matrix(self, aspect: float) -> np.ndarray:
+        """OpenGL perspective projection (4x4) for a width/height ``aspect``."""
+        f = 1.0 / np.tan(np.radians(self.fov) / 2.0)
+        near, far = self.near, self.far
+        return np.array(
+            [
+                [f / aspect, 0.0, 0.0, 0.0],
+                [0.0, f, 0.0, 0.0],
+                [0.0, 0.0, (far + near) / (near - far), 2.0 * far * near / (near - far)],
+                [0.0, 0.0, -1.0, 0.0],
+            ]
+        )
+
+
+class Renderer:
+    """Draws one fixed-topology triangle mesh with changing vertex positions to RGB images.
+
+    The renderer owns its GL objects (buffers, programs, framebuffers) and, unless given an
+    existing ``ctx`` (a window's), a standalone headless context that it also releases. Use it
+    as a context manager or call ``release()``.
+
+    OpenGL calls go to whichever context is current on the thread, so a renderer that owns its
+    context makes it current around its own GL work (several renderers may coexist); with a
+    borrowed ``ctx`` the caller (the window) keeps its context current.
+    """
+
+    def __init__(
+        self,
+        triangles: np.ndarray,
+        n_vertices: int,
+        colors: np.ndarray | None = None,
+        *,
+        materials: np.ndarray | None = None,
+        uv: np.ndarray | None = None,
+        texture: np.ndarray | None = None,
+        texture_weight: np.ndarray | None = None,
+        width: int = 640,
+        height: int = 640,
+        backend: str = "egl",
+        samples: int | None = None,
+        antialias: str | None = None,
+        ctx: moderngl.Context | None = None,
+    ) -> None:
+        """Upload topology, albedo (sRGB 0-1, per vertex) and specular strengths (0-1).
+
+        ``colors`` None paints the mesh in a skin tone; ``materials`` None gives every vertex
+        ``SKIN_SPECULAR``. ``texture`` (H, W, 3) uint8 sRGB, top row first, with ``uv`` (N, 2)
+        per vertex (v up, as in OBJ) and ``texture_weight`` (N,) in 0-1 (None: 1) paints the
+        texture over the vertex colours. ``samples`` (MSAA, > 1 where supported) and
+        ``antialias`` (``ANTIALIAS_MODES``) default to ``choose_antialias``'s choice for the GL.
+        """
+        self.n_vertices = int(n_vertices)
+        self.size = (int(width), int(height))
+        self._owns_ctx = ctx is None
+        self.ctx = ctx or moderngl.create_context(standalone=True, backend=backend)
+        self._normals = VertexNormals(triangles, self.n_vertices)
+        self._normal_out = np.empty((self.n_vertices, 3))
+        self._staging = np.empty((self.n_vertices, 6), dtype="f4")
+        self.camera: Camera | None = None
+        with self._current():
+            samples, self.antialias = choose_antialias(self.ctx, samples, antialias)
+            self._create_texture(uv, texture, texture_weight)
+            self._create_gl_objects(triangles, colors, materials, samples)
+
+    @classmethod
+    def for_face(cls, face: FaceLike, **options) -> Renderer:
+        """A renderer for ``face``: its triangles, vertex colours and, when it has one, its
+        texture (``texture_kwargs``); ``options`` as for the constructor (size, ctx, samples...)."""
+        return cls(face.triangles, len(face.vertices), face.colors, **texture_kwargs(face), **options)
+
+    def _create_texture(
+        self, uv: np.ndarray | None, texture: np.ndarray | None, weight: np.ndarray | None
+    ) -> None:
+        """The albedo texture (mipmapped, clamped) and the per-vertex uv + weight buffer, when
+        there is a texture; none of either otherwise (the untextured shader samples nothing)."""
+        self._texture = self._surface = None
+        if texture is None:
+            return
+        surface = np.empty((self.n_vertices, 3), dtype="f4")
+        surface[:, :2] = uv
+        surface[:, 2] = 1.0 if weight is None else np.clip(weight, 0.0, 1.0)
+        image = np.ascontiguousarray(np.asarray(texture, dtype=np.uint8)[::-1, :, :3])
+        self._texture = self.ctx.texture((image.shape[1], image.shape[0]), 3, image.tobytes(), alignment=1)
+        self._texture.repeat_x = self._texture.repeat_y = False
+        self._texture.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+        self._texture.build_mipmaps()
+        self._surface = self.ctx.buffer(surface)
+
+    def _create_gl_objects(
+        self,
+        triangles: np.ndarray,
+        colors: np.ndarray | None,
+        materials: np.ndarray | None,
+        samples: int,
+    ) -> None:
+        """Programs, static and dynamic buffers, vertex arrays, constant uniforms, targets
+        (after ``_create_texture``: the mesh's shader variant follows whether there is one)."""
+        header = "#version 330\n" + ("#define TEXTURED\n" if self._texture is not None else "")
+        self._mesh_program = self.ctx.program(
+            vertex_shader=header + _MESH_VERTEX_SHADER, fragment_shader=header + _MESH_FRAGMENT_SHADER
+        )
+        self._background_program = self.ctx.program(
+            vertex_shader=_BACKGROUND_VERTEX_SHADER, fragment_shader=_BACKGROUND_FRAGMENT_SHADER
+        )
+        self._fxaa_program = self.ctx.program(
+            vertex_shader=_BACKGROUND_VERTEX_SHADER, fragment_shader=_FXAA_FRAGMENT_SHADER
+        )
+        self._dynamic = self.ctx.buffer(reserve=self._staging.nbytes, dynamic=True)
+        self._static = self.ctx.buffer(_material_data(self.n_vertices, colors, materials))
+        self._indices = self.ctx.buffer(np.ascontiguousarray(triangles, dtype="u4"))
+        attributes = [
+            (self._dynamic, "3f 3f", "in_position", "in_normal"),
+            (self._static, "4f", "in_material"),
+        ]
+        if self._surface is not None:
+            attributes.append((self._surface, "3f", "in_surface"))
+        self._mesh = self.ctx.vertex_array(
+            self._mesh_program, attributes, index_buffer=self._indices, index_element_size=4
+        )
+        self._background = self.ctx.vertex_array(self._background_program, [])
+        self._fxaa = self.ctx.vertex_array(self._fxaa_program, [])
+        self._set_uniform("sky_color", np.array(_SKY_COLOR))
+        self._set_uniform("ground_color", np.array(_GROUND_COLOR))
+        self._set_uniform("light_color", _LIGHT_COLORS)
+        self._make_targets(samples)
+
+    def __enter__(self) -> Renderer:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.release()
+
+    @property
+    def samples(self) -> int:
+        """Multisample count actually in use (0: no multisampling)."""
+        return self._multi.samples if self._multi is not None else 0
+
+    def look_at(
+        self,
+        eye: np.ndarray,
+        target: np.ndarray,
+        up: np.ndarray = (0.0, 1.0, 0.0),
+        fov: float = DEFAULT_FOV,
+        near: float | None = None,
+        far: float | None = None,
+    ) -> Camera:
+        """Place the camera at ``eye`` aimed at ``target``; fov is vertical, in degrees.
+
+        Clip planes default to 1/20 and 20 times the eye-target distance.
+        """
+        eye, target = np.asarray(eye, dtype=float), np.asarray(target, dtype=float)
+        distance = float(np.linalg.norm(eye - target))
+        self.camera = Camera(
+            eye=eye,
+            target=target,
+            up=np.asarray(up, dtype=float),
+            fov=float(fov),
+            near=distance / 20.0 if near is None else float(near),
+            far=distance * 20.0 if far is None else float(far),
+        )
+        return self.camera
+
+    def frame(
+        self,
+        vertices: np.ndarray,
+        view: str = "front",
+        margin: float = 1.15,
+        fov: float = DEFAULT_FOV,
+    ) -> Camera:
+        """Aim a perspective camera at ``vertices`` (e.g. the head) from a named view.
+
+        The camera looks at the centre of their bounding box along ``VIEW_DIRECTIONS[view]``
+        and backs off just far enough that every vertex projects inside the image shrunk by
+        ``margin`` (1.15: 15% breathing room).
+        """
+        points = np.asarray(vertices, dtype=float)
+        direction = np.asarray(VIEW_DIRECTIONS[view])
+        target = (points.min(axis=0) + points.max(axis=0)) / 2.0
+        probe = Camera(target + direction, target, np.array([0.0, 1.0, 0.0]), fov, 1.0, 2.0)
+        local = (points - target) @ probe.basis().T
+        tan_y = np.tan(np.radians(fov) / 2.0)
+        tan_x = tan_y * self.size[0] / self.size[1]
+        reach = np.maximum(np.abs(local[:, 0]) / tan_x, np.abs(local[:, 1]) / tan_y)
+        distance = float(np.max(local[:, 2] + margin * reach))
+        depth = float(np.ptp(local[:, 2])) + 1e-9
+        return self.look_at(
+            target + distance * direction,
+            target,
+            fov=fov,
+            near=max(distance - local[:, 2].max() - depth, distance / 100.0),
+            far=distance + 2.0 * depth,
+        )
+
+    def project(self, points: np.ndarray) -> np.ndarray:
+        """Pixel coordinates (M, 2) as (column, row), row 0 at the top, of world ``points``."""
+        clip = self._view_projection() @ np.c_[points, np.ones(len(points))].T
+        ndc = clip[:2] / clip[3]
+        width, height = self.size
+        return np.stack([(ndc[0] + 1.0) / 2.0 * width, (1.0 - ndc[1]) / 2.0 * height], axis=1)
+
+    def draw(
+        self,
+        vertices: np.ndarray,
+        normals: np.ndarray | None = None,
+        framebuffer: moderngl.Framebuffer | None = None,
+    ) -> None:
+        """Draw background and mesh into ``framebuffer`` (default: the offscreen one).
+
+        A window passes ``ctx.screen`` (of the renderer's size, since the camera's aspect
+        follows it) and skips the readback of ``render``; it gets the same antialiasing as an
+        offscreen frame (a multisampled screen is drawn into directly). Without a camera yet,
+        the first call frames ``vertices`` from the front.
+        """
+        self._prepare(vertices)
+        with self._current():
+            self._upload(vertices, normals)
+            self._set_frame_uniforms()
+            self._draw_antialiased(framebuffer or self._output, vertices)
+
+    def render(self, vertices: np.ndarray, normals: np.ndarray | None = None) -> np.ndarray:
+        """Render one frame and return it as (height, width, 3) uint8 sRGB, top row first.
+
+        ``normals`` None computes unit vertex normals from ``vertices``.
+        """
+        self.draw(vertices, normals)
+        return self.read()
+
+    def read(self) -> np.ndarray:
+        """The last frame drawn offscreen, as (height, width, 3) uint8 sRGB, top row first."""
+        with self._current():
+            data = self._output.read(components=3, alignment=1)
+        width, height = self.size
+        return np.frombuffer(data, dtype=np.uint8).reshape(height, width, 3)[::-1].copy()
+
+    def finish(self) -> None:
+        """Wait until the GL has executed everything issued so far (for timing)."""
+        with self._current():
+            self.ctx.finish()
+
+    def release(self) -> None:
+        """Free every GL object this renderer made, and its context if it created it."""
+        with self._current():
+            for obj in (
+                self._mesh,
+                self._texture,
+                self._surface,
+                self._background,
+                self._fxaa,
+                self._dynamic,
+                self._static,
+                self._indices,
+                self._mesh_program,
+                self._background_program,
+                self._fxaa_program,
+                *self._targets,
+            ):
+                if obj is not None:
+                    obj.release()
+        if self._owns_ctx:
+            self.ctx.release()
+
+    def _current(self) -> contextlib.AbstractContextManager:
+        """Make an owned context current for a ``with`` block; never nest these blocks, since
+        glcontext keeps one saved context per context and a nested exit loses the outer one."""
+        return self.ctx if self._owns_ctx else contextlib.nullcontext()
+
+    def _make_targets(self, samples: int) -> None:
+        """The offscreen output (plain RGBA8 + depth, what ``read`` reads); a multisampled
+        target to draw into when ``samples`` > 1 (dropped if the driver refuses it); and for the
+        FXAA pass, a scene target whose colour is a texture the pass samples."""
+        color = self.ctx.renderbuffer(self.size, components=4)
+        depth = self.ctx.depth_renderbuffer(self.size)
+        self._output = self.ctx.framebuffer(color_attachments=[color], depth_attachment=depth)
+        self._targets: list = [self._output, color, depth]
+        self._multi = self._scene = None
+        if samples > 1:
+            try:
+                color = self.ctx.renderbuffer(self.size, components=4, samples=samples)
+                depth = self.ctx.depth_renderbuffer(self.size, samples=samples)
+                self._multi = self.ctx.framebuffer(color_attachments=[color], depth_attachment=depth)
+                self._targets += [self._multi, color, depth]
+            except moderngl.Error:
+                self._multi = None
+        if self.antialias == "fxaa":
+            self._scene_color = self.ctx.texture(self.size, 4)
+            self._scene_color.repeat_x = self._scene_color.repeat_y = False
+            depth = self.ctx.depth_renderbuffer(self.size)
+            self._scene = self.ctx.framebuffer(color_attachments=[self._scene_color], depth_attachment=depth)
+            self._targets += [self._scene, self._scene_color, depth]
+
+    def _draw_antialiased(self, out: moderngl.Framebuffer, vertices: np.ndarray) -> None:
+        """Draw into ``out``: through the multisampled target (resolved) and the FXAA pass where
+        those are on, straight into ``out`` when neither is, or when ``out`` is a screen that
+        multisamples by itself and there is no post pass. The FXAA pass runs only over the
+        mesh's screen box (the background is a smooth gradient, nothing to smooth), the rest of
+        the frame copied as drawn."""
+        own_samples = out is self._output or not out.samples
+        first = self._scene or out
+        if self._multi is not None and own_samples:
+            self._draw_scene(self._multi)
+            self.ctx.copy_framebuffer(first, self._multi)
+        else:
+            self._draw_scene(first)
+        if self._scene is not None:
+            self.ctx.copy_framebuffer(out, self._scene)
+            out.use()
+            out.scissor = self._screen_box(vertices)
+            self.ctx.disable(moderngl.DEPTH_TEST)
+            self._scene_color.use(location=0)
+            self._fxaa.render(moderngl.TRIANGLES, vertices=3)
+            out.scissor = None
+
+    def _screen_box(self, vertices: np.ndarray, margin: int = 2) -> tuple[int, int, int, int]:
+        """(x, y, width, height), y up as GL counts it, of a pixel box holding the projection
+        of ``vertices``: that of their bounding box's corners (which contains it), widened by
+        ``margin``; the whole image when a corner lies behind the camera."""
+        low, high = np.min(vertices, axis=0), np.max(vertices, axis=0)
+        corners = np.array(list(itertools.product(*zip(low, high))))
+        local = (corners - self.camera.eye) @ self.camera.basis().T
+        width, height = self.size
+        if np.any(local[:, 2] >= 0):
+            return 0, 0, width, height
+        pixels = self.project(corners)
+        x0, y0 = np.floor(pixels.min(axis=0)).astype(int) - margin
+        x1, y1 = np.ceil(pixels.max(axis=0)).astype(int) + margin
+        x0, x1 = max(x0, 0), min(x1, width)
+        y0, y1 = max(height - y1, 0), min(height - y0, height)
+        return int(x0), int(y0), max(int(x1 - x0), 0), max(int(y1 - y0), 0)
+
+    def _prepare(self, vertices: np.ndarray) -> None:
+        """Check the vertex array's shape; frame it from the front if there is no camera yet."""
+        shape = np.shape(vertices)
+        if shape != (self.n_vertices, 3):
+            raise ValueError(f"expected vertices of shape ({self.n_vertices}, 3), got {shape}")
+        if self.camera is None:
+            self.frame(vertices)
+
+    def _set_frame_uniforms(self) -> None:
+        """The camera's uniforms: view-projection, eye and the camera-attached lights."""
+        self._set_uniform("view_projection", self._view_projection().T)
+        self._set_uniform("eye", self.camera.eye)
+        self._set_uniform("light_direction", _LIGHT_DIRECTIONS_CAMERA @ self.camera.basis())
+
+    def _draw_scene(self, target: moderngl.Framebuffer) -> None:
+        """Draw background then mesh into ``target``; the context is current."""
+        target.use()
+        target.clear(depth=1.0)
+        self.ctx.disable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
+        self._background.render(moderngl.TRIANGLES, vertices=3)
+        self.ctx.enable(moderngl.DEPTH_TEST)
+        if self._texture is not None:
+            self._texture.use(location=0)
+        self._mesh.render(moderngl.TRIANGLES)
+
+    def _upload(self, vertices: np.ndarray, normals: np.ndarray | None) -> None:
+        """Write positions and normals into the dynamic vertex buffer in place."""
+        vertices = np.asarray(vertices)
+        if normals is None:
+            normals = self._normals(vertices, out=self._normal_out)
+        self._staging[:, :3] = vertices
+        self._staging[:, 3:] = normals
+        self._dynamic.write(self._staging)
+
+    def _view_projection(self) -> np.ndarray:
+        if self.camera is None:
+            raise RuntimeError("no camera: call frame() or look_at() first")
+        aspect = self.size[0] / self.size[1]
+        return self.camera.projection_matrix(aspect) @ self.camera.view_matrix()
+
+    def _set_uniform(self, name: str, value: np.ndarray) -> None:
+        """Write a float uniform; matrices must already be transposed to column-major."""
+        self._mesh_program[name].write(np.ascontiguousarray(value, dtype="f4"))
+
+
+def render_face(
+    face: FaceLike,
+    vertices: np.ndarray | None = None,
+    *,
+    view: str = "front",
+    width: int = 640,
+    height: int = 640,
+) -> np.ndarray:
+    """One-shot render of ``face`` (its rest pose unless ``vertices`` given), framed on the
+    whole face from ``view``. Uses ``face.colors``, or a skin tone where it has none, and the
+    face's texture when it has one (``texture_kwargs``)."""
+    vertices = face.vertices if vertices is None else vertices
+    with Renderer.for_face(face, width=width, height=height) as r:
+        r.frame(vertices, view=view)
+        return r.render(vertices)
+
+
+def texture_kwargs(face: FaceLike) -> dict:
+    """``Renderer`` keyword arguments for a face's texture: ``uv``, ``texture`` and
+    ``texture_weight`` when it has a ``texture`` (a face from ``puppet.face.folder``), else none."""
+    texture = getattr(face, "texture", None)
+    if texture is None:
+        return {}
+    return {"uv": face.uv, "texture": texture, "texture_weight": getattr(face, "texture_weight", None)}
+
+
+def save_png(image: np.ndarray, path: str | Path) -> None:
+    """Write an (H, W, 3) uint8 image as PNG."""
+    from PIL import Image
+
+    Image.fromarray(np.asarray(image, dtype=np.uint8)).save(path, format="PNG")
+
+
+def write_video(frames: Iterable[np.ndarray], path: str | Path, fps: float = 30.0) -> int:
+    """Encode (H, W, 3) uint8 frames to an H.264 MP4 (yuv420p) and return the frame count.
+
+    yuv420p needs even dimensions, so an odd last row or column is duplicated. Every frame
+    must have the first frame's size.
+    """
+    import imageio_ffmpeg
+
+    iterator: Iterator[np.ndarray] = iter(frames)
+    first = _even(next(iterator))
+    height, width = first.shape[:2]
+    writer = imageio_ffmpeg.write_frames(
+        str(path),
+        (width, height),
+        fps=fps,
+        codec="libx264",
+        pix_fmt_out="yuv420p",
+        macro_block_size=2,
+    )
+    writer.send(None)
+    count = 0
+    try:
+        for frame in itertools.chain([first], iterator):
+            frame = _even(frame)
+            if frame.shape != first.shape:
+                raise ValueError(f"frame {count} has shape {frame.shape}, expected {first.shape}")
+            writer.send(np.ascontiguousarray(frame, dtype=np.uint8))
+            count += 1
+    finally:
+        writer.close()
+    return count
+
+
+def _even(image: np.ndarray) -> np.ndarray:
+    """Pad an odd height or width by repeating the last row or column."""
+    height, width = image.shape[:2]
+    return np.pad(image, ((0, height % 2), (0, width % 2), (0, 0)), mode="edge")
+
+
+def _material_data(
+    n_vertices: int, colors: np.ndarray | None, materials: np.ndarray | None
+) -> np.ndarray:
+    """Static per-vertex attributes (N, 4) float32: linear albedo and specular strength."""
+    data = np.empty((n_vertices, 4), dtype="f4")
+    srgb = np.broadcast_to(SKIN_SRGB if colors is None else np.asarray(colors), (n_vertices, 3))
+    data[:, :3] = _srgb_to_linear(np.clip(srgb, 0.0, 1.0))
+    data[:, 3] = SKIN_SPECULAR if materials is None else np.asarray(materials)
+    return data
+
+
+def _srgb_to_linear(c: np.ndarray) -> np.ndarray:
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / np.linalg.norm(v)

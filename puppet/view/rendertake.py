@@ -1,0 +1,143 @@
+"""Playing a FAP take on a face: frames to poses, offscreen to video, or in a window.
+
+A .fap frame transmits only its masked FAPs; the others keep the value they last had (the
+decoder's rule in MPEG-4 players), starting from neutral. ``FapPlayback`` applies that rule while
+streaming, so a take of any length plays in constant memory, and hands each frame's vertices
+and normals to whatever draws them.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
+
+import numpy as np
+
+from puppet.face.model import Face, load_face
+from puppet.io.fapfile import FapFrame, iter_fap
+from puppet.io.outputs import writable
+from puppet.io.takes import TakeError, take_fap
+from puppet.runtime.fapengine import limit_fields
+from puppet.runtime.runtime import Runtime
+from puppet.view.renderer import VIEW_DIRECTIONS, Renderer, write_video
+
+VIEWS = tuple(VIEW_DIRECTIONS)
+
+
+@dataclass
+class HeldFaps:
+    """The FAP state a player holds: values of FAPs 3..68 and the FAP 1/2 fields, masked-in."""
+
+    values: np.ndarray
+    viseme: np.ndarray | None = None
+    expression: np.ndarray | None = None
+
+    @classmethod
+    def neutral(cls) -> HeldFaps:
+        return cls(np.zeros(68))
+
+    def update(self, frame: FapFrame) -> HeldFaps:
+        """Take this frame's masked values; keep the rest."""
+        self.values[frame.mask] = frame.values[frame.mask]
+        if frame.mask[0]:
+            self.viseme = frame.viseme.copy()
+        if frame.mask[1]:
+            self.expression = frame.expression.copy()
+        return self
+
+    def low_level(self, runtime: Runtime) -> np.ndarray:
+        """The held state as 68 low-level FAPs (visemes and expressions expanded)."""
+        values = self.values.copy()
+        values[:2] = 0
+        return runtime.faps.low_level(values, *limit_fields(self.viseme, self.expression))
+
+
+def held_low_level(frames: Iterable[FapFrame], runtime: Runtime) -> Iterator[np.ndarray]:
+    """Per frame, the FAP state a player holds, as 68 low-level values (FAP 1 / 2 expanded)."""
+    held = HeldFaps.neutral()
+    for frame in frames:
+        yield held.update(frame).low_level(runtime)
+
+
+class FapPlayback:
+    """Streams a .fap take (the file, or a take folder) as (vertices, normals) per frame on a face."""
+
+    def __init__(self, path: str | os.PathLike, face: Face | None = None,
+                 runtime: Runtime | None = None) -> None:
+        self.path = take_fap(path)
+        with iter_fap(self.path) as reader:
+            self.header = reader.header
+        self.face = face if face is not None else load_face()
+        self.runtime = runtime if runtime is not None else Runtime(self.face)
+
+    @property
+    def fps(self) -> float:
+        return self.header.fps
+
+    def __iter__(self) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+        with iter_fap(self.path) as reader:
+            for values in held_low_level(reader, self.runtime):
+                d, motions = self.runtime.faps.controls(values)
+                yield self.runtime.deform_with_normals(d, motions)
+
+
+def render_take(path: str | os.PathLike, out: str | os.PathLike, *, face: Face | None = None,
+                size: tuple[int, int] = (640, 480), view: str = "front", fps: float | None = None,
+                progress: bool = True, runtime: Runtime | None = None) -> int:
+    """Render a .fap take to an MP4 at the take's fps (or ``fps``); return the frame count.
+    ``runtime`` (of ``face``) saves building one when many takes are rendered in turn.
+
+    The video is written beside ``out`` and renamed into place only when every frame has been
+    rendered, so a bad take never leaves a broken video behind. The take, its folder and ``out``
+    are checked before the first frame (an ``OutputError`` for a path that cannot be written).
+    """
+    out = writable(out, "video")
+    playback = FapPlayback(path, face, runtime)
+    partial = out.with_name(f".{out.stem}.partial{out.suffix}")
+    try:
+        with Renderer.for_face(playback.face, width=size[0], height=size[1]) as renderer:
+            frame_head(renderer, playback.face, view)
+            total = playback.header.declared_frames
+            frames = _progress((renderer.render(v, n) for v, n in playback), total, progress)
+            count = write_video(_not_empty(frames, path), partial, playback.fps if fps is None else fps)
+        partial.replace(out)
+        return count
+    finally:
+        partial.unlink(missing_ok=True)
+
+
+def _not_empty(frames: Iterator[np.ndarray], path: str | os.PathLike) -> Iterator[np.ndarray]:
+    """The frames; a TakeError if there are none."""
+    first = next(frames, None)
+    if first is None:
+        raise TakeError(f"{path}: the take holds no frames")
+    yield first
+    yield from frames
+
+
+
+def frame_head(renderer: Renderer, face: Face, view: str) -> None:
+    """Aim the camera at the head (above the neck), from a named view."""
+    if view not in VIEWS:
+        raise ValueError(f"view {view!r}: expected one of {VIEWS}")
+    skin = face.vertices[face.parts["skin"]]
+    chin = face.feature_points.get("2.1")
+    keep = skin[:, 1] > chin[1] - 0.25 * np.ptp(skin[:, 1]) if chin is not None else slice(None)
+    renderer.frame(skin[keep], view=view)
+
+
+def _progress(frames: Iterator[np.ndarray], total: int | None, show: bool) -> Iterator[np.ndarray]:
+    """Pass frames through, with a progress bar on stderr (rich's; when ``show``: a terminal)."""
+    if not show:
+        yield from frames
+        return
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+    columns = (TextColumn("rendering"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())
+    with Progress(*columns, console=Console(stderr=True), transient=True) as bar:
+        task = bar.add_task("render", total=total or None)
+        for frame in frames:
+            yield frame
+            bar.advance(task)
