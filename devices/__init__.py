@@ -15,7 +15,7 @@ BACKENDS: dict[str, str] = {
     "hid": "devices.hid_device:HidDevice",
     "midi": "devices.midi_device:MidiDevice",
     "osc": "devices.osc_device:OscDevice",
-    "replay": "puppet.io.samplelog:ReplayDevice",
+    "replay": "devices.replay_device:ReplayDevice",
     "serial": "devices.serial_port:SerialDevice",
     "sim": "devices.simulated_serial:SimulatedSerialDevice",
 }

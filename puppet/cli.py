@@ -23,7 +23,7 @@ from puppet.view.renderer import VIEW_DIRECTIONS
 
 VIEWS = tuple(VIEW_DIRECTIONS)
 BENCH_SECTIONS = ("deform", "frames", "muscles", "inputs", "latency", "flood", "long_take")
-"""``puppet bench --only`` choices (``puppet.bench.deform.SECTIONS``; the bench is imported only when run)."""
+"""``puppet bench --only`` choices (``puppet.bench.run.SECTIONS``; the bench is imported only when run)."""
 FACE_HELP = "a face folder (puppet rig ... -o FOLDER/, puppet face-from-photo) (default: the embedded face)"
 MAX_SIDE = 8192
 REFUSED = (PuppetError, DeviceError, MappingError, OSError)
@@ -242,7 +242,7 @@ def _run(args: argparse.Namespace) -> int:
         print(report(discover()))
         return 0
     if args.command == "bench":
-        from puppet.bench.deform import run_bench
+        from puppet.bench.run import run_bench
 
         return run_bench(frames=args.frames, as_json=args.json, ict=not args.no_ict,
                          flood_seconds=args.flood_seconds, take_seconds=args.take_seconds,
@@ -281,7 +281,7 @@ def _rig(args: argparse.Namespace) -> int:
 
     from puppet.face.autorig import build_rig
     from puppet.face.folder import write_rigged_folder
-    from puppet.face.model import load_face
+    from puppet.face.load import load_face
     from puppet.face.rig import save_rig
     from puppet.io.outputs import writable
 
@@ -383,7 +383,8 @@ def _face(path: str | None):
     """``--face``: the face at ``path`` (a face folder or a rigged mesh), or None for the embedded one."""
     if path is None:
         return None
-    from puppet.face.model import FaceFileError, load_face
+    from puppet.face.load import load_face
+    from puppet.face.model import FaceFileError
 
     face = load_face(path)
     if not face.feature_points:
@@ -427,7 +428,7 @@ def _calibrate(args: argparse.Namespace) -> int:
 
 def _face_from_photo(args: argparse.Namespace) -> int:
     """``puppet face-from-photo``: a face folder from a photo and its landmarks."""
-    from puppet.face.photo import build_face_folder
+    from puppet.photo.build import build_face_folder
 
     print(build_face_folder(args.photo, args.landmarks, args.output))
     return 0

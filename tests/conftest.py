@@ -6,7 +6,7 @@ import warnings
 import numpy as np
 import pytest
 
-from puppet.face.model import load_face
+from puppet.face.load import load_face
 from puppet.runtime.runtime import Runtime
 
 

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import yaml
 
-from puppet.face.model import AU
+from puppet.fap.units import AU
 from puppet.io.takes import open_take
 from puppet.live.arkit import DEFAULT_MAPPING, CsvError, import_csv, parse_timecode, read_live_link_csv
 from puppet.live.mappingfile import load_mapping

@@ -8,10 +8,10 @@ import json
 import numpy as np
 import pytest
 
-from puppet.bench.deform import shared_assets
+from puppet.bench.assets import shared_assets
 from puppet.face.autorig import _loop_path_via, build_rig
 from puppet.face.landmarks import IBUG_FDP, LandmarkError, read_landmarks
-from puppet.face.model import load_face
+from puppet.face.load import load_face
 from puppet.face.rig import rig_to_dict
 from puppet.runtime.runtime import Runtime
 from tools.rig_faces import ict_inputs, mediapipe_inputs

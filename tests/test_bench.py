@@ -5,8 +5,9 @@ import json
 import numpy as np
 import pytest
 
-from puppet.bench.deform import bench_face, performance, run_bench
-from puppet.face.model import load_face
+from puppet.bench.deform import bench_face, performance
+from puppet.bench.run import run_bench
+from puppet.face.load import load_face
 
 
 def test_bench_face_reports_every_figure():
@@ -25,8 +26,8 @@ def test_the_benchmark_take_is_smooth():
 
 
 def test_run_bench_prints_json(capsys, monkeypatch):
-    monkeypatch.setattr("puppet.bench.deform.bench_faces", lambda ict, subdivided=True: [(load_face(), None, "default")])
-    monkeypatch.setattr("puppet.bench.deform.bench_inputs", lambda seconds: [{"adapter": "x", "samples_s": 1.0}])
+    monkeypatch.setattr("puppet.bench.run.bench_faces", lambda ict, subdivided=True: [(load_face(), None, "default")])
+    monkeypatch.setattr("puppet.bench.run.bench_inputs", lambda seconds: [{"adapter": "x", "samples_s": 1.0}])
     assert run_bench(frames=2, as_json=True, ict=False, flood_seconds=1.0, take_seconds=30.0) == 0
     report = json.loads(capsys.readouterr().out)
     assert report["latency"]["samples"] > 0 and report["latency"]["sample_to_drawn_ms"]["median"] > 0 and report["long_take"]["frames"] == 30 * 30 + 1
@@ -63,7 +64,7 @@ def test_the_cli_refuses_an_unknown_section_in_one_line(capsys):
 
 
 def test_the_cli_sections_are_the_bench_sections():
-    from puppet.bench.deform import SECTIONS
+    from puppet.bench.run import SECTIONS
     from puppet.cli import BENCH_SECTIONS
 
     assert BENCH_SECTIONS == SECTIONS

@@ -147,7 +147,8 @@ def test_an_open_or_close_that_raises_something_odd_keeps_the_thread_alive():
 def test_every_device_error_derives_from_device_error_and_keeps_its_builtin_base(tmp_path):
     from devices.can_device import BadFrame
     from devices.hid_descriptor import DescriptorError, parse_descriptor
-    from puppet.io.samplelog import SampleLogError, read_take_log
+    from devices.samplelines import SampleLogError
+    from puppet.io.samplelog import read_take_log
 
     for cls, builtin in ((DeviceLost, OSError), (DescriptorError, ValueError), (BadFrame, ValueError),
                          (SampleLogError, ValueError)):

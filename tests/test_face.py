@@ -12,7 +12,9 @@ import numpy as np
 import pytest
 
 import puppet
-from puppet.face.model import Face, FaceFileError, MissingFeaturePointsError, load_face, read_obj
+from puppet.face.load import load_face
+from puppet.face.meshfile import read_obj
+from puppet.face.model import Face, FaceFileError, MissingFeaturePointsError
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO.parent / "shared"

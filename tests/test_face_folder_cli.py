@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from puppet.cli import main
-from puppet.face.model import load_face
+from puppet.face.load import load_face
 from puppet.io.fapfile import write_fap
 from puppet.runtime.runtime import Runtime
 

@@ -227,7 +227,7 @@ def test_eyelids_never_cross(runtime, face, upper, lower, point_up, point_low):
 
 
 def test_fap_1_and_2_fields_a_face_cannot_show_pose_as_none_or_held(runtime):
-    from puppet.runtime.fapengine import limit_fields
+    from puppet.fap.highlevel import limit_fields
 
     viseme, expression = limit_fields(np.array([20, -3, 900, 0]), np.array([9, -5, 2, 1e12, 0, 0]))
     assert viseme == (0, 0, 63.0) and expression == (0, 0.0, 2, 63.0)

@@ -13,9 +13,9 @@ import pytest
 from puppet.face.autorig import _lid_share
 from puppet.face.muscles import folded_triangles
 from puppet.face.rig import load_rig, save_rig
+from puppet.fap.highlevel import high_level_faps
 from puppet.fap.table import clamp_ranges, fap
 from puppet.io.fapfile import read_fap, write_fap
-from puppet.runtime.fapengine import high_level_faps
 from puppet.runtime.foldlimits import CORNER_PAIRS, mirror
 from puppet.runtime.runtime import Runtime
 

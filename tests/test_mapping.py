@@ -17,9 +17,11 @@ from hypothesis import strategies as st
 
 from devices.base import Sample
 from puppet import MappingError, load_mapping
-from puppet.face.model import AU
 from puppet.face.muscles import MUSCLE_NAMES
+from puppet.fap.highlevel import high_level_faps
+from puppet.fap.pose import Pose
 from puppet.fap.table import faps
+from puppet.fap.units import AU
 from puppet.live.mappingfile import (
     BUTTON_KEYS,
     BUTTON_MODES,
@@ -33,11 +35,9 @@ from puppet.live.mappingfile import (
     SMOOTHING_KEYS,
     TARGET_KEYS,
     Mapping,
-    Pose,
     fap_names,
     parse_mapping,
 )
-from puppet.runtime.fapengine import high_level_faps
 
 MAPPINGS = Path(__file__).resolve().parents[1] / "mappings"
 SCHEMA = json.loads((MAPPINGS / "schema.json").read_text())

@@ -1,4 +1,4 @@
-"""A face from one frontal photo (puppet.face.photo), its folder (puppet.face.folder), the picker
+"""A face from one frontal photo (puppet.photo.build), its folder (puppet.face.folder), the picker
 (puppet.view.picker) and the command. The photo is the default face itself, rendered frontally with a
 long lens (nearly the orthographic projection the fit assumes), so the rebuilt face must be the
 default face again."""
@@ -13,9 +13,10 @@ import numpy as np
 import pytest
 
 from puppet.cli import main
-from puppet.face import photo as pf
 from puppet.face.folder import load_face_folder, load_folder_rig
-from puppet.face.model import Face, load_face
+from puppet.face.load import load_face
+from puppet.face.model import Face
+from puppet.photo import build as pf
 from puppet.runtime.runtime import Runtime
 from puppet.view.picker import PickerServer
 
@@ -116,7 +117,7 @@ def test_the_command_writes_a_folder_that_loads_rigs_and_animates(shot, fdp11, t
     assert np.abs(textured.astype(int) - untextured).max() > 30
 
     from puppet.face.autorig import rig_for_face
-    from puppet.face.model import load_face as load_any
+    from puppet.face.load import load_face as load_any
     from puppet.io.fapfile import FapWriter
 
     again = load_any(tmp_path / "me")                     # puppet ... --face me/

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from puppet.face.model import load_face
-from puppet.face.photolandmarks import PHOTO_PYTHON, DetectionError, detect_landmarks, photo_python
+from puppet.face.load import load_face
+from puppet.photo.detect import PHOTO_PYTHON, DetectionError, detect_landmarks, photo_python
 
 needs_detector = pytest.mark.skipif(photo_python() is None,
                                     reason="no photo environment (.venv-photo: tools/setup.sh makes it)")

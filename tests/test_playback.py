@@ -9,10 +9,12 @@ import pytest
 from PIL import Image
 
 from puppet import cli
-from puppet.io.fapfile import FapFrame, read_fap, write_fap
+from puppet.fap.frame import FapFrame
+from puppet.fap.held import HeldFaps
+from puppet.io.fapfile import read_fap, write_fap
 from puppet.io.takes import TakeError
 from puppet.view.demo import demo_take, run_demo
-from puppet.view.rendertake import FapPlayback, HeldFaps, render_take
+from puppet.view.rendertake import FapPlayback, render_take
 
 
 def _frame(values: dict[int, float], viseme=None) -> FapFrame:

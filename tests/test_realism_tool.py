@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import puppet
-from puppet.bench.deform import shared_assets
+from puppet.bench.assets import shared_assets
 from puppet.face.autorig import build_rig
 from puppet.face.examples import load_examples
 from tools.realism import TARGETS, fap_ends, fits, fold_count, folds, residuals, summary, targets

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from puppet.face import rigid
-from puppet.face.model import load_face
+from puppet.face.load import load_face
 from puppet.runtime.runtime import Runtime
 
 render = pytest.importorskip("puppet.view.renderer")

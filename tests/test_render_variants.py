@@ -8,7 +8,7 @@ import moderngl
 import numpy as np
 import pytest
 
-from puppet.face.model import load_face
+from puppet.face.load import load_face
 from puppet.runtime.runtime import Runtime
 from puppet.view.rendertake import frame_head
 

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from puppet.face import rigid
-from puppet.face.model import load_default_rig, load_face
+from puppet.face.default import load_default_rig
+from puppet.face.load import load_face
 from puppet.face.rig import load_rig, save_rig
 from puppet.runtime.runtime import Runtime
 from puppet.runtime.sibson import sibson_coordinates

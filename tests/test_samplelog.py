@@ -10,7 +10,9 @@ from hypothesis import strategies as st
 
 from devices import open_device
 from devices.base import Sample, State
-from puppet.io.samplelog import ReplayDevice, SampleLogWriter, read_sample_log
+from devices.replay_device import ReplayDevice
+from devices.samplelines import read_samples
+from puppet.io.samplelog import SampleLogWriter
 
 values = st.dictionaries(st.text("abcxyz0123._", min_size=1, max_size=8),
                          st.floats(allow_nan=False, allow_infinity=False), max_size=6)
@@ -24,7 +26,7 @@ def test_a_log_reads_back_exactly(tmp_path_factory, recorded):
     with SampleLogWriter(path) as log:
         for sample in recorded:
             log.write(sample)
-    assert list(read_sample_log(path)) == recorded
+    assert list(read_samples(path)) == recorded
 
 
 def test_a_recorder_killed_mid_line_leaves_every_complete_sample(tmp_path):
@@ -35,7 +37,7 @@ def test_a_recorder_killed_mid_line_leaves_every_complete_sample(tmp_path):
     with open(path, "a") as file:
         file.write('{"t_ns": 5, "device": "bo')
     with pytest.warns(UserWarning, match="last line is incomplete"):
-        got = list(read_sample_log(path))
+        got = list(read_samples(path))
     assert [s.values["ch0"] for s in got] == [0, 1, 2, 3, 4]
 
 
@@ -43,7 +45,7 @@ def test_a_bad_line_in_the_middle_names_file_and_line(tmp_path):
     path = tmp_path / "bad.jsonl"
     path.write_text('{"t_ns": 1, "device": "box", "values": {"a": 1}}\nnot json\n{"t_ns": 2, "device": "box", "values": {}}\n')
     with pytest.raises(ValueError, match=r"bad.jsonl:2: expected a JSON sample"):
-        list(read_sample_log(path))
+        list(read_samples(path))
 
 
 def test_replay_keeps_the_spacing_and_the_values(tmp_path):
@@ -80,21 +82,21 @@ def test_replay_as_fast_as_possible_and_a_missing_log_is_lost(tmp_path):
 
 
 def test_a_line_longer_than_the_limit_is_refused_unread(tmp_path):
-    from puppet.io.samplelog import MAX_LINE, SampleLogError, read_sample_log
+    from devices.samplelines import MAX_LINE, SampleLogError, read_samples
 
     log = tmp_path / "samples.jsonl"
     good = '{"t_ns": 1, "device": "box", "values": {"a": 1.0}}\n'
     log.write_text(good + '{"t_ns": 2, "device": "box", "values": {"a": ' + "1" * (2 * MAX_LINE) + "}}\n" + good)
-    stream = read_sample_log(log)
+    stream = read_samples(log)
     assert next(stream).values == {"a": 1.0}
     with pytest.raises(SampleLogError, match=r"samples.jsonl:2: a line of more than 1,048,576 characters"):
         next(stream)
 
 
 def test_a_deeply_nested_line_is_a_sample_log_error(tmp_path):
-    from puppet.io.samplelog import SampleLogError, read_sample_log
+    from devices.samplelines import SampleLogError, read_samples
 
     log = tmp_path / "samples.jsonl"
     log.write_text("[" * 100_000 + "]" * 100_000 + "\n")
     with pytest.raises(SampleLogError, match="samples.jsonl:1: expected a JSON sample"):
-        list(read_sample_log(log))
+        list(read_samples(log))

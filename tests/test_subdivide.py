@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from puppet.face.model import load_face
+from puppet.face.load import load_face
 from puppet.face.subdivide import subdivide
 
 

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from puppet import cli
-from puppet.face.model import load_face
+from puppet.face.load import load_face
 from puppet.io.fapfile import FapWarning, write_fap
 from puppet.runtime.runtime import Runtime
 from puppet.view import window as player

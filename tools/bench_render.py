@@ -24,7 +24,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from puppet.face.model import load_face
+from puppet.face.load import load_face
 from puppet.runtime.runtime import Runtime
 from puppet.view import renderer as render
 from puppet.view.rendertake import frame_head

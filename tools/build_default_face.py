@@ -73,7 +73,7 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:
     sys.path.insert(0, str(REPO))
 
-from puppet.face.model import read_obj
+from puppet.face.meshfile import read_obj
 
 DEFAULT_SOURCE = Path("../shared/assets/makehuman/base.obj")  # relative to the repository root
 DEFAULT_OUT = REPO / "puppet" / "data"

@@ -26,7 +26,7 @@ import numpy as np
 
 from puppet.face.autorig import build_rig
 from puppet.face.examples import load_examples
-from puppet.face.model import load_face
+from puppet.face.load import load_face
 from puppet.face.rig import save_rig
 from puppet.fap.table import fap
 from puppet.runtime.fapcalibration import calibrate, fit_faps, relative_residual

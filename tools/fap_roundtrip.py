@@ -13,7 +13,7 @@ import sys
 
 import numpy as np
 
-from puppet.face.model import load_face
+from puppet.face.load import load_face
 from puppet.fap.table import faps
 from puppet.runtime.runtime import Runtime
 

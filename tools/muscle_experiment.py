@@ -53,7 +53,7 @@ import numpy as np
 from PIL import Image, ImageDraw
 from scipy.interpolate import LinearNDInterpolator
 
-from puppet.face.model import load_face
+from puppet.face.load import load_face
 from puppet.face.muscles import (
     EdgeConstraints,
     LinearMuscle,

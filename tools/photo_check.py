@@ -27,8 +27,9 @@ import trimesh
 from PIL import Image, ImageDraw
 from scipy.spatial import cKDTree
 
-from puppet.face import photo as pf
-from puppet.face.model import Face, load_face
+from puppet.face.load import load_face
+from puppet.face.model import Face
+from puppet.photo import build as pf
 from puppet.view.renderer import Renderer, render_face, save_png
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -144,7 +145,7 @@ def _report(table: str, report: dict) -> str:
 
 `tools/photo_check.py` renders the ICT-FaceKit neutral head frontally ({SIZE}x{SIZE}, the
 renderer's portrait camera, flat skin tone), projects its 68 iBUG landmark vertices with the same
-camera as the detector's points, builds the face from that image (`puppet.face.photo`, layout
+camera as the detector's points, builds the face from that image (`puppet.photo.build`, layout
 ibug68) and compares it with the ICT mesh after a similarity alignment on the 68 landmarks.
 Errors are relative to the ICT face width (landmark 0 to 16). "Face area": every rebuilt skin
 vertex inside the face oval facing forward, its distance to the ICT face-area surface.

@@ -39,7 +39,7 @@ import numpy as np
 from PIL import Image, ImageDraw
 
 import puppet
-from puppet.bench.deform import shared_assets
+from puppet.bench.assets import shared_assets
 from puppet.face.autorig import build_rig
 from puppet.face.examples import load_examples
 from puppet.face.muscles import folded_triangles

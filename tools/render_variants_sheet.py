@@ -14,7 +14,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
 from test_render_variants import POSES, _images, studio_4x  # noqa: E402
 
-from puppet.face.model import load_face
+from puppet.face.load import load_face
 from puppet.runtime.runtime import Runtime
 from puppet.view.renderer import Renderer, save_png
 

@@ -26,9 +26,10 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from puppet.bench.deform import shared_assets
+from puppet.bench.assets import shared_assets
 from puppet.face.autorig import build_rig
-from puppet.face.model import Face, load_face
+from puppet.face.load import load_face
+from puppet.face.model import Face
 from puppet.runtime.runtime import Runtime
 from puppet.view.renderer import SKIN_SRGB, Renderer, save_png, texture_kwargs
 

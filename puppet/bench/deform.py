@@ -20,7 +20,7 @@ before the skin grid and the calibrated FAP motions, the "before" of that change
   dense_ms / deform_ms. This is the baseline as specified, and it flatters the dense side: a
   DFFD input moves in 3D, so a blendshape rig doing the same needs 3K shapes (3x the work).
 
-A second table splits whole frames (``bench_frame_split``): FAP frame (the demo take, where the
+``puppet.bench.run`` runs the sections and prints the tables. A second table splits whole frames (``bench_frame_split``): FAP frame (the demo take, where the
 face has feature points; the smooth take's displacements otherwise) -> control points -> DFFD ->
 normals -> draw -> read-back of a 640x480 offscreen image, with the frames per second and the
 share of the frame spent deforming (controls + DFFD + normals). A third table
@@ -39,21 +39,19 @@ from __future__ import annotations
 
 import contextlib
 import functools
-import json
 import os
 import statistics
-import sys
 import tempfile
 import time
 from collections.abc import Callable, Iterator
-from pathlib import Path
 
 import numpy as np
 
-from puppet.bench.inputs import bench_inputs
+from puppet.bench.ict import ict_face_and_rig
 from puppet.face import rigid
 from puppet.face.autorig import build_rig, rig_for_face
-from puppet.face.model import Face, load_face
+from puppet.face.load import load_face
+from puppet.face.model import Face
 from puppet.face.subdivide import subdivide
 from puppet.runtime.runtime import MUSCLE_MODES, Runtime
 
@@ -215,12 +213,12 @@ def bench_muscles(face: Face, frames: int, rig=None) -> list[dict]:
 def _frame_inputs(runtime: Runtime, frames: int):
     """Per frame index, the runtime's inputs: from the demo take's FAPs, or the smooth take."""
     if "2.1" in runtime.face.feature_points:
+        from puppet.fap.held import held_low_level
         from puppet.io.fapfile import iter_fap
         from puppet.view.demo import demo_take
-        from puppet.view.rendertake import held_low_level
 
         with iter_fap(demo_take()) as reader:
-            take = list(held_low_level(reader, runtime))
+            take = list(held_low_level(reader))
         return (lambda i: runtime.faps.controls(take[i % len(take)])), "FAP"
     rng = np.random.default_rng(7)
     d, angles = performance(rng, frames + 1, len(runtime.control_points), 0.03 * float(np.ptp(runtime.rest[:, 1])))
@@ -244,173 +242,7 @@ def bench_faces(ict: bool, subdivided: bool = True) -> list[tuple[Face, object, 
     if subdivided:
         faces += [(f, None, f.name) for f in (subdivide(face, 1), subdivide(face, 2))]
     if ict:
-        from puppet.bench.ict import ict_face_and_rig
-
         found = ict_face_and_rig()
         if found is not None:
             faces.append((*found, found[0].name))
     return faces
-
-
-SECTIONS = ("deform", "frames", "muscles", "inputs", "latency", "flood", "long_take")
-"""What ``puppet bench --only`` can pick, in the order they run and print."""
-
-
-def run_bench(frames: int = 300, as_json: bool = False, ict: bool = True, flood_seconds: float = 60.0,
-              take_seconds: float = 3600.0, only: tuple[str, ...] = SECTIONS, quick: bool = False) -> int:
-    """Measure the ``only`` sections (every mesh, the inputs, the live pipeline); print tables (or
-    JSON) and report progress on stderr; return the process exit code. ``quick``: a minute's
-    worth (30 frames, no subdivided meshes, a 3 s flood, a 1 minute take)."""
-    unknown = sorted(set(only) - set(SECTIONS))
-    if unknown:
-        raise ValueError(f"unknown bench sections {unknown}: expected some of {', '.join(SECTIONS)}")
-    if quick:
-        frames, flood_seconds, take_seconds = min(frames, 30), min(flood_seconds, 3.0), min(take_seconds, 60.0)
-    steps = _steps(frames, ict, flood_seconds, take_seconds, only, quick)
-    report: dict[str, object] = {}
-    with Steps(len(steps)) as progress:
-        for section, label, measure in steps:
-            progress.start(f"{section}: {label}")
-            result = measure()
-            if isinstance(result, list) and section in ("deform", "frames"):
-                report.setdefault(section, []).extend(result)
-            else:
-                report[section] = result
-    if as_json:
-        print(json.dumps(report, indent=1))
-    else:
-        _print_report(report)
-    return 0
-
-
-def _steps(frames: int, ict: bool, flood_seconds: float, take_seconds: float, only: tuple[str, ...],
-           quick: bool) -> list[tuple[str, str, Callable[[], object]]]:
-    """(section, label, measurement) for each step of the run, faces made on first use."""
-    faces = functools.cache(lambda: bench_faces(ict and not quick, subdivided=not quick))
-    default = functools.cache(lambda: Runtime(faces()[0][0]))
-    steps: list[tuple[str, str, Callable[[], object]]] = []
-    if "deform" in only:
-        labels = ["default", "default-coarse"] + ([] if quick else ["default-sub1", "default-sub2"] + ["ict"] * ict)
-        for k, label in enumerate(labels):
-            steps.append(("deform", label, lambda k=k: [bench_face(f, frames, rig, name)
-                                                        for f, rig, name in faces()[k:k + 1]]))
-    if "frames" in only:
-        steps.append(("frames", "default", lambda: [bench_frame_split(faces()[0][0], min(frames, 120), label="default")]))
-        if ict and not quick:
-            steps.append(("frames", "ict", lambda: [bench_frame_split(face, min(frames, 120), rig, label=label)
-                                                    for face, rig, label in faces() if face.name == "ict"]))
-    if "muscles" in only:
-        steps.append(("muscles", "default", lambda: bench_muscles(faces()[0][0], frames)))
-    if "inputs" in only:
-        steps.append(("inputs", "every adapter", lambda: bench_inputs(0.5 if quick else 2.0)))
-    live = _live_sections(default, flood_seconds, take_seconds)
-    steps += [(name, label, fn) for name, (label, fn) in live.items() if name in only]
-    return steps
-
-
-def _live_sections(runtime: Callable[[], Runtime], flood_seconds: float,
-                   take_seconds: float) -> dict[str, tuple[str, Callable[[], dict]]]:
-    """The live pipeline on the default face: latency, a flood of input, a long take."""
-    from puppet.bench import pipeline as loadbench
-
-    return {"latency": ("sim slider box -> drawn frame", lambda: loadbench.latency(runtime())),
-            "flood": (f"{flood_seconds:g} s of 10,000 readings/s", lambda: loadbench.flood(runtime(), flood_seconds)),
-            "long_take": (f"a {take_seconds:g} s take", lambda: loadbench.long_take(take_seconds))}
-
-
-def _print_report(report: dict) -> None:
-    if "deform" in report:
-        _table(report["deform"], ("face", "vertices", "control_points", "rig_s", "precompute_s", "load_s",
-                                  "deform_ms", "deform_normals_ms", "realtime_ms", "dense_ms", "ratio"))
-        print()
-    if "frames" in report:
-        _table(report["frames"], ("face", "input", "size", "controls_ms", "dffd_ms", "normals_ms", "draw_ms",
-                                  "read_ms", "fps", "deform_share"))
-        print()
-    if "muscles" in report:
-        _table(report["muscles"], ("face", "pose", "fap_only_ms", *(f"{mode}_ms" for mode in MUSCLE_MODES)))
-        print()
-    if "inputs" in report:
-        inputs = report["inputs"]
-        _table([r for r in inputs if "error" not in r],
-               ("adapter", "samples_s", "paced_samples_s", "latency_median_ms", "latency_p99_ms", "bad_frames"))
-        for row in inputs:
-            if "error" in row:
-                print(f"{row['adapter']}: not measured ({row['error']})")
-        print()
-    _print_live(report)
-
-
-def _print_live(report: dict) -> None:
-    if "latency" in report:
-        lat = report["latency"]
-        work, mesh, drawn = lat["frame_work_ms"], lat["sample_to_mesh_ms"], lat["sample_to_drawn_ms"]
-        print(f"live latency (a slider box in its own process -> default face, drawn and read back 640x480, "
-              f"every sample to the first frame that shows it): frame work {work['median']:.2f} ms median / "
-              f"{work['p99']:.2f} p99; draw and read-back {lat['draw_ms']['median']:.2f} ms median; sample->mesh {mesh['median']:.2f} / {mesh['p99']:.2f}; "
-              f"sample->drawn {drawn['median']:.2f} ms median / {drawn['p99']:.2f} p99 at {lat['fps']:.0f} fps "
-              f"({lat['samples']} samples)")
-    if "flood" in report:
-        flood = report["flood"]
-        print(f"flood {flood['rate']:,.0f} readings/s for {flood['seconds']:g} s, recording: {flood['fps']:.1f} fps "
-              f"(baseline {flood['baseline_fps']:.1f}, ratio {flood['fps_ratio']:.2f}), {flood['samples_s']:,.0f} "
-              f"samples/s taken, memory {flood['rss_start_mb']:.1f} -> {flood['rss_end_mb']:.1f} MiB, "
-              f"longest backlog {flood['backlog_max']}, dropped {flood['dropped']}")
-    if "long_take" in report:
-        take = report["long_take"]
-        length = take["take_seconds"]
-        print(f"long take {f'{length / 3600:g} h' if length >= 3600 else f'{length:g} s'} at an accelerated clock: {take['frames']:,} frames, "
-              f"{take['samples']:,} samples in {take['wall_s']:.1f} s, memory growth {take['rss_growth_mb']:.2f} MiB, "
-              f"take {take['take_mb']:.0f} MiB on disk")
-
-
-class Steps:
-    """Progress of a bench run on stderr: a rich progress bar on a terminal, else one line a step
-    (stdout stays the report, so ``--json`` pipes cleanly)."""
-
-    def __init__(self, total: int) -> None:
-        self.total = total
-        self.done = 0
-        self._bar = None
-        if sys.stderr.isatty():
-            from rich.console import Console
-            from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
-
-            self._bar = Progress(TextColumn("bench"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
-                                 TimeElapsedColumn(), TextColumn("{task.description}"),
-                                 console=Console(stderr=True), transient=True)
-            self._task = self._bar.add_task("", total=total)
-
-    def __enter__(self) -> Steps:
-        if self._bar is not None:
-            self._bar.start()
-        return self
-
-    def start(self, label: str) -> None:
-        """The next step begins (the previous one is done)."""
-        if self._bar is not None:
-            self._bar.update(self._task, completed=self.done, description=label)
-        else:
-            print(f"bench {self.done + 1}/{self.total}: {label}", file=sys.stderr, flush=True)
-        self.done += 1
-
-    def __exit__(self, *exc: object) -> None:
-        if self._bar is not None:
-            self._bar.update(self._task, completed=self.done)
-            self._bar.stop()
-
-
-def _table(rows: list[dict], header: tuple[str, ...]) -> None:
-    widths = [max(len(h), 12, *(len(str(r[h])) for r in rows if isinstance(r[h], str))) for h in header]
-    print("  ".join(f"{h:>{w}}" for h, w in zip(header, widths)))
-    for row in rows:
-        print("  ".join(f"{row[h]:>{w}.4g}" if isinstance(row[h], float) else f"{row[h]!s:>{w}}"
-                        for h, w in zip(header, widths)))
-
-
-def shared_assets() -> Path:
-    """``../shared/assets`` beside the repository (``$FACEPUPPET_SHARED`` overrides ../shared)."""
-    root = os.environ.get("FACEPUPPET_SHARED")
-    if root:
-        return Path(root) / "assets"
-    return Path(__file__).resolve().parents[3] / "shared" / "assets"

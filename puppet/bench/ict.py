@@ -12,15 +12,15 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from puppet.bench.assets import shared_assets
 from puppet.face.autorig import build_rig
-from puppet.face.model import Face, load_face
+from puppet.face.load import load_face
+from puppet.face.model import Face
 from puppet.face.rig import Rig
 
 
 def ict_face_and_rig(root: Path | None = None) -> tuple[Face, Rig] | None:
     """The ICT face (in the face frame) and its auto-rig, or None when the assets are absent."""
-    from puppet.bench.deform import shared_assets
-
     folder = (root or shared_assets()) / "ict_facekit"
     mesh, indices = folder / "generic_neutral_mesh.obj", folder / "vertex_indices.json"
     if not (mesh.is_file() and indices.is_file()):

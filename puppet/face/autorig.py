@@ -57,9 +57,10 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
+from puppet.face.default import default_face, load_default_rig
 from puppet.face.motiontransfer import transfer_motions
 from puppet.face.muscles import default_muscles
-from puppet.face.rig import ControlPoint, LipLine, Region, Rig, RigError, RigidPart
+from puppet.face.rig import ControlPoint, LipLine, Region, Rig, RigError, RigidPart, load_rig
 
 INDIRECT_WEIGHT = 0.5
 CORNER_JAW_SHARE = 0.5  # how far the lip corners go with the jaw
@@ -99,9 +100,6 @@ def rig_for_face(face) -> Rig:
     """The shipped rig when ``face`` is the default face (same mesh hash), the rig saved beside a
     face folder's mesh (``face.rig_file``) when it was made for this mesh, else a rig generated
     from the face's feature points."""
-    from puppet.face.model import load_default_rig
-    from puppet.face.rig import load_rig
-
     saved = getattr(face, "rig_file", None)
     for rig in (load_default_rig(), load_rig(saved) if saved is not None else None):
         if rig is not None and rig.face_hash == face.content_hash:
@@ -131,20 +129,16 @@ def build_rig(face, *, grid: bool = True, calibrated: bool = True) -> Rig:
 def _default_follow() -> dict[tuple[int, int], tuple[float, float]]:
     """The shipped default rig's lip corner follow ranges (``puppet.runtime.foldlimits``), in FAPU: the
     inner and outer corner lie a hair's breadth apart on every face."""
-    from puppet.face.model import load_default_rig
-
-    default = load_default_rig(generate=False)
+    default = load_default_rig()
     return dict(default.fap_follow) if default is not None else {}
 
 
 def _default_motions(face, rig: Rig) -> dict[int, dict[str, np.ndarray]]:
     """The shipped default rig's FAP motions, carried over to ``rig`` (none if it has none)."""
-    from puppet.face.model import load_default_rig, load_face
-
-    default = load_default_rig(generate=False)
+    default = load_default_rig()
     if default is None or not default.fap_motions:
         return {}
-    return transfer_motions(default, load_face().feature_points, rig, face.feature_points)
+    return transfer_motions(default, default_face().feature_points, rig, face.feature_points)
 
 
 class _Builder:

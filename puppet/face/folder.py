@@ -1,6 +1,6 @@
 """A face folder: a face ready for ``--face``, written so that any OBJ viewer shows it and
 facepuppet loads and animates it like the default face. Two commands write one: ``puppet
-face-from-photo`` (a face built from a photo, ``puppet.face.photo``: textured) and ``puppet rig
+face-from-photo`` (a face built from a photo, ``puppet.photo.build``: textured) and ``puppet rig
 MESH --landmarks ... -o FOLDER/`` (any mesh, rigged from its landmarks: untextured).
 
 Files:
@@ -25,8 +25,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from PIL import Image
 
-from puppet.face.model import Face, FaceFileError, read_obj
+from puppet.face.meshfile import read_obj
+from puppet.face.model import Face, FaceFileError
+from puppet.face.rig import load_rig, save_rig
 
 FACE_OBJ = "face.obj"
 FACE_MTL = "face.mtl"
@@ -50,14 +53,12 @@ def write_face_folder(face: TexturedFace, out: str | os.PathLike, *, source_phot
                       report: dict) -> Path:
     """Write the textured ``face`` into the folder ``out`` (created) as face.obj, face.mtl,
     texture.png and face.json; return the folder."""
-    from puppet.view.renderer import save_png
-
     folder = Path(out)
     folder.mkdir(parents=True, exist_ok=True)
     (folder / FACE_OBJ).write_text(_obj_text(face, f"a face from a photo ({face.name}): the MakeHuman hm08 "
                                                    "default face (CC0) warped"), encoding="utf-8")
     (folder / FACE_MTL).write_text(f"newmtl face\nKd 1 1 1\nmap_Kd {FACE_TEXTURE}\n", encoding="utf-8")
-    save_png(face.texture, folder / FACE_TEXTURE)
+    Image.fromarray(np.asarray(face.texture, dtype=np.uint8)).save(folder / FACE_TEXTURE, format="PNG")
     meta = _meta(face, source_photo=source_photo, texture_weight=np.round(face.texture_weight, 4).tolist(),
                  fit=report)
     (folder / FACE_JSON).write_text(json.dumps(meta), encoding="utf-8")
@@ -67,8 +68,6 @@ def write_face_folder(face: TexturedFace, out: str | os.PathLike, *, source_phot
 def write_rigged_folder(face: Face, rig, out: str | os.PathLike, *, source_mesh: str) -> Path:
     """Write a rigged, untextured ``face`` (a mesh given its landmarks) and its ``rig`` into the
     folder ``out`` (created) as face.obj, face.json and face.rig; return the folder."""
-    from puppet.face.rig import save_rig
-
     folder = Path(out)
     folder.mkdir(parents=True, exist_ok=True)
     (folder / FACE_OBJ).write_text(_obj_text(face, f"{face.name}, rigged from {Path(source_mesh).name}"),
@@ -150,8 +149,6 @@ def _texture(folder: Path, meta: dict, mesh, positions: np.ndarray, triangles: n
     """The texture fields of a textured folder (texture.png there), else none."""
     if not (folder / FACE_TEXTURE).is_file():
         return {}
-    from PIL import Image
-
     if triangle_uv is None or not np.array_equal(triangle_uv, triangles) or len(mesh.uvs) != len(positions):
         raise FaceFileError(f"{folder / FACE_OBJ}: expected one texture coordinate per vertex (f a/a b/b c/c)")
     with Image.open(folder / FACE_TEXTURE) as image:
@@ -165,6 +162,4 @@ def _texture(folder: Path, meta: dict, mesh, positions: np.ndarray, triangles: n
 
 def load_folder_rig(path: str | os.PathLike):
     """The rig saved in a face folder (``face.rig``)."""
-    from puppet.face.rig import load_rig
-
     return load_rig(Path(path) / FACE_RIG)

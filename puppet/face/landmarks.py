@@ -45,6 +45,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components, dijkstra
 
 from puppet.errors import PuppetError
+from puppet.face.default import default_face
 from puppet.face.muscles import frame_coefficients, place
 
 __all__ = ["LandmarkError", "read_landmarks", "ibug_to_fdp", "apply_landmarks"]
@@ -157,8 +158,6 @@ def _halfway(skin: Skin, waypoints: list[int]) -> int:
 def apply_landmarks(face, landmarks) -> object:
     """A copy of ``face`` in the face frame with parts, contours, pivots and all feature points
     (module docstring), ready for ``autorig.build_rig``."""
-    from puppet.face.model import load_face
-
     landmarks = read_landmarks(landmarks, len(face.vertices))
     skin = _skin_graph(face.vertices, face.triangles, _landmark_component(face, landmarks))
     if isinstance(landmarks, list):
@@ -169,7 +168,7 @@ def apply_landmarks(face, landmarks) -> object:
             raise LandmarkError(f"landmarks: FDP(s) {missing} are needed (the lip and lid loops, chin, nose)")
         given = dict(landmarks)
         waypoints = {name: [given[f] for f in loop] for name, loop in FDP_CONTOURS.items()}
-    reference = load_face()
+    reference = default_face()
     frame = _face_frame(face.vertices, given, reference.feature_points)
     vertices = _snapped(face.vertices @ frame[:, :3].T + frame[:, 3], face.vertices, given)
     skin = _skin_graph(vertices, face.triangles, skin.mask)

@@ -79,6 +79,7 @@ from typing import IO, Iterator, Sequence
 import numpy as np
 
 from puppet.errors import PuppetError
+from puppet.fap.frame import FapFrame
 from puppet.fap.table import N_FAPS
 
 DEFAULT_FPS = 25.0
@@ -112,17 +113,6 @@ class FapHeader:
     name: str
     fps: float
     declared_frames: int | None
-
-
-@dataclass(frozen=True)
-class FapFrame:
-    """One frame: ``number`` as written, ``values``/``mask`` (68,), FAP 1/2 fields (4,) / (6,)."""
-
-    number: int
-    values: np.ndarray
-    mask: np.ndarray
-    viseme: np.ndarray
-    expression: np.ndarray
 
 
 @dataclass

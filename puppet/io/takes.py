@@ -37,9 +37,10 @@ from pathlib import Path
 import numpy as np
 
 from devices.base import Sample
+from devices.samplelines import read_samples
 from puppet.errors import PuppetError
 from puppet.io.fapfile import FapStream, FapWriter, read_fap
-from puppet.io.samplelog import LogEvent, SampleLogWriter, read_sample_log, read_take_log
+from puppet.io.samplelog import LogEvent, SampleLogWriter, read_take_log
 
 FPS_CHOICES = (25, 30, 50, 60)
 FAP_NAME, LOG_NAME, META_NAME = "take.fap", "samples.jsonl", "take.json"
@@ -176,7 +177,7 @@ class Take:
         return read_fap(self.present(FAP_NAME))
 
     def samples(self) -> Iterator[Sample]:
-        return self._log(read_sample_log)
+        return self._log(read_samples)
 
     def entries(self) -> Iterator[Sample | LogEvent]:
         """The log's Samples and events, in order (what replay feeds a ``TakeClock``)."""

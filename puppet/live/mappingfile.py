@@ -79,7 +79,7 @@ import math
 import os
 import re
 import reprlib
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from urllib.parse import parse_qsl, urlencode, urlsplit
 
@@ -89,9 +89,10 @@ import yaml
 from devices import BACKENDS, DeviceError
 from devices.base import Sample, Url, table_class
 from puppet.errors import PuppetError
-from puppet.face.model import AU
 from puppet.face.muscles import MUSCLE_NAMES
+from puppet.fap.pose import Pose
 from puppet.fap.table import N_FAPS, faps
+from puppet.fap.units import AU
 from puppet.live.filters import Exponential, OneEuro, RateLimit
 
 # -- the format -------------------------------------------------------------------------------
@@ -828,20 +829,6 @@ def _check(data, file: str, lines=None, duplicates=()) -> tuple[dict, dict, list
 
 # -- the compiled mapping ---------------------------------------------------------------------
 
-@dataclass
-class Pose:
-    """One frame for the face: 68 FAP values (FAPU; index 0 = FAP 1, FAP 1 and 2 left 0), FAP 1 and
-    FAP 2 as ``viseme`` (select1, select2, blend) and ``expression`` (select1, intensity1,
-    select2, intensity2), and muscle contractions 0..1 by name. ``Runtime.pose(pose.fap,
-    viseme=pose.viseme, expression=pose.expression)`` draws it."""
-
-    fap: np.ndarray
-    viseme: tuple | None = None
-    expression: tuple | None = None
-    muscles: dict[str, float] = field(default_factory=dict)
-    t_ns: int | None = None
-
-
 @dataclass(frozen=True)
 class ChannelState:
     """What a monitor shows for one channel: the last raw value (None before any), the shaped
@@ -1116,7 +1103,7 @@ class Mapping:
         self.muscle_names = tuple(dict.fromkeys(t.key for t in self._muscles))
         self._shapes = None
         if self._visemes or self._expressions:
-            from puppet.runtime.fapengine import high_level_faps
+            from puppet.fap.highlevel import high_level_faps
 
             self._shapes = high_level_faps()
 

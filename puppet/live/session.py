@@ -62,9 +62,10 @@ import numpy as np
 
 from devices import Device, State, open_device
 from devices.base import Sample
+from puppet.fap.pose import Pose
 from puppet.io.samplelog import LogEvent
 from puppet.io.takes import TakeError, TakeRecorder, take_fap
-from puppet.live.mappingfile import Pose, load_mapping
+from puppet.live.mappingfile import load_mapping
 from puppet.live.takeclock import Layer, TakeClock
 from puppet.runtime.runtime import Runtime
 
@@ -99,7 +100,7 @@ class LiveSession:
             self.runtime = face
         else:
             if face is None:
-                from puppet.face.model import load_face
+                from puppet.face.load import load_face
 
                 face = load_face()
             self.runtime = Runtime(face)

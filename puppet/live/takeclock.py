@@ -33,12 +33,13 @@ from pathlib import Path
 import numpy as np
 
 from devices.base import Sample
+from puppet.fap.held import HeldFaps
+from puppet.fap.pose import Pose
 from puppet.fap.table import faps
 from puppet.io.fapfile import iter_fap
 from puppet.io.samplelog import LogEvent
 from puppet.io.takes import TakeError
-from puppet.live.mappingfile import Mapping, Pose
-from puppet.view.rendertake import HeldFaps
+from puppet.live.mappingfile import Mapping
 
 WriteFrame = Callable[[np.ndarray, "tuple | np.ndarray | None", "tuple | np.ndarray | None"], None]
 """Writes one frame: 68 FAP values (FAPU; FAP 1/2 slots unused), viseme and expression fields."""
@@ -54,7 +55,7 @@ def default_muscle_faps(muscles: dict[str, float]) -> np.ndarray:
 
 @functools.cache
 def _default_runtime():
-    from puppet.face.model import load_face
+    from puppet.face.load import load_face
     from puppet.runtime.runtime import Runtime
 
     return Runtime(load_face())

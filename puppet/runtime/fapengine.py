@@ -40,10 +40,9 @@ file; index 0 = FAP 1) into the runtime's inputs: control point displacements an
   ``shown(values)`` gives the values the face then shows, which is what ``encode`` measures back;
   within these limits they are the values themselves (``puppet.runtime.foldlimits`` finds reach and follow).
 
-  ``limit_fields`` does the same for FAP 1 / 2 fields read from a file: a select that names no
-  viseme or expression shows none (0), blends and intensities are held to 0-63.
-* High-level FAPs 1 and 2 expand into low-level FAPs from ``data/high_level_faps.yaml`` (blends as
-  the standard says) and add to the frame's low-level values.
+  ``puppet.fap.highlevel.limit_fields`` does the same for FAP 1 / 2 fields read from a file.
+* High-level FAPs 1 and 2 expand into low-level FAPs (``puppet.fap.highlevel``) and add to the
+  frame's low-level values.
 
 ``effects()`` says for every FAP what it does on this face, or why it does nothing (pupil dilation
 is painted on the eyeball; the default face's ears are in its still region; tongue roll needs a
@@ -57,14 +56,12 @@ the jaw's (or lid's) frame, so a take driven by other means can be written as st
 from __future__ import annotations
 
 import functools
-import importlib.resources
 import math
-from collections.abc import Mapping
 
 import numpy as np
-import yaml
 
 from puppet.face import rigid
+from puppet.fap.highlevel import expand
 from puppet.fap.table import N_FAPS, fap, faps
 
 JAW_FAPS = (3, 14, 15)
@@ -95,7 +92,6 @@ class FapEngine:
         self._index = {name: i for i, name in enumerate(runtime.control_points)}
         self._own = self._translation_matrix()
         self._translations = self._own + self._calibrated_matrix()
-        self._high = high_level_faps()
         self.reach = self._face_limits()
         self.skin_reach = np.stack([np.full(N_FAPS, -np.inf), np.full(N_FAPS, np.inf)])
         for number, (low, high) in self.rig.fap_reach.items():
@@ -193,25 +189,9 @@ class FapEngine:
 
     def low_level(self, values: np.ndarray, viseme: tuple | None = None,
                   expression: tuple | None = None) -> np.ndarray:
-        """The 68 values with FAP 1 / FAP 2 expanded into low-level FAPs and added.
-
-        ``viseme`` is (select1, select2, blend); ``expression`` is (select1, intensity1,
-        select2, intensity2); both as in a .fap file. The def / init_face flags of a .fap file
-        (new viseme or expression definitions sent in the stream) are not used: the shapes come
-        from the data file.
-        """
-        out = np.array(values, dtype=float)
-        if out[:2].any():
-            raise ValueError("FAP 1 and 2 are not values: pass them as viseme=(select1, select2, blend) "
-                             "and expression=(select1, intensity1, select2, intensity2)")
-        _check_selects(viseme, expression)
-        if viseme is not None:
-            s1, s2, blend = viseme[:3]
-            out += self._high["visemes"][int(s1)] * (blend / 63) + self._high["visemes"][int(s2)] * (1 - blend / 63)
-        if expression is not None:
-            s1, i1, s2, i2 = expression[:4]
-            out += self._high["expressions"][int(s1)] * (i1 / 63) + self._high["expressions"][int(s2)] * (i2 / 63)
-        return out
+        """The 68 values with FAP 1 / FAP 2 expanded into low-level FAPs and added
+        (``puppet.fap.highlevel.expand``)."""
+        return expand(values, viseme, expression)
 
     def controls(self, values: np.ndarray) -> tuple[np.ndarray, dict[str, np.ndarray]]:
         """Control point displacements (K, 3) and rigid motions for 68 low-level FAP values, as
@@ -375,22 +355,6 @@ def _drop_reach(offset: np.ndarray, axis: np.ndarray) -> np.ndarray:
     return np.array([A - radius, A + radius])
 
 
-def limit_fields(viseme: np.ndarray | None, expression: np.ndarray | None) -> tuple:
-    """FAP 1 / 2 fields as read from a file, held to what they can mean: a select naming no
-    viseme (0-14) or expression (0-6) selects none, blends and intensities are held to 0-63."""
-    if viseme is not None:
-        s1, s2, blend = (float(x) for x in viseme[:3])
-        viseme = (_select(s1, 14), _select(s2, 14), min(max(blend, 0.0), 63.0))
-    if expression is not None:
-        s1, i1, s2, i2 = (float(x) for x in expression[:4])
-        expression = (_select(s1, 6), min(max(i1, 0.0), 63.0), _select(s2, 6), min(max(i2, 0.0), 63.0))
-    return viseme, expression
-
-
-def _select(value: float, top: int) -> int:
-    return int(value) if 0 <= value <= top else 0
-
-
 def _yaw_pitch_roll(R: np.ndarray) -> np.ndarray:
     """Angles (about y, x, z) of R = Ry(yaw) Rx(pitch) Rz(roll)."""
     pitch = np.arcsin(np.clip(-R[1, 2], -1.0, 1.0))
@@ -400,45 +364,3 @@ def _yaw_pitch_roll(R: np.ndarray) -> np.ndarray:
 def _inverse(motion: np.ndarray) -> np.ndarray:
     R = motion[:, :3].T
     return np.hstack([R, (-R @ motion[:, 3])[:, None]])
-
-
-@functools.lru_cache(maxsize=1)
-def high_level_faps() -> dict[str, dict[int, np.ndarray]]:
-    """Visemes 0-14 and expressions 0-6 (0 = none) as 68-value arrays, from the data file."""
-    text = importlib.resources.files("puppet").joinpath("data", "high_level_faps.yaml").read_text("utf-8")
-    data = yaml.safe_load(text)
-    out: dict[str, dict[int, np.ndarray]] = {"visemes": {}, "expressions": {0: np.zeros(N_FAPS)}}
-    for kind in ("visemes", "expressions"):
-        for number, shape in data[kind].items():
-            values = np.zeros(N_FAPS)
-            for name, value in (shape or {}).items():
-                values[fap(name).number - 1] += float(value)
-            out[kind][int(number)] = values
-    for kind, top in (("visemes", 14), ("expressions", 6)):
-        missing = sorted(set(range(top + 1)) - set(out[kind]))
-        if missing:
-            raise ValueError(f"high_level_faps.yaml: {kind} {missing} are not defined")
-    return out
-
-
-def fap_values(faps_by_key: Mapping[int | str, float]) -> np.ndarray:
-    """A 68-value array from {number or name: value}; unknown keys name the closest FAP."""
-    values = np.zeros(N_FAPS)
-    for key, value in faps_by_key.items():
-        number = fap(key).number
-        if number in (1, 2):
-            raise ValueError(f"FAP {number} ({fap(number).name}) is not a value: pass it as "
-                             f"{'viseme=(select1, select2, blend)' if number == 1 else 'expression=(select1, intensity1, select2, intensity2)'}")
-        values[number - 1] = float(value)
-    return values
-
-
-def _check_selects(viseme: tuple | None, expression: tuple | None) -> None:
-    """Viseme selects 0-14 and expression selects 0-6, as FAP 1 / FAP 2 define them."""
-    for name, fields, top in (("viseme", viseme, 14), ("expression", expression, 6)):
-        if fields is None:
-            continue
-        selects = [fields[0], fields[2]] if name == "expression" else list(fields[:2])
-        bad = [s for s in selects if not (0 <= int(s) <= top)]
-        if bad:
-            raise ValueError(f"{name} {bad[0]} does not exist: {name}s are numbered 0 to {top}")

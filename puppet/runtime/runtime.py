@@ -419,7 +419,7 @@ class Runtime:
                      viseme: tuple | None = None,
                      expression: tuple | None = None) -> tuple[np.ndarray, dict[str, np.ndarray]]:
         """The displacements and rigid motions ``pose`` deforms with."""
-        from puppet.runtime.fapengine import fap_values
+        from puppet.fap.highlevel import fap_values
 
         if fap is None:
             values = np.zeros(68)

@@ -22,7 +22,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from puppet.errors import PuppetError
-from puppet.face.model import Face, FaceFileError, MissingFeaturePointsError, load_face
+from puppet.face.load import load_face
+from puppet.face.model import Face, FaceFileError, MissingFeaturePointsError
 from puppet.face.rig import RigError
 from puppet.io.fapfile import FapError
 from puppet.io.takes import TakeError

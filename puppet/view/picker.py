@@ -1,5 +1,5 @@
 """A landmark picker for people without a detector: a web page on loopback showing the photo,
-where the user clicks the points in order; saved as the landmark JSON ``puppet.face.photo``
+where the user clicks the points in order; saved as the landmark JSON ``puppet.photo.build``
 reads (``{"layout": ..., "points": [[x, y], ...]}``, pixels of the full-size photo).
 
 ``PickerServer`` serves the page (``http.server`` in a thread, 127.0.0.1 only, a free port):
@@ -18,7 +18,7 @@ import threading
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
 
-from puppet.face.photo import FDP11, FDP11_HINTS, PhotoFaceError, check_inside, parse_landmarks, read_photo
+from puppet.photo.build import FDP11, FDP11_HINTS, PhotoFaceError, check_inside, parse_landmarks, read_photo
 
 IBUG_PARTS = [(0, 17, "jaw line, from the photo's left ear level down round the chin to the right"),
               (17, 22, "brow on the photo's left, outer to inner"), (22, 27, "brow on the photo's right, inner to outer"),

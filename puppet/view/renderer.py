@@ -15,7 +15,7 @@ teeth); and a sky/ground hemisphere ambient. Lighting is computed in linear spac
 sRGB on output. Back faces are drawn with flipped normals, because the mouth interior is seen
 from inside the mesh.
 
-Optionally the albedo comes from a texture (a face built from a photo, ``puppet.face.photo``):
+Optionally the albedo comes from a texture (a face built from a photo, ``puppet.photo.build``):
 per-vertex texture coordinates and a per-vertex texture weight that mixes the texture's colour
 over the vertex colour (0 keeps the vertex colour: where the photo does not see the surface).
 Without a texture the weight is 0 everywhere and the colour path is the per-vertex one.

@@ -9,55 +9,20 @@ and normals to whatever draws them.
 from __future__ import annotations
 
 import os
-from collections.abc import Iterable, Iterator
-from dataclasses import dataclass
+from collections.abc import Iterator
 
 import numpy as np
 
-from puppet.face.model import Face, load_face
-from puppet.io.fapfile import FapFrame, iter_fap
+from puppet.face.load import load_face
+from puppet.face.model import Face
+from puppet.fap.held import held_low_level
+from puppet.io.fapfile import iter_fap
 from puppet.io.outputs import writable
 from puppet.io.takes import TakeError, take_fap
-from puppet.runtime.fapengine import limit_fields
 from puppet.runtime.runtime import Runtime
 from puppet.view.renderer import VIEW_DIRECTIONS, Renderer, write_video
 
 VIEWS = tuple(VIEW_DIRECTIONS)
-
-
-@dataclass
-class HeldFaps:
-    """The FAP state a player holds: values of FAPs 3..68 and the FAP 1/2 fields, masked-in."""
-
-    values: np.ndarray
-    viseme: np.ndarray | None = None
-    expression: np.ndarray | None = None
-
-    @classmethod
-    def neutral(cls) -> HeldFaps:
-        return cls(np.zeros(68))
-
-    def update(self, frame: FapFrame) -> HeldFaps:
-        """Take this frame's masked values; keep the rest."""
-        self.values[frame.mask] = frame.values[frame.mask]
-        if frame.mask[0]:
-            self.viseme = frame.viseme.copy()
-        if frame.mask[1]:
-            self.expression = frame.expression.copy()
-        return self
-
-    def low_level(self, runtime: Runtime) -> np.ndarray:
-        """The held state as 68 low-level FAPs (visemes and expressions expanded)."""
-        values = self.values.copy()
-        values[:2] = 0
-        return runtime.faps.low_level(values, *limit_fields(self.viseme, self.expression))
-
-
-def held_low_level(frames: Iterable[FapFrame], runtime: Runtime) -> Iterator[np.ndarray]:
-    """Per frame, the FAP state a player holds, as 68 low-level values (FAP 1 / 2 expanded)."""
-    held = HeldFaps.neutral()
-    for frame in frames:
-        yield held.update(frame).low_level(runtime)
 
 
 class FapPlayback:
@@ -77,7 +42,7 @@ class FapPlayback:
 
     def __iter__(self) -> Iterator[tuple[np.ndarray, np.ndarray]]:
         with iter_fap(self.path) as reader:
-            for values in held_low_level(reader, self.runtime):
+            for values in held_low_level(reader):
                 d, motions = self.runtime.faps.controls(values)
                 yield self.runtime.deform_with_normals(d, motions)
 

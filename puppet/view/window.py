@@ -50,11 +50,12 @@ import numpy as np
 
 from puppet.errors import PuppetError
 from puppet.face.model import Face
+from puppet.fap.held import held_low_level
 from puppet.fap.table import N_FAPS
 from puppet.io.fapfile import FapError, FapReader, FapWarning, iter_fap
 from puppet.runtime.runtime import Runtime
 from puppet.view.renderer import Renderer, software_rasteriser
-from puppet.view.rendertake import VIEWS, FapPlayback, frame_head, held_low_level
+from puppet.view.rendertake import VIEWS, FapPlayback, frame_head
 
 BACKENDS = ("pyglet", "glfw")
 """moderngl-window backends tried in order (glfw only where its package is installed)."""
@@ -229,7 +230,7 @@ class HeldTable:
         self._chunks: list[np.ndarray] = []
         self._count = 0
         self._reader: FapReader | None = iter_fap(self.path)
-        self._held = held_low_level(self._reader, runtime)
+        self._held = held_low_level(self._reader)
 
     @property
     def count(self) -> int:

@@ -58,7 +58,8 @@ from scipy.interpolate import RBFInterpolator
 
 from puppet.errors import PuppetError
 from puppet.face.folder import TexturedFace
-from puppet.face.model import Face, load_face
+from puppet.face.load import load_face
+from puppet.face.model import Face
 from puppet.runtime.normals import VertexNormals
 
 FDP11 = ("3.12", "3.8", "3.11", "3.7", "9.3", "9.15", "8.4", "8.3", "2.1", "2.14", "2.13")
@@ -590,11 +591,11 @@ def build_face_folder(photo_path: str | os.PathLike, landmarks_path: str | os.Pa
                       out: str | os.PathLike) -> Path:
     """``puppet face-from-photo``: fit, texture, write ``out`` (``puppet.face.folder``) and rig the
     written face (rigged from what was written, so the rig matches the face as loaded). With no
-    ``landmarks_path`` the landmarks are detected (``puppet.face.photolandmarks``)."""
+    ``landmarks_path`` the landmarks are detected (``puppet.photo.detect``)."""
     from puppet.face.autorig import build_rig
     from puppet.face.folder import FACE_RIG, load_face_folder, write_face_folder
-    from puppet.face.photolandmarks import detect_landmarks
     from puppet.face.rig import save_rig
+    from puppet.photo.detect import detect_landmarks
 
     photo = read_photo(photo_path)
     if landmarks_path is None:

@@ -3,7 +3,7 @@
 mediapipe 0.10.21 carries its face-landmark model inside the wheel, so nothing is downloaded at
 run time; it also pins numpy < 2, which this project has outgrown. So it lives in a separate
 virtual environment (the ``photo`` set-up: ``tools/setup.sh`` makes ``.venv-photo`` beside
-``.venv``) and runs ``puppet/face/mediapipe_detect.py`` there as a subprocess, which prints the 478
+``.venv``) and runs ``puppet/photo/mediapipe_detect.py`` there as a subprocess, which prints the 478
 landmarks as JSON. Elsewhere, point ``FACEPUPPET_PHOTO_PYTHON`` at the Python of any environment
 with ``mediapipe==0.10.21`` installed.
 
@@ -42,7 +42,7 @@ def photo_python() -> Path | None:
 
 def detect_landmarks(photo: str | os.PathLike) -> dict:
     """The photo's 478 MediaPipe landmarks as landmark JSON (``{"layout": "mediapipe468",
-    "points": [[x, y, z], ...]}``, pixels), for ``puppet.face.photo.parse_landmarks``."""
+    "points": [[x, y, z], ...]}``, pixels), for ``puppet.photo.build.parse_landmarks``."""
     python = photo_python()
     if python is None or not python.exists():
         raise DetectionError(f"{photo}: finding landmarks needs the photo environment (mediapipe 0.10.21): "

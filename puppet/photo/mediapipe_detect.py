@@ -1,6 +1,6 @@
 """Detect face landmarks in a photo with MediaPipe Face Mesh; print them as JSON on stdout.
 
-Run by ``puppet.face.photolandmarks`` in the photo environment (``.venv-photo``, made by
+Run by ``puppet.photo.detect`` in the photo environment (``.venv-photo``, made by
 ``tools/setup.sh``), never imported by the project: mediapipe 0.10.21, the last release that
 carries its face-landmark model inside the wheel (no download at run time), needs numpy < 2,
 which the project's own environment has outgrown. So this file imports nothing of ``puppet``.

@@ -1,0 +1,1 @@
+"""A performer's face from one photo: landmarks found (or given), the default face fitted and textured."""
