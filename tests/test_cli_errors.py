@@ -41,7 +41,7 @@ def place(tmp_path_factory) -> dict[str, str]:
 
 
 BAD = [
-    "", "nonsense", "render", "render {take}",
+    "", "nonsense", "render", "render {take} {take}",
     "render {take} -o {tmp}/x.mp4 --fps inf", "render {take} -o {tmp}/x.mp4 --fps nan",
     "render {take} -o {tmp}/x.mp4 --fps 1e-300", "render {take} -o {tmp}/x.mp4 --fps abc",
     "render {take} -o {tmp}/x.mp4 --size 99999x99999", "render {take} -o {tmp}/x.mp4 --size 1x1",
