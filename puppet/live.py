@@ -236,6 +236,9 @@ class LiveView:
         self.window.fbo.viewport = (0, 0, *size)
 
     def _draw_cockpit(self, states: dict[str, Any]) -> None:
+        self.cockpit.tick(self.stats.fps, self.stats.latency_ms)
+        if not self.cockpit.visible:  # hidden: nothing gathered, nothing drawn
+            return
         recording = None
         if self.take is not None and self.session.recording:
             recording = (self.take.name, time.monotonic() - self._take_started)

@@ -48,10 +48,17 @@ def test_the_cockpit_draws_over_the_face_and_hidden_draws_nothing(tmp_path, head
         shown = _pixels(window)
         imgui = live.cockpit.imgui
         drawn = imgui.get_frame_count()
+        live._on_key(_Keys.M, _Keys.ACTION_PRESS, None)
         live._on_key(_Keys.H, _Keys.ACTION_PRESS, None)
+        reads = []
+        channels = session.mapping.channels
+        session.mapping.channels = lambda: reads.append(1) or channels()
         _steps(live, 3)
         hidden = _pixels(window)
         assert imgui.get_frame_count() == drawn  # hidden: not one ImGui frame
+        assert reads == [] and len(live.cockpit.fps) == 6  # nor a channel read; the graphs still fill
+        session.mapping.channels = channels
+        live._on_key(_Keys.M, _Keys.ACTION_PRESS, None)
         corner = (slice(10, 150), slice(10, 200))    # the status panel, top left
         assert np.abs(shown[corner].astype(int) - hidden[corner].astype(int)).mean() > 10
 
