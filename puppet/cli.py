@@ -1,7 +1,7 @@
 """The ``puppet`` command.
 
 Every refusal is one line on stderr and exit code 2: argparse's own (``puppet render: argument
---fps: ...``), and every ``PuppetError``, ``DeviceError``, ``MappingError`` or ``OSError`` a command
+--fps: ...``), and every ``PuppetError`` (``MappingError`` ...), ``DeviceError`` or ``OSError`` a command
 raises, caught once in ``main`` as ``puppet COMMAND: message``; warnings are one line too. A
 traceback is a bug.
 """
@@ -18,16 +18,16 @@ from pathlib import Path
 from devices.base import DeviceError
 
 from .errors import PuppetError
-from .mapping import MappingError
-from .render import VIEW_DIRECTIONS
 from .shipped import copy_mapping, mapping_path, mappings_folder, shipped_mappings
 
-VIEWS = tuple(VIEW_DIRECTIONS)
+VIEWS = ("front", "three_quarter", "profile")
+"""``--view`` choices (``puppet.render.VIEW_DIRECTIONS``, imported only by the commands that draw,
+so ``puppet devices`` starts in well under a second)."""
 BENCH_SECTIONS = ("deform", "frames", "muscles", "inputs", "latency", "flood", "long_take")
 """``puppet bench --only`` choices (``puppet.bench.SECTIONS``; the bench is imported only when run)."""
 FACE_HELP = "a face folder (puppet rig ... -o FOLDER/, puppet face-from-photo) (default: the embedded face)"
 MAX_SIDE = 8192
-REFUSED = (PuppetError, DeviceError, MappingError, OSError)
+REFUSED = (PuppetError, DeviceError, OSError)  # MappingError, FapError ... are PuppetErrors
 
 
 class _Parser(argparse.ArgumentParser):

@@ -29,6 +29,21 @@ def test_puppet_devices_runs_on_this_machine(capsys):
     assert all(line.split(":")[0] in discovery.KINDS or line.startswith("  ") for line in out.splitlines())
 
 
+def test_puppet_devices_loads_no_face_renderer_or_scipy():
+    """What keeps ``puppet devices`` under a second: the command imports the device libraries and
+    nothing of the face side (scipy alone is about half a second to import)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    probe = ("import sys; from puppet import cli; cli.main(['devices']); "
+             "print(sorted(m for m in sys.modules if m.split('.')[0] in ('scipy', 'moderngl', 'trimesh') "
+             "or m in ('puppet.face', 'puppet.runtime', 'puppet.render', 'puppet.mapping')))")
+    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True,
+                          cwd=Path(__file__).resolve().parents[1])
+    assert done.stdout.splitlines()[-1] == "[]"
+
+
 def _interface(net, name: str, kind: str, flags: str, bitrate: str | None = None) -> None:
     folder = net / name
     folder.mkdir(parents=True)
