@@ -306,8 +306,8 @@ def run_live(mapping_path: str | os.PathLike, *, record: str | None = None, fps:
         if isinstance(error, WindowError):
             _exit(str(error))
         raise
-    print("keys: R record/stop, N neutral, C re-centre sticks, M channel monitor, H hide the overlay, "
-          "Q/Esc quit (calibrate ranges with 'puppet calibrate')", file=sys.stderr)
+    print("keys: R record/stop, N neutral, C re-centre sticks, K calibrate, M channel monitor, H hide the overlay, "
+          "Q/Esc quit", file=sys.stderr)
     print(f"takes go to {session.record_root.resolve()}", file=sys.stderr)
     live = LiveView(session, window, view)
     try:

@@ -149,7 +149,7 @@ class Cockpit:
             if channel.targets:
                 imgui.same_line()
                 more = f" +{len(channel.targets) - 1}" if len(channel.targets) > 1 else ""
-                imgui.text_disabled(f"{channel.targets[0][:22]}{more}")
+                imgui.text_disabled(f"{channel.targets[0][:26]}{more}")
         imgui.end()
 
 
