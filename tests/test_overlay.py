@@ -112,7 +112,7 @@ def test_a_screenshot_of_the_real_window_under_xvfb_shows_everything_and_so_does
     and one LOST with its reason, REC, the graphs and keys, the channel monitor's bars; and the
     picture in docs/ that the same tool took shows them all too."""
     root = Path(__file__).resolve().parents[1]
-    docs = np.asarray(Image.open(root / "docs" / "live_cockpit.png").convert("RGB")).astype(int)
+    docs = np.asarray(Image.open(root / "docs" / "guide" / "live_cockpit.png").convert("RGB")).astype(int)
     assert docs.shape == (720, 960, 3) and _cockpit_parts(docs) == EVERYTHING
     if shutil.which("xvfb-run") is None:
         pytest.skip("no xvfb-run here (tools/setup.sh installs xvfb where it can)")

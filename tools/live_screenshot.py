@@ -1,13 +1,13 @@
 """A screenshot of the live window with everything its cockpit shows, as a user sees it.
 
-    xvfb-run -s "-screen 0 1280x800x24" .venv/bin/python tools/live_screenshot.py docs/live_cockpit.png
+    xvfb-run -s "-screen 0 1280x800x24" .venv/bin/python tools/live_screenshot.py docs/guide/live_cockpit.png
 
 Opens the real window (``puppet.window.open_window``: pyglet; under Xvfb when there is no
 screen) on the shipped slider-box mapping with a second device added, a foot pedal on a serial
 port that is not there, so the cockpit shows a LOST device and why. The simulated box performs
 for a few seconds (the fps and latency graphs fill), a take is recording, the channel monitor is
 on; then the window's pixels are saved. tests/test_overlay.py runs it under Xvfb and checks
-that the picture, and the one in docs/, shows each part.
+that the picture, and the one in the guide, shows each part.
 """
 
 from __future__ import annotations
@@ -66,4 +66,4 @@ def main(out: str, size: tuple[int, int] = (960, 720), seconds: float = 3.0) -> 
 
 
 if __name__ == "__main__":
-    main(sys.argv[1] if len(sys.argv) > 1 else "docs/live_cockpit.png")
+    main(sys.argv[1] if len(sys.argv) > 1 else "docs/guide/live_cockpit.png")
