@@ -17,16 +17,10 @@ from PIL import Image
 from puppet.live import LiveView, open_session
 from puppet.overlay import device_lines
 from puppet.shipped import shipped_mappings
+from window_keys import WindowKeys as _Keys
 
 SIM_BOX = {"box": "sim://joystick?protocol=ascii&rate=200&channels=6"}
 SIZE = (960, 720)
-
-
-class _Keys:
-    ACTION_PRESS, ACTION_RELEASE = "press", "release"
-    R, N, C, K, M, H, Q, ESCAPE = "r", "n", "c", "k", "m", "h", "q", "escape"
-    TAB, LEFT, RIGHT, UP, DOWN, PAGE_UP, PAGE_DOWN = "tab", "left", "right", "up", "down", "pgup", "pgdn"
-    HOME, END, DELETE, SPACE, BACKSPACE, ENTER = "home", "end", "delete", "space", "backspace", "enter"
 
 
 def _pixels(window) -> np.ndarray:
@@ -40,7 +34,7 @@ def _steps(live: LiveView, n: int) -> None:
 
 
 def test_the_cockpit_draws_over_the_face_and_hidden_draws_nothing(tmp_path, headless_window):
-    window = headless_window(SIZE, _Keys)
+    window = headless_window(SIZE)
     session = open_session(shipped_mappings()["arduino_sliders"], devices=SIM_BOX, record_root=tmp_path)
     live = LiveView(session, window)
     try:
@@ -136,7 +130,7 @@ def test_calibration_from_the_window_guides_rest_then_sweep_and_writes_the_mappi
 
     mapping = tmp_path / "sliders.yaml"
     mapping.write_bytes(shipped_mappings()["arduino_sliders"].read_bytes())
-    window = headless_window(SIZE, _Keys)
+    window = headless_window(SIZE)
     box = {"box": "sim://joystick?protocol=ascii&rate=200&channels=6&motion=calibrate&rest=4"}
     session = open_session(mapping, devices=box, record_root=tmp_path)
     live = LiveView(session, window)
@@ -178,7 +172,7 @@ def test_the_window_does_not_calibrate_a_shipped_mapping_or_while_recording(tmp_
     if case == "recording":
         mapping = tmp_path / "mine.yaml"
         mapping.write_bytes(shipped_mappings()["arduino_sliders"].read_bytes())
-    window = headless_window(SIZE, _Keys)
+    window = headless_window(SIZE)
     session = open_session(mapping, devices=SIM_BOX, record_root=tmp_path)
     live = LiveView(session, window)
     try:
