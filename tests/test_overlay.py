@@ -121,7 +121,7 @@ def test_a_screenshot_of_the_real_window_under_xvfb_shows_everything_and_so_does
 
 
 def test_calibration_from_the_window_guides_rest_then_sweep_and_writes_the_mapping(tmp_path, headless_window):
-    """K, against the simulated box's calibration motion (hands off for its first 4 s, then
+    """K, against the simulated box's calibration motion (hands off for its first 6 s, then
     sweeping). The phases are moved on here by what the box does rather than by the clock (rest:
     5 frames; get ready: until the box sweeps; sweep: 3 s and 10 frames), so a slow machine
     calibrates the same."""
@@ -131,7 +131,7 @@ def test_calibration_from_the_window_guides_rest_then_sweep_and_writes_the_mappi
     mapping = tmp_path / "sliders.yaml"
     mapping.write_bytes(shipped_mappings()["arduino_sliders"].read_bytes())
     window = headless_window(SIZE)
-    box = {"box": "sim://joystick?protocol=ascii&rate=200&channels=6&motion=calibrate&rest=4"}
+    box = {"box": "sim://joystick?protocol=ascii&rate=200&channels=6&motion=calibrate&rest=6"}
     session = open_session(mapping, devices=box, record_root=tmp_path)
     live = LiveView(session, window)
     try:
@@ -139,8 +139,7 @@ def test_calibration_from_the_window_guides_rest_then_sweep_and_writes_the_mappi
         calibration = live.calibration
         assert isinstance(calibration, GuidedCalibration)
         start = time.monotonic()
-        ends = dict(calibration._ends)
-        ends.update({"ready": start, "rest": start + 1e6, "get ready to sweep": start + 2e6, "sweep": start + 3e6})
+        ends = {"ready": start, "rest": start + 1e6, "get ready to sweep": start + 2e6, "sweep": start + 3e6}
         frames = {phase: 0 for phase in ends}
         swept_from = None
         while live.calibration is not None:
