@@ -8,6 +8,7 @@ import pytest
 
 from puppet.face import load_face
 from puppet.runtime import Runtime
+from window_keys import WindowKeys
 
 
 @pytest.fixture(autouse=True, scope="session")
@@ -32,8 +33,9 @@ def runtime(face, _private_coefficient_cache):
 
 @pytest.fixture
 def headless_window():
-    """Make a moderngl-window offscreen (EGL) window answering to a key table; skip where no EGL."""
-    def make(size: tuple[int, int], keys: type):
+    """Make a moderngl-window offscreen (EGL) window answering to a key table (``WindowKeys`` by
+    default); skip where no EGL."""
+    def make(size: tuple[int, int], keys: type = WindowKeys):
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", PendingDeprecationWarning)
