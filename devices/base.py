@@ -16,6 +16,7 @@ import collections
 import contextlib
 import difflib
 import enum
+import errno
 import importlib
 import threading
 import time
@@ -80,6 +81,24 @@ class Url:
             raise DeviceError(f"device URL {url!r}: expected scheme://target, e.g. serial:///dev/ttyACM0")
         target = (parts.netloc + parts.path) if parts.netloc else parts.path
         return cls(parts.scheme, target, dict(parse_qsl(parts.query)))
+
+
+PLAIN_REASONS = {errno.ENOENT: "port missing", errno.ENODEV: "not plugged in", errno.ENXIO: "not plugged in",
+                 errno.EACCES: "permission denied", errno.EPERM: "permission denied",
+                 errno.EBUSY: "busy (another program has it open)"}
+"""What an ``OSError``'s errno means to someone plugging controllers in."""
+
+
+def lost_reason(exc: BaseException) -> str:
+    """Why a device is LOST, as ``counters.last_error`` keeps it and the live cockpit and
+    ``puppet calibrate`` show it: the plain reason first (port missing, permission denied,
+    unplugged, ...), then the adapter's own words."""
+    if isinstance(exc, DeviceLost):
+        plain = "unplugged"
+    else:
+        plain = PLAIN_REASONS.get(getattr(exc, "errno", None))
+    text = (exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)) or type(exc).__name__
+    return f"{plain}: {text}" if plain else text
 
 
 def closest_hint(word: str, choices: Iterable[str]) -> str:
@@ -259,5 +278,5 @@ class Device(ABC):
     def _lost(self, exc: BaseException) -> None:
         if self.state == State.OPEN:
             self.counters.reconnects += 1
-        self.counters.last_error = str(exc)
+        self.counters.last_error = lost_reason(exc)
         self.state = State.LOST

@@ -51,6 +51,10 @@ def hid_devices() -> list[Found]:
     return [Found("hid", url, description) for url, description in available()]
 
 
+ALSA_SEQUENCER = "/dev/snd/seq"
+"""What MIDI needs on Linux: the ALSA sequencer's device (absent in many containers and VMs)."""
+
+
 def midi_ports() -> list[Found]:
     import mido
 
@@ -58,7 +62,10 @@ def midi_ports() -> list[Found]:
         with _quiet_stderr():  # ALSA prints its own complaint straight to fd 2 when there is no sequencer
             names = mido.get_input_names()
     except Exception as exc:  # rtmidi's own SystemError when the machine has no MIDI system
-        raise OSError(f"no MIDI system ({str(exc).splitlines()[0]})") from None
+        detail = str(exc).splitlines()[0]
+        if sys.platform.startswith("linux") and not Path(ALSA_SEQUENCER).exists():
+            detail = f"no {ALSA_SEQUENCER}: load the ALSA sequencer, sudo modprobe snd-seq"
+        raise OSError(f"no MIDI system ({detail})") from None
     return [Found("midi", f"midi://{quote(name, safe=' ')}", "MIDI input") for name in names]
 
 

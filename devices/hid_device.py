@@ -31,6 +31,7 @@ with an ``OSError`` that says so in ``counters.last_error``, so a live session n
 
 from __future__ import annotations
 
+import errno
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict
 from typing import Any
@@ -135,6 +136,19 @@ class HidDevice(Device):
         raise OSError(f"no HID device {self.vendor_id:04x}:{self.product_id:04x} with "
                       f"interface={self.interface} usage_page={self.usage_page} usage={self.usage}")
 
+    def _open_by_ids(self, dev: Any) -> None:
+        """``dev.open`` by vendor and product id; hidapi's bare "open failed" told apart as a
+        device that is not plugged in or one that is there but will not open (permission)."""
+        try:
+            dev.open(self.vendor_id, self.product_id, self.serial)
+        except OSError as exc:
+            ids = f"{self.vendor_id:04x}:{self.product_id:04x}"
+            if not any(self.serial is None or info.get("serial_number") == self.serial
+                       for info in self._hid.enumerate(self.vendor_id, self.product_id)):
+                raise OSError(errno.ENODEV, f"no HID device {ids} plugged in") from None
+            raise OSError(errno.EACCES, f"HID device {ids} is plugged in but would not open ({exc}): on Linux, "
+                                        "no permission on /dev/hidraw* (a udev rule: see the HID page)") from None
+
     def _open(self) -> None:
         dev = self._hid.device()
         if self.path is not None:
@@ -142,7 +156,7 @@ class HidDevice(Device):
         elif self.interface is not None or self.usage_page is not None or self.usage is not None:
             dev.open_path(self._find_path())
         else:
-            dev.open(self.vendor_id, self.product_id, self.serial)
+            self._open_by_ids(dev)
         try:
             try:
                 self._drain = dev.set_nonblocking(1) == 0

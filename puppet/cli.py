@@ -1,7 +1,7 @@
 """The ``puppet`` command.
 
 Every refusal is one line on stderr and exit code 2: argparse's own (``puppet render: argument
---fps: ...``), and every ``PuppetError``, ``DeviceError``, ``MappingError`` or ``OSError`` a command
+--fps: ...``), and every ``PuppetError`` (``MappingError`` ...), ``DeviceError`` or ``OSError`` a command
 raises, caught once in ``main`` as ``puppet COMMAND: message``; warnings are one line too. A
 traceback is a bug.
 """
@@ -18,15 +18,15 @@ from pathlib import Path
 from devices.base import DeviceError
 from puppet.errors import PuppetError
 from puppet.io.shipped import copy_mapping, mapping_path, mappings_folder, shipped_mappings
-from puppet.live.mappingfile import MappingError
-from puppet.view.renderer import VIEW_DIRECTIONS
 
-VIEWS = tuple(VIEW_DIRECTIONS)
+VIEWS = ("front", "three_quarter", "profile")
+"""``--view`` choices (``puppet.view.renderer.VIEW_DIRECTIONS``, imported only by the commands that draw,
+so ``puppet devices`` starts in well under a second)."""
 BENCH_SECTIONS = ("deform", "frames", "muscles", "inputs", "latency", "flood", "long_take")
 """``puppet bench --only`` choices (``puppet.bench.run.SECTIONS``; the bench is imported only when run)."""
 FACE_HELP = "a face folder (puppet rig ... -o FOLDER/, puppet face-from-photo) (default: the embedded face)"
 MAX_SIDE = 8192
-REFUSED = (PuppetError, DeviceError, MappingError, OSError)
+REFUSED = (PuppetError, DeviceError, OSError)  # MappingError, FapError ... are PuppetErrors
 
 
 class _Parser(argparse.ArgumentParser):
@@ -76,8 +76,9 @@ def _parser() -> argparse.ArgumentParser:
 
     render = commands.add_parser("render", help="render a .fap take to an MP4 video, or many takes on Dask")
     render.add_argument("take", nargs="+", help="the .fap file (or several, rendered in parallel)")
-    render.add_argument("-o", "--output", required=True,
-                        help="the video to write (.mp4), or for several takes a folder (DIR/): one TAKE.mp4 each")
+    render.add_argument("-o", "--output", default=None,
+                        help="the video to write (.mp4; default: take.mp4 in the take folder, or X.mp4 beside "
+                             "X.fap), or for several takes a folder (DIR/): one TAKE.mp4 each")
     render.add_argument("--scheduler", default=None,
                         help="many takes: a running Dask scheduler (tcp://host:8786); default a local cluster")
     render.add_argument("--workers", type=int, default=None,
@@ -323,6 +324,10 @@ def _render(args: argparse.Namespace) -> int:
 
     from puppet.view.rendertake import render_take
 
+    if args.output is None:
+        if len(args.take) > 1:
+            raise PuppetError("several takes: give -o DIR/ for their videos")
+        args.output = str(_default_video(args.take[0]))
     if len(args.take) > 1 or args.output.endswith(("/", os.sep)) or os.path.isdir(args.output):
         return _render_many(args)
     args.take = args.take[0]
@@ -333,6 +338,13 @@ def _render(args: argparse.Namespace) -> int:
     seconds = time.perf_counter() - start
     print(f"{args.output}: {count} frames in {seconds:.1f} s ({count / max(seconds, 1e-9):.1f} frames/s)")
     return 0
+
+
+def _default_video(take: str) -> Path:
+    """Where ``puppet render TAKE`` writes without ``-o``: ``take.mp4`` in a take folder, or
+    ``X.mp4`` beside ``X.fap``."""
+    path = Path(take)
+    return path / "take.mp4" if path.is_dir() else path.with_suffix(".mp4")
 
 
 def _render_many(args: argparse.Namespace) -> int:

@@ -5,6 +5,7 @@ import warnings
 
 import numpy as np
 import pytest
+from window_keys import WindowKeys
 
 from puppet.face.load import load_face
 from puppet.runtime.runtime import Runtime
@@ -32,8 +33,9 @@ def runtime(face, _private_coefficient_cache):
 
 @pytest.fixture
 def headless_window():
-    """Make a moderngl-window offscreen (EGL) window answering to a key table; skip where no EGL."""
-    def make(size: tuple[int, int], keys: type):
+    """Make a moderngl-window offscreen (EGL) window answering to a key table (``WindowKeys`` by
+    default); skip where no EGL."""
+    def make(size: tuple[int, int], keys: type = WindowKeys):
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", PendingDeprecationWarning)

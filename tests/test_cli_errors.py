@@ -42,7 +42,7 @@ def place(tmp_path_factory) -> dict[str, str]:
 
 
 BAD = [
-    "", "nonsense", "render", "render {take}",
+    "", "nonsense", "render", "render {take} {take}",
     "render {take} -o {tmp}/x.mp4 --fps inf", "render {take} -o {tmp}/x.mp4 --fps nan",
     "render {take} -o {tmp}/x.mp4 --fps 1e-300", "render {take} -o {tmp}/x.mp4 --fps abc",
     "render {take} -o {tmp}/x.mp4 --size 99999x99999", "render {take} -o {tmp}/x.mp4 --size 1x1",
@@ -177,3 +177,9 @@ def test_every_error_class_in_puppet_is_a_puppet_error_with_its_builtin_base():
         assert issubclass(error, PuppetError), name
         builtin = [b for b in error.__mro__ if b.__module__ == "builtins" and b not in (Exception, BaseException, object)]
         assert builtin, f"{name} keeps no built-in base (ValueError, OSError ...)"
+
+
+def test_the_view_choices_are_the_renderers_views():
+    from puppet.view.renderer import VIEW_DIRECTIONS
+
+    assert cli.VIEWS == tuple(VIEW_DIRECTIONS)

@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+import errno
+import os
 import threading
 import time
 
 import pytest
 
 from devices import BACKENDS, DeviceError, open_device
-from devices.base import Device, DeviceLost, State, Url
+from devices.base import Device, DeviceLost, State, Url, lost_reason
 
 
 class Scripted(Device):
@@ -163,3 +165,18 @@ def test_every_device_error_derives_from_device_error_and_keeps_its_builtin_base
     log.write_text('{"t_ns": 1, "device": "box", "values": {"ch0": 1' + "0" * 400 + '}}\n')
     with pytest.raises(ValueError, match=r"samples.jsonl:1: expected numbers"):
         list(read_take_log(log))
+
+
+@pytest.mark.parametrize("code, reason", [(errno.ENOENT, "port missing"), (errno.EACCES, "permission denied"),
+                                          (errno.EBUSY, "busy (another program has it open)")])
+def test_a_lost_device_says_why_in_plain_words_then_the_adapters(code, reason):
+    import serial  # pyserial's own failure to open a port, as serialposix raises it
+
+    error = serial.SerialException(code, f"could not open port /dev/ttyACM0: [Errno {code}] {os.strerror(code)}")
+    assert lost_reason(error) == f"{reason}: could not open port /dev/ttyACM0: [Errno {code}] {os.strerror(code)}"
+
+
+def test_a_device_lost_while_open_was_unplugged():
+    assert lost_reason(DeviceLost("/dev/ttyACM0: device reports readiness to read but returned no data")) == (
+        "unplugged: /dev/ttyACM0: device reports readiness to read but returned no data")
+    assert lost_reason(ValueError("adapter bug")) == "adapter bug"

@@ -1,5 +1,11 @@
 """`puppet devices` lists what each library finds, and says why where it cannot."""
 
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
 from devices import discovery
 from devices.discovery import Found, discover, report
 from puppet import cli
@@ -29,6 +35,17 @@ def test_puppet_devices_runs_on_this_machine(capsys):
     assert all(line.split(":")[0] in discovery.KINDS or line.startswith("  ") for line in out.splitlines())
 
 
+def test_puppet_devices_loads_no_face_renderer_or_scipy():
+    """What keeps ``puppet devices`` under a second: the command imports the device libraries and
+    nothing of the face side (scipy alone is about half a second to import)."""
+    probe = ("import sys; from puppet import cli; cli.main(['devices']); "
+             "print(sorted(m for m in sys.modules if m.split('.')[0] in ('scipy', 'moderngl', 'trimesh') "
+             "or m in ('puppet.face.model', 'puppet.runtime.runtime', 'puppet.view.renderer', 'puppet.live.mappingfile')))")
+    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True,
+                          cwd=Path(__file__).resolve().parents[1])
+    assert done.stdout.splitlines()[-1] == "[]"
+
+
 def _interface(net, name: str, kind: str, flags: str, bitrate: str | None = None) -> None:
     folder = net / name
     folder.mkdir(parents=True)
@@ -47,8 +64,6 @@ def test_can_lists_the_socketcan_interfaces_that_are_up_and_nothing_else(tmp_pat
 
 
 def test_without_socketcan_the_reason_is_given(tmp_path):
-    import pytest
-
     with pytest.raises(OSError, match="open a CAN adapter by URL"):
         discovery.can_interfaces(tmp_path / "absent")
 
@@ -59,3 +74,11 @@ def test_a_usb_serial_port_is_named_by_its_maker_and_usb_ids():
     port = ListPortInfo("/dev/ttyACM0", skip_link_detection=True)
     port.vid, port.pid, port.manufacturer, port.product = 0x2341, 0x0043, "Arduino (www.arduino.cc)", "Uno"
     assert discovery._serial_description(port) == "Arduino (www.arduino.cc) Uno USB 2341:0043"
+
+
+def test_without_an_alsa_sequencer_midi_says_what_to_load():
+    if not sys.platform.startswith("linux") or Path(discovery.ALSA_SEQUENCER).exists():
+        pytest.skip("this machine has an ALSA sequencer")
+    pytest.importorskip("mido")
+    line = next(line for line in report(discover()).splitlines() if line.startswith("midi:"))
+    assert line.startswith("midi: no MIDI system") and "sudo modprobe snd-seq" in line

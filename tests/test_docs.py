@@ -76,6 +76,7 @@ def test_the_guide_builds_strictly(site):
                  "devices/simulated", "mappings", "takes", "faces", "arkit", "troubleshooting", "reference/mapping",
                  "reference/commands"):
         assert (site / page / "index.html").is_file(), page
+    assert (site / "live_cockpit.png").read_bytes() == (GUIDE / "live_cockpit.png").read_bytes()  # getting started shows it
     for sample in ("livelink_sample.csv", "send_vmc.py", "slider_box.ino"):
         assert (site / "samples" / sample).read_bytes() == (SAMPLES / sample).read_bytes()
 

@@ -63,3 +63,42 @@ def test_a_rig_file_name_still_writes_the_rig_alone(rigged):
     out = rigged / "alone.rig"
     assert main(["rig", str(rigged / "head.obj"), "--landmarks", str(rigged / "points.json"), "-o", str(out)]) == 0
     assert out.is_file()
+
+
+@pytest.mark.parametrize("command", ["play", "replay", "live"])
+def test_play_replay_and_live_take_the_folder(rigged, monkeypatch, command):
+    """The window commands hand the folder's face, with its own rig, to the window they open."""
+    import puppet.view.livewindow
+    import puppet.view.window
+
+    seen = {}
+    if command == "live":
+        monkeypatch.setattr(puppet.view.livewindow, "run_live", lambda mapping, **kw: seen.update(kw))
+        argv = ["live", "--mapping", "arduino_sliders", "--device", "box=sim://joystick"]
+    else:
+        monkeypatch.setattr(puppet.view.window, "play_take", lambda take, **kw: seen.update(kw))
+        argv = [command, str(rigged / "take.fap")]
+    assert main([*argv, "--face", str(rigged / "head")]) == 0
+    face = seen["face"]
+    assert face.content_hash == load_face(rigged / "head").content_hash and face.feature_points
+
+
+def test_the_live_window_performs_the_folder_face(rigged, tmp_path, headless_window):
+    """``puppet live --face FOLDER/``'s loop, headless: the slider box moves the rigged face."""
+    from puppet.io.shipped import shipped_mappings
+    from puppet.view.livewindow import LiveView, open_session
+
+    window = headless_window((160, 120))
+    session = open_session(shipped_mappings()["arduino_sliders"], devices={"box": "sim://joystick?rate=200"},
+                           record_root=tmp_path, face=load_face(rigged / "head"))
+    live = LiveView(session, window)
+    try:
+        first = session.frame().vertices.copy()
+        for _ in range(10):
+            live.step()
+        pixels = np.frombuffer(window.fbo.read(components=3), dtype=np.uint8).reshape(120, 160, 3)
+        assert np.ptp(pixels[60].astype(int)) > 60  # a face across the middle row
+        assert np.abs(session.frame().vertices - first).max() > 0  # and it moves
+    finally:
+        live.close()
+        session.close()

@@ -254,7 +254,7 @@ def test_unplug_is_lost_and_replug_opens_again():
         assert device.wait_state(State.LOST, 2.0)
         time.sleep(0.1)
         assert device.state in (State.LOST, State.OPENING)
-        assert device.counters.last_error == "open failed"
+        assert device.counters.last_error == "not plugged in: no HID device 046d:c21d plugged in"
         pad.replug()
         assert device.wait_state(State.OPEN, 2.0)
         pad.feed(gamepad_report(y=32767))
@@ -338,9 +338,21 @@ def test_bad_urls_say_what_was_expected(url, message):
         HidDevice.from_url(Url.parse(url), "x", hid_module=FakeHidModule())
 
 
+def test_a_device_that_is_plugged_in_but_will_not_open_points_at_permissions(monkeypatch):
+    def refuse(self, *args):
+        raise OSError("open failed")  # what hidapi says when /dev/hidraw* is not readable
+
+    module = FakeHidModule(gamepad())
+    monkeypatch.setattr(type(module.device()), "open", refuse)
+    with hid_device(module) as device:
+        assert device.wait_state(State.LOST, 2.0)
+        assert device.counters.last_error.startswith("permission denied: HID device 046d:c21d is plugged in")
+        assert "udev rule" in device.counters.last_error
+
+
 def test_the_real_hidapi_module_is_used_by_default_and_a_missing_device_is_lost_not_fatal():
     device = fast(open_device("hid://dead:beef"))
     assert isinstance(device, HidDevice)
     with device:
         assert device.wait_state(State.LOST, 2.0)
-        assert device.counters.last_error == "open failed"
+        assert device.counters.last_error == "not plugged in: no HID device dead:beef plugged in"

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from window_keys import WindowKeys as _Keys
 
 from puppet import cli
 from puppet.io.fapfile import iter_fap
@@ -54,16 +55,8 @@ def test_title():
 # -- the loop, drawing offscreen --------------------------------------------------------------
 
 
-class _Keys:
-    ACTION_PRESS, ACTION_RELEASE = "press", "release"
-    R, N, C, K, M, H, Q, ESCAPE = "r", "n", "c", "k", "m", "h", "q", "escape"
-    TAB, LEFT, RIGHT, UP, DOWN, PAGE_UP, PAGE_DOWN = "tab", "left", "right", "up", "down", "pgup", "pgdn"
-    HOME, END, DELETE, SPACE, BACKSPACE, ENTER = "home", "end", "delete", "space", "backspace", "enter"
-
-
-
 def test_the_live_loop_draws_records_and_obeys_the_keys(tmp_path, headless_window):
-    window = headless_window((96, 72), _Keys)
+    window = headless_window((96, 72))
     session = open_session(MAPPING, record="run", fps=30, devices=SIM_BOX, record_root=tmp_path)
     live = LiveView(session, window)
 
@@ -126,3 +119,10 @@ def test_device_overrides_are_parsed_from_the_command_line():
     assert _device_override("box=sim://joystick?rate=200") == ("box", "sim://joystick?rate=200")
     with pytest.raises(argparse.ArgumentTypeError, match="NAME=URL"):
         _device_override("box")
+
+
+def test_a_device_name_the_mapping_does_not_use_is_refused_naming_the_ones_it_has(capsys):
+    assert cli.main(["live", "--mapping", "arduino_sliders", "--device", "pad=sim://joystick"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith("puppet live: ")
+    assert "no device named 'pad'" in err and "this mapping's devices: box" in err

@@ -73,8 +73,8 @@ def test_the_wheel_carries_the_mappings_and_data_and_finds_them_from_another_fol
 
     sample = ROOT / "docs" / "guide" / "samples" / "livelink_sample.csv"
     assert puppet("import-arkit", str(sample)).strip() == str(Path("takes") / "arkit_001")
-    assert "30 frames" in puppet("render", "takes/arkit_001", "-o", "arkit.mp4", "--size", "160x120")
-    assert (elsewhere / "arkit.mp4").stat().st_size > 0
+    assert "30 frames" in puppet("render", "takes/arkit_001", "--size", "160x120")  # no -o: into the take
+    assert (elsewhere / "takes" / "arkit_001" / "take.mp4").stat().st_size > 0
 
 
 def test_puppet_mappings_lists_and_copies_and_a_wrong_name_is_one_line(tmp_path, capsys):

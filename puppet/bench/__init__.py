@@ -1,1 +1,3 @@
-"""puppet.bench."""
+"""``puppet bench``: what the runtime, the devices and the live pipeline cost, each against a
+baseline measured in the same run.
+"""

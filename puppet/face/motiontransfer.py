@@ -31,14 +31,17 @@ def transfer_motions(source: Rig, source_points: dict[str, np.ndarray], target: 
                            np.array([source_points[k] for k in shared]), kernel="thin_plate_spline")
     moved = sorted({name for motions in source.fap_motions.values() for name in motions})
     out: dict[int, dict[str, np.ndarray]] = {}
+    source_point = {p.name: p for p in source.control_points}  # Rig.point builds this dict every call
+    target_point = {p.name: p for p in target.control_points}
     for region in target.regions:
-        names = [n for n in region.control_points if target.point(n).role == "active"
+        names = [n for n in region.control_points if target_point[n].role == "active"
                  and not _feature_point(n)]
-        known = [n for n in moved if n in set(_region_members(source, region.name))]
+        members = set(_region_members(source, region.name))
+        known = [n for n in moved if n in members]
         if not names or not known:
             continue
-        tree = cKDTree(np.array([source.point(n).position for n in known]))
-        where = warp(np.array([target.point(n).position for n in names]))
+        tree = cKDTree(np.array([source_point[n].position for n in known]))
+        where = warp(np.array([target_point[n].position for n in names]))
         distance, nearest = tree.query(where, k=min(NEIGHBOURS, len(known)))
         weights = 1.0 / np.maximum(np.atleast_2d(distance.T).T, 1e-9)
         weights /= weights.sum(axis=1, keepdims=True)

@@ -235,6 +235,9 @@ class LiveView:
         self.window.fbo.viewport = (0, 0, *size)
 
     def _draw_cockpit(self, states: dict[str, Any]) -> None:
+        self.cockpit.tick(self.stats.fps, self.stats.latency_ms)
+        if not self.cockpit.visible:  # hidden: nothing gathered, nothing drawn
+            return
         recording = None
         if self.take is not None and self.session.recording:
             recording = (self.take.name, time.monotonic() - self._take_started)
@@ -301,8 +304,8 @@ def run_live(mapping_path: str | os.PathLike, *, record: str | None = None, fps:
         if isinstance(error, WindowError):
             _exit(str(error))
         raise
-    print("keys: R record/stop, N neutral, C re-centre sticks, M channel monitor, H hide the overlay, "
-          "Q/Esc quit (calibrate ranges with 'puppet calibrate')", file=sys.stderr)
+    print("keys: R record/stop, N neutral, C re-centre sticks, K calibrate, M channel monitor, H hide the overlay, "
+          "Q/Esc quit", file=sys.stderr)
     print(f"takes go to {session.record_root.resolve()}", file=sys.stderr)
     live = LiveView(session, window, view)
     try:

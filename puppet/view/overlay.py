@@ -13,9 +13,10 @@ is rendered into the window's framebuffer:
   of its shaped value's size (the signed value written on it), with the first target it drives;
 * **the keys**.
 
-H hides it. Hidden, a frame makes no ImGui call at all: the overlay costs nothing. It draws on
-any moderngl-window window, headless (EGL) ones included, so tests and screenshots need no
-display.
+H hides it. Hidden, a frame only appends its fps and latency to the graphs' history (``tick``):
+no ImGui call, no device or channel read, so the overlay costs nothing (``tools/bench_overlay.py``
+measures it). It draws on any moderngl-window window, headless (EGL) ones included, so tests and
+screenshots need no display.
 """
 
 from __future__ import annotations
@@ -58,21 +59,25 @@ class Cockpit:
         self.window = window
         self.visible = True
         self.monitor = False
-        self.fps = deque([0.0] * HISTORY, maxlen=HISTORY)
-        self.latency = deque([0.0] * HISTORY, maxlen=HISTORY)
+        self.fps: deque[float] = deque(maxlen=HISTORY)
+        self.latency: deque[float] = deque(maxlen=HISTORY)
         self._last = time.perf_counter()
 
     def toggle(self) -> None:
         """H: show or hide the whole overlay."""
         self.visible = not self.visible
 
-    def draw(self, fps: float, latency_ms: float | None, devices: Iterable[DeviceLine],
-             recording: tuple[str, float] | None, channels: Iterable[Any], notice: str = "") -> None:
-        """Draw the cockpit over the current framebuffer (nothing when hidden). ``recording``:
-        (take name, seconds) while a take runs; ``channels``: ``Mapping.channels()``; ``notice``:
-        a line for the performer (the window's calibration steps, its result)."""
+    def tick(self, fps: float, latency_ms: float | None) -> None:
+        """Every frame, shown or hidden: the graphs' history (so they are whole when shown again)."""
         self.fps.append(fps)
         self.latency.append(latency_ms or 0.0)
+
+    def draw(self, fps: float, latency_ms: float | None, devices: Iterable[DeviceLine],
+             recording: tuple[str, float] | None, channels: Iterable[Any], notice: str = "") -> None:
+        """Draw the cockpit over the current framebuffer (nothing when hidden: the caller skips
+        gathering what it shows too). ``recording``: (take name, seconds) while a take runs;
+        ``channels``: ``Mapping.channels()``; ``notice``: a line for the performer (the window's
+        calibration steps, its result)."""
         if not self.visible:
             return
         imgui = self.imgui
@@ -144,7 +149,7 @@ class Cockpit:
             if channel.targets:
                 imgui.same_line()
                 more = f" +{len(channel.targets) - 1}" if len(channel.targets) > 1 else ""
-                imgui.text_disabled(f"{channel.targets[0][:22]}{more}")
+                imgui.text_disabled(f"{channel.targets[0][:26]}{more}")
         imgui.end()
 
 
