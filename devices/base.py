@@ -17,7 +17,6 @@ import contextlib
 import difflib
 import enum
 import errno
-import importlib
 import threading
 import time
 from abc import ABC, abstractmethod
@@ -107,11 +106,16 @@ def closest_hint(word: str, choices: Iterable[str]) -> str:
     return f"; did you mean {close[0]!r}?" if close else ""
 
 
-def table_class(entry: str) -> type:
-    """The class a ``"module:Class"`` table entry names (``BACKENDS``, ``TWINS``), its module
-    imported only now, so a missing optional library only matters to what needs it (ImportError)."""
-    module_name, class_name = entry.split(":")
-    return getattr(importlib.import_module(module_name), class_name)
+
+
+@dataclass(frozen=True)
+class Found:
+    """One connectable device, as a backend's ``discover()`` finds it: its URL and what the
+    system says about it."""
+
+    kind: str
+    url: str
+    description: str
 
 
 class Device(ABC):
@@ -139,6 +143,12 @@ class Device(ABC):
             problem = cls.unknown_option(url, key)
             if problem:
                 raise DeviceError(f"device URL {url.scheme}://{url.target}: {problem}")
+
+    @classmethod
+    @abstractmethod
+    def from_url(cls, url: Url, name: str) -> Device:
+        """The device a parsed URL of this backend's scheme names, called ``name`` (not started);
+        a URL it cannot use (an unknown option, a bad value) is a ``DeviceError`` naming it."""
 
     def __init__(self, name: str) -> None:
         self.name = name

@@ -39,12 +39,17 @@ the device (``device.bus.shutdown()``).
 
 from __future__ import annotations
 
+import os
+import tempfile
+import uuid
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import asdict, dataclass
+from pathlib import Path
 from typing import Any
 from urllib.parse import unquote
 
-from devices.base import Device, DeviceError, DeviceLost, Url
+from devices.base import Device, DeviceError, DeviceLost, Found, Url
+from devices.twin import Twin
 
 try:
     import can
@@ -428,3 +433,80 @@ def _signal(s: CanSignal | Mapping[str, Any] | str) -> CanSignal:
             raise ValueError(f"CAN signal {d.get('name')!r}: byte order {d['byte_order']!r}")
         d["byte_order"] = order
     return CanSignal(**d)
+
+
+class CanTwin(Twin):
+    """``can://`` wires: a ``CanDevice`` with the logged URL's options (signals, decoder, filter,
+    ...) on a fresh python-can ``virtual`` channel of its own, and a sender on that channel; a
+    logged reading goes back as the frame its decoder's ``encode`` packs. The decoder comes from
+    ``wire_info`` when the take kept it (the DBC text, or the hand-given signals), else from the
+    URL (its ``signals=``, or its ``dbc=`` file as it is now).
+
+    Values go through each signal's integer raw value (``raw * scale + offset``), so only values
+    the decoder produces come back exactly; float signals (cantools) carry their float.
+    """
+
+    def __init__(self, device: CanDevice, sender: Any, url: str) -> None:
+        self.sender = sender
+        super().__init__(device, url)
+
+    @classmethod
+    def from_url(cls, url: str, name: str, wire_info: Mapping) -> CanTwin:
+        parsed = Url.parse(url)
+        channel = f"twin-{uuid.uuid4().hex}"
+        options = dict(parsed.options)
+        if "dbc" in wire_info:
+            device = _with_dbc_text(Url("can", f"virtual/{channel}", options), name, wire_info["dbc"])
+        else:
+            device = CanDevice.from_url(Url("can", f"virtual/{channel}", options), name,
+                                        signals=wire_info.get("signals"))
+        return cls(device, can.Bus(interface="virtual", channel=channel), url)
+
+    def _put(self, values: Mapping[str, float]) -> int:
+        frame_id, data = self.device.decoder.encode(values)
+        self.sender.send(can.Message(arbitration_id=frame_id, data=data, is_extended_id=frame_id > 0x7FF))
+        return 1
+
+    def close(self) -> None:
+        super().close()
+        self.sender.shutdown()
+
+
+def _with_dbc_text(url: Url, name: str, text: str) -> CanDevice:
+    """A CanDevice whose ``dbc=`` is ``text``, through a temporary file (CanDevice reads a path)."""
+    fd, path = tempfile.mkstemp(suffix=".dbc")
+    try:
+        with os.fdopen(fd, "w", encoding="latin-1", newline="") as f:
+            f.write(text)
+        return CanDevice.from_url(Url(url.scheme, url.target, {**url.options, "dbc": path}), name)
+    finally:
+        os.unlink(path)
+
+
+def discover(net: Path = Path("/sys/class/net")) -> list[Found]:
+    """SocketCAN interfaces that are up (``net``: the kernel's network interface folder)."""
+    if not net.is_dir():
+        raise OSError("no SocketCAN here (Linux only); open a CAN adapter by URL, e.g. can://pcan/PCAN_USBBUS1")
+    found = []
+    for interface in sorted(net.iterdir()):
+        if _read(interface / "type") != CAN_TYPE:
+            continue
+        flags = int(_read(interface / "flags") or "0", 16)
+        if flags & IFF_UP:
+            bitrate = _read(interface / "can_bittiming" / "bitrate")
+            found.append(Found("can", f"can://socketcan/{interface.name}",
+                               f"SocketCAN, up{f', {int(bitrate):,} bit/s' if bitrate else ''}"))
+    return found
+
+CAN_TYPE = "280"
+"""ARPHRD_CAN: a network interface of this type is a CAN bus."""
+IFF_UP = 0x1
+
+
+def _read(path: Path) -> str | None:
+    try:
+        return path.read_text().strip()
+    except OSError:
+        return None
+
+DEVICE, TWIN = CanDevice, CanTwin

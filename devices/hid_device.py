@@ -37,8 +37,10 @@ from dataclasses import asdict
 from typing import Any
 from urllib.parse import quote, unquote
 
-from devices.base import Device, DeviceError, DeviceLost, Url
+from devices.base import Device, DeviceError, DeviceLost, Found, Url
 from devices.hid_descriptor import DescriptorError, FieldSpec, ReportLayout
+from devices.simulated_hid import FakeHidHardware, FakeHidModule
+from devices.twin import Twin
 
 try:
     import hid
@@ -238,8 +240,8 @@ class HidDevice(Device):
                 pass
 
 
-def available(hid_module: Any = None) -> list[tuple[str, str]]:
-    """(URL, description) of every HID device plugged in now, by path so each interface shows."""
+def discover(hid_module: Any = None) -> list[Found]:
+    """Every HID device plugged in now, by path so each interface of a composite device shows."""
     module = hid_module or hid
     if module is None:
         raise DeviceError("HID devices need hidapi (pip install hidapi)")
@@ -249,5 +251,44 @@ def available(hid_module: Any = None) -> list[tuple[str, str]]:
         desc = (f"{info['vendor_id']:04x}:{info['product_id']:04x} {info.get('manufacturer_string') or ''} "
                 f"{info.get('product_string') or ''} (interface {info.get('interface_number')}, usage page "
                 f"0x{info.get('usage_page', 0):02x} usage 0x{info.get('usage', 0):02x})").replace("  ", " ")
-        out.append((f"hid://path/{quote(path, safe='')}", desc))
+        out.append(Found("hid", f"hid://path/{quote(path, safe='')}", desc))
     return out
+
+
+class HidTwin(Twin):
+    """``hid://`` wires: one ``FakeHidHardware`` answering to the logged URL (ids, serial, path,
+    interface, usage) with the logged report descriptor, read by a ``HidDevice`` opened from that
+    URL; a logged reading goes back as the report ``ReportLayout.encode`` packs.
+
+    The channels come from ``wire_info``: the hand-given ``fields``, or the ``report_descriptor``
+    (hex) the device read. Values go through the field's integer range, so only values the
+    adapter's scaling produces come back exactly (buttons 0/1, hats in steps or -1, axes at
+    raw / max, ...).
+    """
+
+    def __init__(self, device: HidDevice, hardware: FakeHidHardware, url: str) -> None:
+        self.hardware = hardware
+        super().__init__(device, url)
+
+    @classmethod
+    def from_url(cls, url: str, name: str, wire_info: Mapping) -> HidTwin:
+        descriptor = wire_info.get("report_descriptor")
+        fields = wire_info.get("fields")
+        if descriptor is None and fields is None and "fields" not in Url.parse(url).options:
+            raise DeviceError(f"{name}: the take keeps no HID report descriptor or fields for {url!r} "
+                              "(wire_info), so its reports cannot be rebuilt")
+        module = FakeHidModule()
+        device = HidDevice.from_url(Url.parse(url), name, fields=fields, hid_module=module)
+        module.hardware.append(FakeHidHardware(
+            device.vendor_id or 0, device.product_id or 0,
+            None if descriptor is None else bytes.fromhex(descriptor), serial=device.serial or "TWIN",
+            path=device.path, usage_page=device.usage_page or 0, usage=device.usage or 0,
+            interface_number=device.interface or 0))
+        return cls(device, module.hardware[0], url)
+
+    def _put(self, values: Mapping[str, float]) -> int:
+        self.hardware.feed(self.device.layout.encode(values))
+        return 1
+
+
+DEVICE, TWIN = HidDevice, HidTwin

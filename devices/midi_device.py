@@ -22,13 +22,18 @@ the device ``LOST`` and it retries, like any other unplugged controller.
 
 from __future__ import annotations
 
+import contextlib
+import os
+import sys
 import time
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Mapping
+from pathlib import Path
+from urllib.parse import quote
 
 import mido
 
-from devices.base import Device, DeviceError, DeviceLost, Url
+from devices.base import Device, DeviceError, DeviceLost, Found, Url
 from devices.twin import Twin
 
 POLL = 0.005
@@ -195,3 +200,36 @@ class MidiTwin(Twin):
 
 def _clamp(value: int, lo: int, hi: int) -> int:
     return lo if value < lo else hi if value > hi else value
+
+
+ALSA_SEQUENCER = "/dev/snd/seq"
+"""What MIDI needs on Linux: the ALSA sequencer's device (absent in many containers and VMs)."""
+
+
+def discover() -> list[Found]:
+    """The MIDI input ports there are now (mido's names)."""
+    try:
+        with _quiet_stderr():  # ALSA prints its own complaint straight to fd 2 when there is no sequencer
+            names = mido.get_input_names()
+    except Exception as exc:  # rtmidi's own SystemError when the machine has no MIDI system
+        detail = str(exc).splitlines()[0]
+        if sys.platform.startswith("linux") and not Path(ALSA_SEQUENCER).exists():
+            detail = f"no {ALSA_SEQUENCER}: load the ALSA sequencer, sudo modprobe snd-seq"
+        raise OSError(f"no MIDI system ({detail})") from None
+    return [Found("midi", f"midi://{quote(name, safe=' ')}", "MIDI input") for name in names]
+
+@contextlib.contextmanager
+def _quiet_stderr() -> Iterator[None]:
+    """Silence what C libraries write to the process's stderr (file descriptor 2) meanwhile."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    try:
+        with open(os.devnull, "w") as null:
+            os.dup2(null.fileno(), 2)
+            yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+
+
+DEVICE, TWIN = MidiDevice, MidiTwin

@@ -167,3 +167,6 @@ def _message(address: str, *args: str | float) -> OscMessage:
         kind = builder.ARG_TYPE_STRING if isinstance(arg, str) else builder.ARG_TYPE_DOUBLE
         builder.add_arg(arg if isinstance(arg, str) else float(arg), kind)
     return builder.build()
+
+
+DEVICE, TWIN = OscDevice, OscTwin

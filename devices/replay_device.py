@@ -69,3 +69,6 @@ class ReplayDevice(Device):
 
     def _close(self) -> None:
         pass
+
+
+DEVICE = ReplayDevice

@@ -21,20 +21,12 @@ Messages (both byte orders, signed and unsigned, odd lengths):
 from __future__ import annotations
 
 import math
-import os
-import tempfile
 import threading
 import time
-import uuid
-from collections.abc import Mapping
 from typing import Any
 
 import can
 import cantools
-
-from devices.base import Url
-from devices.can_device import CanDevice
-from devices.twin import Twin
 
 AXES_ID, EXTRA_ID = 0x100, 0x101
 BUTTONS = ("Trigger", "ThumbButton", "Button3", "Button4")
@@ -186,51 +178,3 @@ class CanJoystick:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
-
-
-class CanTwin(Twin):
-    """``can://`` wires: a ``CanDevice`` with the logged URL's options (signals, decoder, filter,
-    ...) on a fresh python-can ``virtual`` channel of its own, and a sender on that channel; a
-    logged reading goes back as the frame its decoder's ``encode`` packs. The decoder comes from
-    ``wire_info`` when the take kept it (the DBC text, or the hand-given signals), else from the
-    URL (its ``signals=``, or its ``dbc=`` file as it is now).
-
-    Values go through each signal's integer raw value (``raw * scale + offset``), so only values
-    the decoder produces come back exactly; float signals (cantools) carry their float.
-    """
-
-    def __init__(self, device: CanDevice, sender: Any, url: str) -> None:
-        self.sender = sender
-        super().__init__(device, url)
-
-    @classmethod
-    def from_url(cls, url: str, name: str, wire_info: Mapping) -> CanTwin:
-        parsed = Url.parse(url)
-        channel = f"twin-{uuid.uuid4().hex}"
-        options = dict(parsed.options)
-        if "dbc" in wire_info:
-            device = _with_dbc_text(Url("can", f"virtual/{channel}", options), name, wire_info["dbc"])
-        else:
-            device = CanDevice.from_url(Url("can", f"virtual/{channel}", options), name,
-                                        signals=wire_info.get("signals"))
-        return cls(device, can.Bus(interface="virtual", channel=channel), url)
-
-    def _put(self, values: Mapping[str, float]) -> int:
-        frame_id, data = self.device.decoder.encode(values)
-        self.sender.send(can.Message(arbitration_id=frame_id, data=data, is_extended_id=frame_id > 0x7FF))
-        return 1
-
-    def close(self) -> None:
-        super().close()
-        self.sender.shutdown()
-
-
-def _with_dbc_text(url: Url, name: str, text: str) -> CanDevice:
-    """A CanDevice whose ``dbc=`` is ``text``, through a temporary file (CanDevice reads a path)."""
-    fd, path = tempfile.mkstemp(suffix=".dbc")
-    try:
-        with os.fdopen(fd, "w", encoding="latin-1", newline="") as f:
-            f.write(text)
-        return CanDevice.from_url(Url(url.scheme, url.target, {**url.options, "dbc": path}), name)
-    finally:
-        os.unlink(path)

@@ -26,11 +26,7 @@ import math
 import threading
 import time
 from collections import deque
-from collections.abc import Iterable, Iterator, Mapping, Sequence
-
-from devices.base import DeviceError, Url
-from devices.hid_device import HidDevice
-from devices.twin import Twin
+from collections.abc import Iterable, Iterator, Sequence
 
 # A USB game pad's report descriptor, as a real one is written (HID 1.11 short items).
 # Report 1: four 16-bit signed sticks, two 8-bit triggers, 12 buttons, a 4-bit hat, a pad byte.
@@ -329,39 +325,3 @@ def gamepad(reports: Iterable[bytes] | None = None, rate: float | None = None,
     fed (``reports=gamepad_motion()`` for an endless performance)."""
     return FakeHidHardware(GAMEPAD_VID, GAMEPAD_PID, GAMEPAD_DESCRIPTOR, reports, rate, serial=serial,
                            product="Fake Game Pad")
-
-
-class HidTwin(Twin):
-    """``hid://`` wires: one ``FakeHidHardware`` answering to the logged URL (ids, serial, path,
-    interface, usage) with the logged report descriptor, read by a ``HidDevice`` opened from that
-    URL; a logged reading goes back as the report ``ReportLayout.encode`` packs.
-
-    The channels come from ``wire_info``: the hand-given ``fields``, or the ``report_descriptor``
-    (hex) the device read. Values go through the field's integer range, so only values the
-    adapter's scaling produces come back exactly (buttons 0/1, hats in steps or -1, axes at
-    raw / max, ...).
-    """
-
-    def __init__(self, device: HidDevice, hardware: FakeHidHardware, url: str) -> None:
-        self.hardware = hardware
-        super().__init__(device, url)
-
-    @classmethod
-    def from_url(cls, url: str, name: str, wire_info: Mapping) -> HidTwin:
-        descriptor = wire_info.get("report_descriptor")
-        fields = wire_info.get("fields")
-        if descriptor is None and fields is None and "fields" not in Url.parse(url).options:
-            raise DeviceError(f"{name}: the take keeps no HID report descriptor or fields for {url!r} "
-                              "(wire_info), so its reports cannot be rebuilt")
-        module = FakeHidModule()
-        device = HidDevice.from_url(Url.parse(url), name, fields=fields, hid_module=module)
-        module.hardware.append(FakeHidHardware(
-            device.vendor_id or 0, device.product_id or 0,
-            None if descriptor is None else bytes.fromhex(descriptor), serial=device.serial or "TWIN",
-            path=device.path, usage_page=device.usage_page or 0, usage=device.usage or 0,
-            interface_number=device.interface or 0))
-        return cls(device, module.hardware[0], url)
-
-    def _put(self, values: Mapping[str, float]) -> int:
-        self.hardware.feed(self.device.layout.encode(values))
-        return 1

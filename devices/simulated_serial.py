@@ -2,7 +2,7 @@
 
 ``PtyJoystick`` opens ``os.openpty()``, sets the slave side raw (no echo, no line editing) and
 writes readings on the master side -- ascii lines, COBS or SLIP frames, made by the encoders of
-``devices.serial_port`` -- from a generated signal (smooth sine sliders by default) or a script, at
+``devices.serial_wire`` -- from a generated signal (smooth sine sliders by default) or a script, at
 a given rate, in a thread of its own. Whatever opens the slave with pyserial sees an ordinary
 serial port.
 
@@ -28,9 +28,9 @@ Rates: ``rate`` readings a second, paced by the clock and written in batches whe
 late; ``rate=math.inf`` writes as fast as the reader takes (for throughput measurements);
 ``rate=None`` starts no thread: the test calls ``send(values)`` and ``write(raw_bytes)``.
 
-``sim://joystick?protocol=ascii&rate=200&channels=6`` (``SimulatedSerialDevice``) is a
-``SerialDevice`` that starts its own ``PtyJoystick`` and reads it: a serial device for demos with
-no hardware. Options: ``protocol``, ``rate`` (0 = as fast as possible), ``channels`` (a count, or
+``sim://joystick?protocol=ascii&rate=200&channels=6`` (``devices.sim_device``) is a serial
+device that starts its own ``PtyJoystick`` and reads it: a serial device for demos with no
+hardware. Options: ``protocol``, ``rate`` (0 = as fast as possible), ``channels`` (a count, or
 names), ``format`` (i16/f32 for cobs and slip), ``style`` (csv, space or pairs for ascii),
 ``checksum`` (``nmea``: ascii lines end in ``*hh``, and the reader checks them), ``motion``
 (``sines``, the default, or ``calibrate``: ``rest_then_sweep``, a hand doing what ``puppet
@@ -48,23 +48,13 @@ import tempfile
 import threading
 import time
 import tty
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Sequence
 
-from devices.base import DeviceError, Url
-from devices.serial_port import (
-    SerialDevice,
-    add_checksum,
-    encode_ascii_line,
-    encode_cobs_frame,
-    encode_slip_frame,
-    make_parser,
-)
-from devices.twin import Twin
+from devices.serial_wire import STYLES, encode_reading, make_parser
 
 PENDING_MAX = 8192      # bytes waiting for the reader before whole readings are dropped
 MAX_BATCH = 0.1         # at most this many seconds of readings are caught up after a stall
 FLOOD_BLOCK = 256       # readings per block written in flood mode
-STYLES = {"csv": ",", "space": " ", "pairs": ","}
 
 Signal = Callable[[float], Sequence[float]]
 
@@ -111,20 +101,6 @@ def rest_then_sweep(channels: int = 6, rest_seconds: float = 4.0, seed: int = 0)
             values.append(float(min(1023, max(0, round(value)))))
         return values
     return signal
-
-
-def encode_reading(values: Sequence[float], protocol: str = "ascii", fmt: str = "i16", style: str = "csv",
-                   names: Sequence[str] | None = None, checksum: str = "none") -> bytes:
-    """One reading on the wire: a COBS or SLIP frame, or an ascii line in a style (with its
-    ``*hh`` check when ``checksum`` is ``nmea``)."""
-    if protocol == "cobs":
-        return encode_cobs_frame(values, fmt)
-    if protocol == "slip":
-        return encode_slip_frame(values, fmt)
-    if style == "pairs":
-        names = names or [f"ch{i}" for i in range(len(values))]
-        return encode_ascii_line(dict(zip(names, values)), STYLES["pairs"], checksum=checksum)
-    return encode_ascii_line(values, STYLES[style], checksum=checksum)
 
 
 class PtyJoystick:
@@ -308,123 +284,3 @@ class PtyJoystick:
                     self._flush_locked()
             if master is None:
                 self._stop.wait(0.01)
-
-
-def _joystick(url: Url, paced: bool) -> PtyJoystick:
-    """The PtyJoystick a sim://joystick URL describes: sending at the URL's rate when ``paced``,
-    else only when told (``rate=None``: a twin writes the logged readings itself)."""
-    if url.target.strip("/") != "joystick":
-        raise DeviceError(f"sim URL: expected sim://joystick?protocol=ascii&rate=200, got target {url.target!r}")
-    SimulatedSerialDevice.check_options(url)
-    options = url.options
-    channels = options.get("channels", "6")
-    try:
-        rate = float(options.get("rate", "200"))
-        names = [f"ch{i}" for i in range(int(channels))] if channels.isdigit() else channels.split(",")
-        return PtyJoystick(options.get("protocol", "ascii"), (rate if rate > 0 else math.inf) if paced else None,
-                           fmt=options.get("format", "i16"), style=options.get("style", "csv"), names=names,
-                           checksum=options.get("checksum", "none"), signal=_motion(options, len(names)))
-    except ValueError as exc:
-        raise DeviceError(f"sim URL: {exc}") from None
-
-
-def _motion(options: Mapping[str, str], channels: int) -> Signal | None:
-    """The signal a sim URL's ``motion`` names (None: the joystick's default sines)."""
-    motion = options.get("motion", "sines")
-    if motion == "calibrate":
-        rest = float(options.get("rest", "4"))
-        if not 0 <= rest <= 600:
-            raise ValueError(f"rest={rest:g}: expected seconds from 0 to 600")
-        return rest_then_sweep(channels, rest, int(options.get("seed", "0")))
-    if motion != "sines" or "rest" in options:
-        raise ValueError(f"motion={motion}: expected sines, or calibrate (with rest=SECONDS)")
-    return None
-
-
-class SimulatedSerialDevice(SerialDevice):
-    """``sim://joystick?...``: a SerialDevice reading a PtyJoystick it starts itself."""
-
-    OPTIONS = frozenset({"protocol", "rate", "channels", "format", "style", "checksum", "motion", "rest", "seed"})
-
-    def __init__(self, name: str, joystick: PtyJoystick, **serial_options: object) -> None:
-        super().__init__(name, joystick.path, protocol=joystick.protocol, fmt=joystick.fmt,
-                         channels=joystick.names, checksum=joystick.checksum, **serial_options)
-        self.joystick = joystick
-        self._joystick_started = False
-
-    @classmethod
-    def from_url(cls, url: Url, name: str) -> SimulatedSerialDevice:
-        return cls(name, _joystick(url, paced=True))
-
-    def _open(self) -> None:
-        if not self._joystick_started:  # once: after that, unplug() and replug() are the test's
-            self.joystick.start()
-            self._joystick_started = True
-        super()._open()
-
-    def close(self, timeout: float = 2.0) -> None:
-        super().close(timeout)
-        self.joystick.close()
-        self._joystick_started = False
-
-
-# -- wire twins ---------------------------------------------------------------------------------
-
-class SerialTwin(Twin):
-    """``serial://`` and ``sim://`` wires: a PtyJoystick sending nothing by itself (``rate=None``),
-    a serial adapter reading its pseudo-terminal with the logged protocol, format and channel
-    names, and logged readings written on it as the adapter parses them.
-
-    ascii readings go as ``name=value`` pairs with ``repr`` floats, which parse back bit for bit
-    (NaN and infinities excepted: the parser refuses them, so the adapter reports a bad frame);
-    the line must stay within ``MAX_LINE`` bytes. cobs and slip frames carry the values in the
-    adapter's channel order, as int16 (integers -32768..32767 only) or float32 (float32 values
-    only): anything else comes back different or cannot be packed.
-    """
-
-    def __init__(self, device: SerialDevice, joystick: PtyJoystick, url: str) -> None:
-        self.joystick = joystick
-        super().__init__(device, url)
-
-    @classmethod
-    def from_url(cls, url: str, name: str, wire_info: Mapping) -> SerialTwin:
-        options = Url.parse(url).options
-        joystick = PtyJoystick(rate=None)  # only a carrier: the twin writes the wire bytes
-        decoding = {k: v for k, v in options.items() if k in ("protocol", "format", "channels", "checksum")}
-        try:
-            device = SerialDevice.from_url(Url("serial", joystick.path, decoding), name)
-        except DeviceError:
-            joystick.close()
-            raise
-        return cls(device, joystick.start(), url)
-
-    def _put(self, values: Mapping[str, float]) -> int:
-        device = self.device
-        if device.protocol == "ascii":
-            line = ",".join(f"{k}={float(v)!r}" for k, v in values.items()).encode("ascii")
-            data = add_checksum(line, device.checksum) + b"\n"
-        else:
-            names = device.channels or [f"ch{i}" for i in range(len(values))]
-            if set(names) != set(values):
-                raise ValueError(f"a {device.protocol} frame carries the channels {list(names)} in order")
-            data = encode_reading([values[k] for k in names], device.protocol, device.fmt)
-        if not self.joystick.write(data):
-            raise ValueError(f"{len(data)} bytes do not fit the pseudo-terminal")
-        return 1
-
-    def close(self) -> None:
-        super().close()
-        self.joystick.close()
-
-
-class SimTwin(SerialTwin):
-    """``sim://joystick`` wires: the ``SimulatedSerialDevice`` itself, its joystick unpaced."""
-
-    @classmethod
-    def from_url(cls, url: str, name: str, wire_info: Mapping) -> SimTwin:
-        joystick = _joystick(Url.parse(url), paced=False)
-        return cls(SimulatedSerialDevice(name, joystick), joystick, url)
-
-
-__all__ = ["PtyJoystick", "SerialTwin", "SimTwin", "SimulatedSerialDevice", "encode_reading", "rest_then_sweep",
-           "sine_sliders"]

@@ -8,10 +8,9 @@ bytes or messages the hardware would have sent. ``exchange`` sends a reading and
 adapter's Sample of it, checked bit for bit against what was sent: replaying a take this way tests
 the adapters' decoding against everything that was ever recorded, and reproduces the take exactly.
 
-Twins are chosen by URL scheme, like devices (``devices.BACKENDS``): ``open_twin(url, name,
-wire_info)``. Each backend's twin lives in the module of that backend's simulated device and is
-imported only when used. A URL with no wire (``replay://``, anything that is not a device URL)
-has no twin: ``open_twin`` raises ``DeviceError`` naming it.
+A backend module names its twin ``TWIN``, and ``devices.open_twin(url, name, wire_info)`` picks it
+by the URL's scheme, like ``open_device``. A URL with no wire (``replay://``, anything that is not
+a device URL) has no twin: ``open_twin`` raises ``DeviceError`` naming it.
 """
 
 from __future__ import annotations
@@ -22,7 +21,7 @@ from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from typing import Self
 
-from devices.base import Device, DeviceError, Sample, State, Url, table_class
+from devices.base import Device, DeviceError, Sample, State
 
 TWINS: dict[str, str] = {
     "can": "devices.simulated_can:CanTwin",
@@ -143,25 +142,4 @@ def _bits(value: float) -> bytes:
     return struct.pack("<d", value)
 
 
-def open_twin(url: str, name: str, wire_info: Mapping | None = None) -> Twin:
-    """The twin of a logged device (its URL, name and ``wire_info``), its adapter open and ready."""
-    try:
-        scheme = Url.parse(url).scheme
-    except DeviceError:
-        scheme = None
-    if scheme not in TWINS:
-        raise DeviceError(f"{name}: {url!r} cannot be replayed through a device: only device URLs "
-                          f"with a wire have a twin ({', '.join(s + '://' for s in sorted(TWINS))})")
-    try:
-        twin = table_class(TWINS[scheme])
-    except ImportError as exc:
-        raise DeviceError(f"{name}: the twin of {url!r} needs {exc.name!r} (pip install {exc.name})") from None
-    try:
-        return twin.from_url(url, name, wire_info or {})
-    except DeviceError as exc:
-        if str(exc).startswith(f"{name}: "):
-            raise
-        raise DeviceError(f"{name}: no twin for {url!r}: {exc}") from None
-
-
-__all__ = ["TWINS", "Twin", "differences", "open_twin"]
+__all__ = ["Twin", "differences"]

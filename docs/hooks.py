@@ -43,8 +43,7 @@ BOUNDS = (("minimum", "≥"), ("exclusiveMinimum", ">"), ("maximum", "≤"), ("e
 _CHILD_SCRIPT = r"""
 import contextlib, io, json, re, sys
 from puppet.cli import main
-from devices import BACKENDS
-from devices.base import table_class
+from devices import BACKENDS, DeviceError, device_class
 
 def help_of(argv):
     out = io.StringIO()
@@ -55,10 +54,10 @@ def help_of(argv):
             pass
     return out.getvalue()
 
-def options_of(entry):
+def options_of(scheme):
     try:
-        declared = getattr(table_class(entry), "OPTIONS", None)
-    except ImportError:
+        declared = getattr(device_class(scheme, scheme), "OPTIONS", None)
+    except DeviceError:
         return None
     return None if declared is None else sorted(declared)
 
@@ -69,7 +68,7 @@ if found is None:
 helps = {"": top}
 for command in found.group(1).split(","):
     helps[command] = help_of([command, "--help"])
-options = {scheme: options_of(entry) for scheme, entry in BACKENDS.items()}
+options = {scheme: options_of(scheme) for scheme in BACKENDS}
 print(json.dumps({"help": helps, "options": options}))
 """
 

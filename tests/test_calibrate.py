@@ -46,6 +46,10 @@ targets:
 class PhasedBox(Device):
     """A slider box in memory: phase 0 (before Enter) junk, 1 rest, 2 sweep; ch3 never reports."""
 
+    @classmethod
+    def from_url(cls, url, name):
+        return cls()
+
     def __init__(self) -> None:
         super().__init__("box")
         self.phase = 0

@@ -224,26 +224,6 @@ def test_close_is_prompt():
     assert device.state == State.CLOSED and device.bus is None
 
 
-def test_a_bus_that_shuts_down_under_the_device_is_lost_and_reopened():
-    """python-can's virtual bus has no cable to pull: the nearest thing is its bus object going
-    away (shutdown) while the device reads it; the device reports LOST and opens a new one."""
-    ch = channel()
-    with can_device(f"can://virtual/{ch}?signals={JOYSTICK_SIGNALS}") as device, closing(CanJoystick(ch)) as joystick:
-        assert device.wait_state(State.OPEN, 2.0)
-        first = device.bus
-        first.shutdown()
-        assert wait_for(lambda: device.counters.reconnects == 1)
-        assert "closed bus" in device.counters.last_error
-        assert device.wait_state(State.OPEN, 2.0) and device.bus is not first
-        sent = joystick.tick(1.0)
-        got = {}
-        for sample in device.samples(timeout=2.0):
-            got.update(sample.values)
-            if len(got) == len(sent):
-                break
-        assert got == sent
-
-
 def test_a_bus_that_cannot_be_opened_is_lost_not_fatal():
     with can_device("can://socketcan/nosuchcan0?signals=x:1:0:8") as device:
         assert device.wait_state(State.LOST, 2.0)

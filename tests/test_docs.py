@@ -20,7 +20,7 @@ import pytest
 import yaml
 
 from devices import BACKENDS, State, open_device
-from devices.serial_port import make_parser
+from devices.serial_wire import make_parser
 from puppet import cli
 from puppet.io.fapfile import read_fap
 from puppet.io.shipped import shipped_mapping
@@ -141,7 +141,7 @@ def test_every_command_in_the_guide_exists_with_its_options():
 
 def test_every_device_backend_has_a_page_with_its_options():
     text = "\n".join(p.read_text("utf-8") for p in (GUIDE / "devices").glob("*.md"))
-    for scheme, entry in BACKENDS.items():
+    for scheme in BACKENDS:
         assert f"<!-- url-options: {scheme} -->" in text, f"no device page lists the options of {scheme}://"
         assert f"{scheme}://" in text
 

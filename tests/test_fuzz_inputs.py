@@ -23,7 +23,7 @@ from hypothesis import strategies as st
 
 from devices.base import DeviceError
 from devices.osc_packet import parse_datagram
-from devices.serial_port import MAX_FRAME, MAX_LINE, encode_cobs_frame, encode_slip_frame, make_parser
+from devices.serial_wire import MAX_FRAME, MAX_LINE, encode_cobs_frame, encode_slip_frame, make_parser
 from puppet.errors import PuppetError
 from puppet.io.fapfile import read_fap, write_fap
 from puppet.io.shipped import shipped_mappings

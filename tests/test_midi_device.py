@@ -87,18 +87,6 @@ def test_a_channel_filter_keeps_one_midi_channel():
     assert device.reading(mido.Message("control_change", channel=2, control=1, value=127)) == {"cc1": 1.0}
 
 
-def test_no_port_means_lost_and_a_returning_port_reopens(box):
-    device, port, plugged = box
-    plugged["yes"] = False
-    port.vanished = True
-    assert device.wait_state(State.LOST, 2.0)
-    port.vanished = False
-    plugged["yes"] = True
-    assert device.wait_state(State.OPEN, 2.0)
-    port.send_bytes(0xB0, 1, 0)
-    assert _values(device, 1) == [{"cc1": 0.0}]
-
-
 def test_a_midi_url_names_the_port_and_channel():
     device = open_device("midi://nanoKONTROL2?channel=3&cc14=0,1")
     assert isinstance(device, MidiDevice)

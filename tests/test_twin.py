@@ -16,14 +16,14 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from devices import DeviceError, State, Url
+from devices import DeviceError, State, Url, open_twin
 from devices.can_device import CanDevice
 from devices.hid_descriptor import ReportLayout
 from devices.hid_device import HidDevice
 from devices.midi_device import MidiDevice
 from devices.simulated_can import AXES_ID, EXTRA_ID, JOYSTICK_DBC, JOYSTICK_SIGNALS, joystick_database
 from devices.simulated_hid import GAMEPAD_DESCRIPTOR, FakeHidModule, gamepad, gamepad_report, knobs_report
-from devices.twin import differences, open_twin
+from devices.twin import differences
 
 EXAMPLES = settings(max_examples=300, deadline=None,
                     suppress_health_check=[HealthCheck.too_slow])

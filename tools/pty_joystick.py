@@ -32,7 +32,8 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from devices import State
 from devices.serial_port import SerialDevice
-from devices.simulated_serial import PtyJoystick, encode_reading, sine_sliders
+from devices.serial_wire import encode_reading
+from devices.simulated_serial import PtyJoystick, sine_sliders
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -86,8 +86,8 @@ from urllib.parse import parse_qsl, urlencode, urlsplit
 import numpy as np
 import yaml
 
-from devices import BACKENDS, DeviceError
-from devices.base import Sample, Url, table_class
+from devices import DeviceError, backends, device_class
+from devices.base import Sample, Url
 from puppet.errors import PuppetError
 from puppet.face.muscles import MUSCLE_NAMES
 from puppet.fap.pose import Pose
@@ -472,9 +472,9 @@ class _Checker:
                 self.expect(where + ("url",), "a device URL scheme://..., e.g. 'serial:///dev/ttyACM0' "
                                               "or 'serial:loop://'", url)
                 url = None
-            elif m is not None and m.group(1) not in BACKENDS:
+            elif m is not None and m.group(1) not in backends():
                 self.error(where + ("url",), f"unknown device URL scheme {m.group(1)!r}: expected one of "
-                                             f"{', '.join(sorted(BACKENDS))}{_closest(m.group(1), BACKENDS)}")
+                                             f"{', '.join(sorted(backends()))}{_closest(m.group(1), backends())}")
                 url = None
             options = spec.get("options", {})
             if not isinstance(options, dict):
@@ -496,8 +496,8 @@ class _Checker:
         """Every option of the device URL (its query and ``options``) is one its backend reads."""
         try:
             parsed = Url.parse(url)
-            backend = table_class(BACKENDS[parsed.scheme])
-        except (ImportError, DeviceError):  # a missing optional library is said when the device opens
+            backend = device_class(parsed.scheme, url)
+        except DeviceError:  # a missing optional library is said when the device opens
             return
         for key in parsed.options:
             problem = backend.unknown_option(parsed, key)

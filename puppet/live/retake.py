@@ -156,7 +156,7 @@ def _layer(take: Take) -> Layer | None:
 def _through_devices(entries: Iterator[Sample | LogEvent], take: Take,
                      stack: ExitStack) -> Iterator[Sample | LogEvent]:
     """The entries, each Sample's values replaced by what its device's real adapter read back."""
-    from devices.twin import open_twin
+    from devices import open_twin
 
     urls, wire = take.meta.get("devices") or {}, take.meta.get("wire") or {}
     twins = {}
