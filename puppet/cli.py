@@ -13,7 +13,9 @@ import math
 import os
 import sys
 import warnings
+from collections.abc import Callable
 from pathlib import Path
+from typing import NamedTuple
 
 from devices.base import DeviceError
 from puppet.errors import PuppetError
@@ -37,12 +39,15 @@ class _Parser(argparse.ArgumentParser):
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = _parser()
-    args = parser.parse_args(argv)
+    """Run ``puppet COMMAND ...``; return its exit code (every refusal: one line on stderr, 2)."""
+    args = _parser().parse_args(argv)
     with warnings.catch_warnings():
         warnings.showwarning = _warning_line(args.command)
         try:
-            return _run(args)
+            if getattr(args, "mapping", None):
+                args.shipped_mapping = not Path(args.mapping).exists()
+                args.mapping = str(mapping_path(args.mapping))
+            return COMMANDS[args.command].run(args)
         except REFUSED as exc:
             print(f"puppet {args.command}: {_one_line(exc)}", file=sys.stderr)
             return 2
@@ -69,12 +74,28 @@ def _parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="puppet", description="facepuppet: live facial puppeteering")
     parser.add_argument("--version", action="version", version="puppet (facepuppet) 0.1.0")
     commands = parser.add_subparsers(dest="command", required=True)
+    for name, command in COMMANDS.items():
+        command.arguments(commands.add_parser(name, help=command.help))
+    return parser
 
-    demo = commands.add_parser("demo", help="replay the shipped demo take on the default face to a video")
+
+# -- the commands: for each, its arguments and what it does ------------------------------------
+
+def _demo_arguments(demo: argparse.ArgumentParser) -> None:
     demo.add_argument("--out", default="out", help="output folder (default: out)")
     demo.add_argument("--size", type=_size, default=(640, 480), help="video size WxH (default 640x480)")
 
-    render = commands.add_parser("render", help="render a .fap take to an MP4 video, or many takes on Dask")
+
+def _demo(args: argparse.Namespace) -> int:
+    """``puppet demo``: the shipped take on the default face, to a video and a still."""
+    from puppet.view.demo import run_demo
+
+    for path in run_demo(Path(args.out), size=args.size):
+        print(path)
+    return 0
+
+
+def _render_arguments(render: argparse.ArgumentParser) -> None:
     render.add_argument("take", nargs="+", help="the .fap file (or several, rendered in parallel)")
     render.add_argument("-o", "--output", default=None,
                         help="the video to write (.mp4; default: take.mp4 in the take folder, or X.mp4 beside "
@@ -89,23 +110,34 @@ def _parser() -> argparse.ArgumentParser:
                         help="video fps (default: the take's)")
     render.add_argument("--face", default=None, help=FACE_HELP)
 
-    for command, help_text in (("play", "play a take (a .fap or a take folder) in a window, in real time"),
-                               ("replay", "play a take in a window; or replay its raw log through its devices' "
-                                          "wires or another mapping into a new .fap")):
-        play = commands.add_parser(command, help=help_text)
-        play.add_argument("take", help="the .fap file or take folder")
-        play.add_argument("--size", type=_size, default=(960, 720), help="window size WxH (default 960x720)")
-        play.add_argument("--view", choices=VIEWS, default="front", help="camera (default front)")
-        play.add_argument("--face", default=None, help=FACE_HELP)
-    play.add_argument("--through-devices", action="store_true",
-                      help="re-encode the raw log into each device's wire format and read it back with the "
-                           "real adapters; the new .fap must equal the recorded one")
-    play.add_argument("--mapping", default=None, help="re-map the take's raw log with this mapping YAML")
-    play.add_argument("-o", "--output", default=None,
-                      help="the new .fap (default: replay.fap or remap-<mapping>.fap in the take folder)")
-    play.add_argument("--no-window", action="store_true", help="write the new .fap only; do not play it")
 
-    export = commands.add_parser("export", help="export a take to glTF binary (.glb), animated by morph targets")
+def _window_arguments(play: argparse.ArgumentParser) -> None:
+    play.add_argument("take", help="the .fap file or take folder")
+    play.add_argument("--size", type=_size, default=(960, 720), help="window size WxH (default 960x720)")
+    play.add_argument("--view", choices=VIEWS, default="front", help="camera (default front)")
+    play.add_argument("--face", default=None, help=FACE_HELP)
+
+
+def _play(args: argparse.Namespace) -> int:
+    """``puppet play``: a take in a window, in real time."""
+    from puppet.view.window import play_take
+
+    play_take(args.take, size=args.size, view=args.view, face=_face(args.face))
+    return 0
+
+
+def _replay_arguments(replay: argparse.ArgumentParser) -> None:
+    _window_arguments(replay)
+    replay.add_argument("--through-devices", action="store_true",
+                        help="re-encode the raw log into each device's wire format and read it back with the "
+                             "real adapters; the new .fap must equal the recorded one")
+    replay.add_argument("--mapping", default=None, help="re-map the take's raw log with this mapping YAML")
+    replay.add_argument("-o", "--output", default=None,
+                        help="the new .fap (default: replay.fap or remap-<mapping>.fap in the take folder)")
+    replay.add_argument("--no-window", action="store_true", help="write the new .fap only; do not play it")
+
+
+def _export_arguments(export: argparse.ArgumentParser) -> None:
     export.add_argument("take", help="the .fap file or take folder")
     export.add_argument("-o", "--output", required=True, help="the .glb to write")
     export.add_argument("--mode", choices=("morph", "frames"), default="morph",
@@ -113,7 +145,8 @@ def _parser() -> argparse.ArgumentParser:
     export.add_argument("--max-frames", type=_positive, default=None, help="export only the first N frames")
     export.add_argument("--face", default=None, help=FACE_HELP)
 
-    arkit = commands.add_parser("import-arkit", help="import a Live Link Face / ARKit blendshape CSV as a take")
+
+def _import_arkit_arguments(arkit: argparse.ArgumentParser) -> None:
     arkit.add_argument("csv", help="the CSV file")
     arkit.add_argument("--mapping", default=None, help="ARKit names -> FAPs (default: mappings/arkit_csv.yaml)")
     arkit.add_argument("--name", default="arkit", help="take name (default arkit: folders arkit_001, ...)")
@@ -122,7 +155,8 @@ def _parser() -> argparse.ArgumentParser:
     arkit.add_argument("--csv-fps", type=_seconds_or_rate("fps", 0.1, 1000), default=60.0,
                        help="the rate of the timecodes' frame field (default 60)")
 
-    live = commands.add_parser("live", help="run a mapping's devices onto the face in a window, live")
+
+def _live_arguments(live: argparse.ArgumentParser) -> None:
     live.add_argument("--mapping", required=True, help="the mapping: a YAML file or a shipped name (puppet mappings)")
     live.add_argument("--record", default=None, metavar="NAME", help="take name for R (default: take)")
     live.add_argument("--takes", default="takes", metavar="DIR",
@@ -138,13 +172,36 @@ def _parser() -> argparse.ArgumentParser:
     live.add_argument("--arm", default="", metavar="A,B",
                       help="what a layered pass replaces: channels (box.ch0), FAP numbers or names, viseme, expression")
 
-    commands.add_parser("devices", help="list the controllers that are connected (serial, HID, MIDI, CAN)")
 
-    mappings = commands.add_parser("mappings", help="list the shipped mappings, or write an editable copy of one")
+def _live(args: argparse.Namespace) -> int:
+    """``puppet live``: the mapping's devices onto the face in the live window."""
+    from puppet.io.takes import TakeError
+    from puppet.view.livewindow import run_live
+
+    if args.layer_over and not args.arm:
+        raise TakeError("--layer-over needs --arm: what the pass replaces (e.g. --arm box.ch0)")
+    if args.arm and not args.layer_over:
+        raise TakeError("--arm needs --layer-over: the take the pass is recorded over")
+    run_live(args.mapping, record=args.record, fps=args.fps, size=args.size, view=args.view,
+             devices=dict(args.device) or None, face=_face(args.face), layer_over=args.layer_over,
+             arm=[a for a in args.arm.split(",") if a], record_root=args.takes)
+    return 0
+
+
+def _devices(args: argparse.Namespace) -> int:
+    """``puppet devices``: what is plugged in, as device URLs."""
+    from devices.discovery import discover, report
+
+    print(report(discover()))
+    return 0
+
+
+def _mappings_arguments(mappings: argparse.ArgumentParser) -> None:
     mappings.add_argument("--copy", metavar="NAME", default=None, help="write NAME.yaml here (or to -o) to edit")
     mappings.add_argument("-o", "--output", default=".", help="folder or file for --copy (default: here)")
 
-    calibrate = commands.add_parser("calibrate", help="record rest and a sweep per channel; write them into the mapping")
+
+def _calibrate_arguments(calibrate: argparse.ArgumentParser) -> None:
     calibrate.add_argument("--mapping", required=True,
                            help="the mapping YAML to calibrate (a .bak copy is kept; copy a shipped one first)")
     calibrate.add_argument("--device", action="append", type=_device_override, default=[], metavar="NAME=URL",
@@ -154,7 +211,8 @@ def _parser() -> argparse.ArgumentParser:
     calibrate.add_argument("--sweep", type=_seconds_or_rate("seconds", 0.1, 600), default=8.0,
                            help="seconds of sweep to record (default 8)")
 
-    bench = commands.add_parser("bench", help="measure Sibson precompute, rig load and per-frame deform")
+
+def _bench_arguments(bench: argparse.ArgumentParser) -> None:
     bench.add_argument("--json", action="store_true", help="print the results as JSON")
     bench.add_argument("--frames", type=_positive, default=300, help="frames per measurement")
     bench.add_argument("--no-ict", action="store_true", help="skip the ICT face even when present")
@@ -167,88 +225,38 @@ def _parser() -> argparse.ArgumentParser:
     bench.add_argument("--only", type=_sections, default=None, metavar="A,B",
                        help="measure only these sections: " + ", ".join(BENCH_SECTIONS))
 
-    rig = commands.add_parser("rig", help="rig a face mesh from its landmarks into a face folder for --face")
+
+def _bench(args: argparse.Namespace) -> int:
+    """``puppet bench``: the measured sections, as tables or JSON."""
+    from puppet.bench.run import run_bench
+
+    return run_bench(frames=args.frames, as_json=args.json, ict=not args.no_ict,
+                     flood_seconds=args.flood_seconds, take_seconds=args.take_seconds,
+                     only=args.only or BENCH_SECTIONS, quick=args.quick)
+
+
+def _rig_arguments(rig: argparse.ArgumentParser) -> None:
     rig.add_argument("mesh", help="the face mesh (.obj or any format trimesh reads)")
     rig.add_argument("--landmarks", required=True,
                      help="JSON: {FDP id: vertex index} or a list of the 68 iBUG landmark vertex indices")
     rig.add_argument("-o", "--output", required=True,
                      help="the face folder to write (mesh, feature points, rig); a name ending .rig writes the rig alone")
 
-    from_photo = commands.add_parser("face-from-photo", help="build a rigged, textured face from one frontal photo")
+
+def _face_from_photo_arguments(from_photo: argparse.ArgumentParser) -> None:
     from_photo.add_argument("photo", help="the frontal photo")
     from_photo.add_argument("--landmarks", default=None,
                             help="landmark JSON: fdp11, iBUG 68 or MediaPipe 468/478 points (puppet pick-landmarks); "
                                  "default: detected offline (MediaPipe, the photo set-up)")
     from_photo.add_argument("-o", "--output", required=True, help="the face folder to write")
 
-    pick = commands.add_parser("pick-landmarks", help="click a photo's landmarks in a web page on 127.0.0.1")
+
+def _pick_landmarks_arguments(pick: argparse.ArgumentParser) -> None:
     pick.add_argument("photo", help="the photo")
     pick.add_argument("--layout", choices=("fdp11", "ibug68"), default="fdp11", help="points to click (default fdp11)")
     pick.add_argument("-o", "--output", required=True, help="the landmark JSON to write")
     pick.add_argument("--port", type=_port, default=0, help="port 1-65535 (default: a free one)")
     pick.add_argument("--no-browser", action="store_true", help="print the address only")
-
-    return parser
-
-
-def _run(args: argparse.Namespace) -> int:
-    """Run the command ``args`` names; a refusal propagates to ``main`` as an exception."""
-    if getattr(args, "mapping", None):
-        args.shipped_mapping = not Path(args.mapping).exists()
-        args.mapping = str(mapping_path(args.mapping))
-    if args.command == "mappings":
-        return _mappings(args)
-    if args.command == "face-from-photo":
-        return _face_from_photo(args)
-    if args.command == "pick-landmarks":
-        return _pick_landmarks(args)
-    if args.command == "rig":
-        return _rig(args)
-    if args.command == "demo":
-        from puppet.view.demo import run_demo
-
-        for path in run_demo(Path(args.out), size=args.size):
-            print(path)
-        return 0
-    if args.command == "render":
-        return _render(args)
-    if args.command == "play":
-        from puppet.view.window import play_take
-
-        play_take(args.take, size=args.size, view=args.view, face=_face(args.face))
-        return 0
-    if args.command == "replay":
-        return _replay(args)
-    if args.command == "export":
-        return _export(args)
-    if args.command == "import-arkit":
-        return _import_arkit(args)
-    if args.command == "live":
-        from puppet.io.takes import TakeError
-        from puppet.view.livewindow import run_live
-
-        if args.layer_over and not args.arm:
-            raise TakeError("--layer-over needs --arm: what the pass replaces (e.g. --arm box.ch0)")
-        if args.arm and not args.layer_over:
-            raise TakeError("--arm needs --layer-over: the take the pass is recorded over")
-        run_live(args.mapping, record=args.record, fps=args.fps, size=args.size, view=args.view,
-                 devices=dict(args.device) or None, face=_face(args.face), layer_over=args.layer_over,
-                 arm=[a for a in args.arm.split(",") if a], record_root=args.takes)
-        return 0
-    if args.command == "calibrate":
-        return _calibrate(args)
-    if args.command == "devices":
-        from devices.discovery import discover, report
-
-        print(report(discover()))
-        return 0
-    if args.command == "bench":
-        from puppet.bench.run import run_bench
-
-        return run_bench(frames=args.frames, as_json=args.json, ict=not args.no_ict,
-                         flood_seconds=args.flood_seconds, take_seconds=args.take_seconds,
-                         only=args.only or BENCH_SECTIONS, quick=args.quick)
-    return 2
 
 
 def _mappings(args: argparse.Namespace) -> int:
@@ -515,6 +523,43 @@ def _port(text: str) -> int:
     if not 0 <= value <= 65535:
         raise argparse.ArgumentTypeError(f"expected a port from 1 to 65535 (0: any free one), got {text!r}")
     return value
+
+
+class Command(NamedTuple):
+    """One ``puppet`` command: its help line, what adds its arguments, what runs it."""
+
+    help: str
+    arguments: Callable[[argparse.ArgumentParser], None]
+    run: Callable[[argparse.Namespace], int]
+
+
+def _no_arguments(parser: argparse.ArgumentParser) -> None:
+    """A command that takes no arguments."""
+
+
+COMMANDS: dict[str, Command] = {
+    "demo": Command("replay the shipped demo take on the default face to a video", _demo_arguments, _demo),
+    "render": Command("render a .fap take to an MP4 video, or many takes on Dask", _render_arguments, _render),
+    "play": Command("play a take (a .fap or a take folder) in a window, in real time", _window_arguments, _play),
+    "replay": Command("play a take in a window; or replay its raw log through its devices' wires or another "
+                      "mapping into a new .fap", _replay_arguments, _replay),
+    "export": Command("export a take to glTF binary (.glb), animated by morph targets", _export_arguments, _export),
+    "import-arkit": Command("import a Live Link Face / ARKit blendshape CSV as a take", _import_arkit_arguments,
+                            _import_arkit),
+    "live": Command("run a mapping's devices onto the face in a window, live", _live_arguments, _live),
+    "devices": Command("list the controllers that are connected (serial, HID, MIDI, CAN)", _no_arguments, _devices),
+    "mappings": Command("list the shipped mappings, or write an editable copy of one", _mappings_arguments,
+                        _mappings),
+    "calibrate": Command("record rest and a sweep per channel; write them into the mapping", _calibrate_arguments,
+                         _calibrate),
+    "bench": Command("measure Sibson precompute, rig load and per-frame deform", _bench_arguments, _bench),
+    "rig": Command("rig a face mesh from its landmarks into a face folder for --face", _rig_arguments, _rig),
+    "face-from-photo": Command("build a rigged, textured face from one frontal photo", _face_from_photo_arguments,
+                               _face_from_photo),
+    "pick-landmarks": Command("click a photo's landmarks in a web page on 127.0.0.1", _pick_landmarks_arguments,
+                              _pick_landmarks),
+}
+"""The dispatch table: ``puppet NAME`` runs ``COMMANDS[NAME].run`` (in this order in ``--help``)."""
 
 
 if __name__ == "__main__":
