@@ -66,13 +66,9 @@ def test_the_face_rebuilt_from_its_own_photo_is_the_default_face(shot, layout):
     if layout == "fdp11":
         data = {"layout": "fdp11", "points": project(np.array([face.feature_points[k] for k in pf.FDP11])).tolist()}
     elif layout == "ibug68":
-        data = project(pf._ibug_points(face)).tolist()
-    else:  # unused MediaPipe points sit anywhere inside the image
-        points = np.full((478, 2), SIZE / 2.0)
-        table = pf.MEDIAPIPE_FDP | pf.MEDIAPIPE_IRIS_FDP
-        points[list(table)] = project(np.array([face.feature_points[f] for f in table.values()]))
-        points[list(pf.MEDIAPIPE_SIDES)] = project(np.array(pf._side_points(face)))
-        data = points.tolist()
+        data = project(pf.ibug_points(face).on(face.vertices)).tolist()
+    else:  # the 10 iris points of the 478-point form are not used: they sit anywhere inside
+        data = np.vstack([project(pf.mediapipe_points(face).on(face.vertices)), np.full((10, 2), SIZE / 2.0)]).tolist()
     rebuilt, report = pf.face_from_photo(photo, pf.parse_landmarks(data))
     error = _aligned_error(rebuilt.vertices, face.vertices) / _face_width(face)
     assert error.mean() < 0.01 and np.percentile(error, 99) < 0.03, (layout, error.mean())
@@ -90,8 +86,8 @@ def test_texture_coordinates_land_inside_the_image(shot, fdp11):
     assert textured.sum() > 1000 and set(np.flatnonzero(textured)) <= set(face.parts["skin"]) | \
         set(face.parts["eye_l"]) | set(face.parts["eye_r"])
     assert face.texture_weight[face.parts["teeth_upper"]].max() == 0  # teeth keep their colour
-    # the photo's cheeks are the default face's skin, so the fall-back tone is a skin tone
-    r, g, b = report["fallback_tone"]
+    # the photo's cheeks are the default face's skin, so the skin colour is a skin tone
+    r, g, b = report["skin_tone"]
     assert r > g > b
 
 

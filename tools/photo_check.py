@@ -28,6 +28,7 @@ from PIL import Image, ImageDraw
 from scipy.spatial import cKDTree
 
 from puppet import photoface as pf
+from puppet.phototexture import _inside_distance
 from puppet.face import Face, load_face
 from puppet.render import Renderer, render_face, save_png
 
@@ -56,7 +57,7 @@ def face_area(face: Face) -> np.ndarray:
     skin = face.parts["skin"]
     oval = face.vertices[face.contours["face_oval"], :2]
     normals = VertexNormals(face.triangles, len(face.vertices))(face.vertices)
-    inside = pf._inside_distance(oval, face.vertices[skin, :2]) > 0
+    inside = _inside_distance(oval, face.vertices[skin, :2]) > 0
     return skin[inside & (normals[skin, 2] > 0)]
 
 
@@ -72,9 +73,9 @@ def surface_tree(ict: Face, samples: int = 400_000) -> cKDTree:
 def measure(face: Face, landmarks: np.ndarray, surface: cKDTree) -> dict[str, float]:
     """Errors of ``face`` against ICT after alignment on the landmarks, / ICT face width."""
     width = float(np.linalg.norm(landmarks[0] - landmarks[16]))
-    scale, rotation, t = umeyama(pf._ibug_points(face), landmarks)
+    scale, rotation, t = umeyama(pf.ibug_points(face).on(face.vertices), landmarks)
     moved = scale * face.vertices @ rotation.T + t
-    points = scale * pf._ibug_points(face) @ rotation.T + t
+    points = scale * pf.ibug_points(face).on(face.vertices) @ rotation.T + t
     at = np.linalg.norm(points - landmarks, axis=1) / width
     planar = np.linalg.norm((points - landmarks)[:, :2], axis=1) / width
     distance = surface.query(moved[face_area(face)])[0] / width
@@ -99,7 +100,7 @@ def figure(photo: np.ndarray, pixels: np.ndarray, fit: pf.PhotoFit, rebuilt: Fac
         loop = fit.similarity.forward(rebuilt.vertices[rebuilt.contours[name], :2])
         draw.line([tuple(p) for p in np.vstack([loop, loop[:1]])], fill=(40, 220, 60), width=2)
     for (x, y), colour in [(p, (230, 40, 40)) for p in pixels] + \
-            [(p, (40, 220, 60)) for p in fit.similarity.forward(pf._ibug_points(rebuilt)[:, :2])]:
+            [(p, (40, 220, 60)) for p in fit.similarity.forward(pf.ibug_points(rebuilt).on(rebuilt.vertices)[:, :2])]:
         draw.ellipse((x - 3, y - 3, x + 3, y + 3), fill=colour)
     shape = Face(rebuilt.name, rebuilt.vertices, rebuilt.triangles, rebuilt.parts, colors=None)
     panels = [np.asarray(overlay), render_face(textured, width=SIZE, height=SIZE),
