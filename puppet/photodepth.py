@@ -32,10 +32,12 @@ DISTANCE = 7.0  # camera distance in face widths when the photo does not say: a 
 FULL_FRAME_DIAGONAL = 43.27  # mm, the 35 mm film frame's diagonal (EXIF 35 mm-equivalent focal)
 XY_SMOOTHING = 1e-5  # thin-plate spline smoothing of x, y, face units squared
 Z_SMOOTHING = 1e-3  # the same for depth
-DEPTH_TRUST = 0.5
-"""How far the face's depth goes toward a detector's: MediaPipe's depth on the rendered ICT face
-errs about as much as the default face's own (3.4% and 3.0% of the face width, RMS at its
-landmarks), and half of each errs less than either (2.7%): tools/photo_check.py."""
+DEPTH_TRUST = 0.3
+"""How far the face's depth goes toward a detector's. On the rendered ICT face MediaPipe's depth
+errs more than the default face's own (4.3% and 2.9% of the face width, RMS at MediaPipe's
+landmarks: tools/photo_check.py); weighing the two by their inverse variances gives the detector
+0.3. It still shapes what the default face cannot know (a longer nose, a flatter face), but a
+detector's depth is an estimate, not a measurement."""
 ANCHORS = 48  # points on the back of the head and the neck the warp keeps
 
 

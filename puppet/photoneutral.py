@@ -50,6 +50,7 @@ MIRRORED = ((6, 7), (8, 9), (10, 11), (12, 13), (53, 54), (59, 60))  # left and 
 SYMMETRY_WEIGHT = 1.0  # how firmly a FAP and its mirror image move alike
 CORNER_WEIGHT = 1.0  # how firmly a neutral mouth's corners sit level with its middle
 MOUTH_REACH = (0.7, 1.1)  # mouth widths from its centre: the lips' own detail left out, fading out
+SHOWN = (0.04, 0.1)  # mouth widths of parting or corner raise: from no expression to a plain one
 REFINE = 2  # Gauss-Newton steps on the real rig after the linear fit
 STEP = 20.0  # FAPU, the finite-difference step of the rig's response
 
@@ -59,11 +60,31 @@ def neutralise(face: Face, points, targets: np.ndarray, roles: dict[str, int]) -
     with its motion removed) for landmarks at ``points`` (``photoface.MeshPoints``) on ``face``,
     the default face; ``roles`` name the rows of the inner lip feature points."""
     runtime = _runtime(face)
-    values = fit_expression(runtime, points, targets, roles)
     rest = points.on(runtime.pose(np.zeros(N_FAPS)))
-    own = targets - points.on(runtime.pose(values))  # the performer's own shape, landmark by landmark
-    mouth = _mouth_weight(face, rest)
+    shown = expression_shown(face, rest, targets, roles)
+    if shown == 0.0:
+        return np.zeros(N_FAPS), targets
+    values = shown * fit_expression(runtime, points, targets, roles)
+    own = targets - points.on(runtime.pose(values))  # the performer's own shape: offsets from the default
+    mouth = shown * _mouth_weight(face, rest)
     return values, rest + (1.0 - mouth[:, None]) * own + mouth[:, None] * _scaled(rest, own, mouth)
+
+
+def expression_shown(face: Face, rest: np.ndarray, targets: np.ndarray, roles: dict[str, int]) -> float:
+    """How plainly the landmarks show an expression of the mouth, 0 to 1: the lips parted more
+    than the default face's at rest, or the corners raised or lowered from the lips' middle
+    more than its, each measured in mouth widths and ramped over ``SHOWN``. Without the inner
+    lip points (the ``fdp11`` layout) nothing can be told: 0."""
+    if not all(k in roles for k in ("2.2", "2.3", "2.4", "2.5")):
+        return 0.0
+
+    def mouth(p: np.ndarray) -> np.ndarray:
+        upper, lower, left, right = (p[roles[k]] for k in ("2.2", "2.3", "2.4", "2.5"))
+        width = np.linalg.norm(left - right)
+        return np.array([upper[1] - lower[1], (left[1] + right[1] - upper[1] - lower[1]) / 2]) / width
+
+    parted, raised = np.abs(mouth(targets) - mouth(rest))
+    return float(np.clip((max(parted, raised) - SHOWN[0]) / (SHOWN[1] - SHOWN[0]), 0.0, 1.0))
 
 
 def _scaled(rest: np.ndarray, own: np.ndarray, weight: np.ndarray) -> np.ndarray:

@@ -28,6 +28,7 @@ import trimesh
 from scipy.spatial import cKDTree
 
 from puppet.face import Face, load_face
+from puppet.normals import VertexNormals
 from puppet.photoface import MEDIAPIPE_FDP, _topology_hash
 from puppet.photolandmarks import detect_landmarks
 from puppet.phototexture import _inside_distance
@@ -91,43 +92,50 @@ def cast(origin: np.ndarray, directions: np.ndarray, triangles: np.ndarray) -> t
     return hits, which
 
 
-def detected_on_face(face: Face, tris: np.ndarray, work: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per landmark, the facing-weighted mean of its cast hits over ``VIEWS`` (468, 3) (the
-    front view's hit alone for the face outline, a silhouette that moves as the head turns),
-    the weight each got (468,), and the front view's detected pixels with the face's vertices
+def detected_on_surface(renderer: Renderer, vertices: np.ndarray, tris: np.ndarray, framed: np.ndarray,
+                        margin: float, work: Path) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray]]:
+    """Where MediaPipe finds its landmarks on a surface (the triangles ``tris`` of a mesh drawn
+    by ``renderer`` at ``vertices``), seen from ``VIEWS`` about the front view framing
+    ``framed``: per landmark, the facing-weighted mean of its cast hits (468, 3) (the front
+    view's hit alone for the face outline, a silhouette that moves as the head turns), the
+    weight each got (468,), and the front view's detected pixels with the mesh's vertices
     projected in it: ((468, 2), (N, 2))."""
     total, weight = np.zeros((468, 3)), np.zeros(468)
-    corners = face.vertices[tris]
+    corners = vertices[tris]
     normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
-    with Renderer.for_face(face, width=SIZE, height=SIZE) as renderer:
-        front = renderer.frame(face.vertices[face.parts["skin"]], view="front", margin=1.3)
-        distance = np.linalg.norm(front.eye - front.target)
-        for yaw, pitch in VIEWS:
-            y, p = np.radians(yaw), np.radians(pitch)
-            direction = np.array([np.sin(y) * np.cos(p), np.sin(p), np.cos(y) * np.cos(p)])
-            camera = renderer.look_at(front.target + distance * direction, front.target, fov=front.fov)
-            path = work / f"view_{yaw}_{pitch}.png"
-            save_png(renderer.render(face.vertices), path)
-            pixels = np.array(detect_landmarks(path)["points"])[:468, :2]
-            if (yaw, pitch) == (0, 0):
-                front_pixels, projected = pixels, renderer.project(face.vertices)
-            right, up, back = camera.basis()
-            tan = np.tan(np.radians(camera.fov) / 2)
-            x, yy = (2 * pixels[:, 0] / SIZE - 1) * tan, (1 - 2 * pixels[:, 1] / SIZE) * tan
-            rays = -back + x[:, None] * right + yy[:, None] * up
-            rays /= np.linalg.norm(rays, axis=1, keepdims=True)
-            hits, which = cast(camera.eye, rays, corners)
-            w = np.where(which >= 0, np.clip(-(normals[which] * rays).sum(axis=1), 0.0, 1.0) ** 2, 0.0)
-            if (yaw, pitch) != (0, 0):
-                w[OVAL] = 0.0
-            else:  # an outline point just off the silhouette: the front half's vertex shown nearest it
-                front_half = np.unique(tris)[face.vertices[np.unique(tris), 2] > face.pivots["head"][2]]
-                for m in np.flatnonzero(which < 0):
-                    hits[m] = face.vertices[front_half[np.argmin(np.linalg.norm(projected[front_half] - pixels[m], axis=1))]]
-                    w[m] = 1.0
-            total += w[:, None] * hits
-            weight += w
+    used = np.unique(tris)
+    front = renderer.frame(framed, view="front", margin=margin)
+    toward = front.eye - vertices[used]
+    facing = (VertexNormals(tris, len(vertices))(vertices)[used] * toward).sum(axis=1) / np.linalg.norm(toward, axis=1)
+    rim = used[facing > -0.2]  # facing the front camera or side-on: the silhouette is among them
+    distance = np.linalg.norm(front.eye - front.target)
+    size = renderer.size
+    for yaw, pitch in VIEWS:
+        y, p = np.radians(yaw), np.radians(pitch)
+        direction = np.array([np.sin(y) * np.cos(p), np.sin(p), np.cos(y) * np.cos(p)])
+        camera = renderer.look_at(front.target + distance * direction, front.target, fov=front.fov)
+        path = work / f"view_{yaw}_{pitch}.png"
+        save_png(renderer.render(vertices), path)
+        pixels = np.array(detect_landmarks(path)["points"])[:468, :2]
+        if (yaw, pitch) == (0, 0):
+            front_pixels, projected = pixels, renderer.project(vertices)
+        right, up, back = camera.basis()
+        tan = np.tan(np.radians(camera.fov) / 2)
+        x, yy = (2 * pixels[:, 0] / size[0] - 1) * tan * size[0] / size[1], (1 - 2 * pixels[:, 1] / size[1]) * tan
+        rays = -back + x[:, None] * right + yy[:, None] * up
+        rays /= np.linalg.norm(rays, axis=1, keepdims=True)
+        hits, which = cast(camera.eye, rays, corners)
+        w = np.where(which >= 0, np.clip(-(normals[which] * rays).sum(axis=1), 0.0, 1.0) ** 2, 0.0)
+        if (yaw, pitch) != (0, 0):
+            w[OVAL] = 0.0
+        else:  # a point just off the silhouette or in a hole: the rim's vertex shown nearest it
+            for m in np.flatnonzero(which < 0):
+                hits[m] = vertices[rim[np.argmin(np.linalg.norm(projected[rim] - pixels[m], axis=1))]]
+                w[m] = 1.0
+        total += w[:, None] * hits
+        weight += w
+    renderer.frame(framed, view="front", margin=margin)
     return total / np.maximum(weight, 1e-12)[:, None], weight, (front_pixels, projected)
 
 
@@ -178,8 +186,9 @@ def on_contour(face: Face, contour: str, chain: list[int], front: tuple[np.ndarr
 def main() -> int:
     face = load_face()
     tris = outer_skin(face)
-    with tempfile.TemporaryDirectory() as work:
-        found, weight, front = detected_on_face(face, tris, Path(work))
+    with tempfile.TemporaryDirectory() as work, Renderer.for_face(face, width=SIZE, height=SIZE) as renderer:
+        found, weight, front = detected_on_surface(renderer, face.vertices, tris, face.vertices[face.parts["skin"]],
+                                                   1.3, Path(work))
     if (weight == 0).any():
         print(f"landmarks never found on the face: {np.flatnonzero(weight == 0).tolist()}")
         return 1
