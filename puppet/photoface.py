@@ -433,11 +433,14 @@ def fit_photo(face: Face, landmarks: Landmarks, size: tuple[int, int], *, focal:
     flat = similarity_2d(model[:, :2], pixels * [1.0, -1.0])
     eyes = np.linalg.norm(model[roles["3.7"], :2] - model[roles["3.12"], :2])
     residual = float(np.sqrt(((flat.inverse(pixels) - model[:, :2]) ** 2).sum(axis=1).mean()) / eyes)
+    misfit = PhotoFaceError(f"the landmarks do not fit a face in layout {landmarks.layout} (residual "
+                            f"{residual:.2f} eye-widths after a similarity, at most {MAX_RESIDUAL}): "
+                            f"wrong order, mirrored, or another layout")
+    if residual > 2 * MAX_RESIDUAL:
+        raise misfit
+    frontal = check_frontal(flat.inverse(pixels), model, roles)  # a turned head misfits too: say so first
     if residual > MAX_RESIDUAL:
-        raise PhotoFaceError(f"the landmarks do not fit a face in layout {landmarks.layout} (residual "
-                             f"{residual:.2f} eye-widths after a similarity, at most {MAX_RESIDUAL}): "
-                             f"wrong order, mirrored, or another layout")
-    frontal = check_frontal(flat.inverse(pixels), model, roles)
+        raise misfit
     width = float(np.ptp(face.vertices[face.contours["face_oval"], 0]))
     camera = PhotoCamera(focal or DISTANCE * width * flat.scale, np.asarray(size, float) / 2)
     depth = None if landmarks.depth is None else -landmarks.depth[rows]
