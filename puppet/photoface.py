@@ -138,11 +138,15 @@ class Similarity:
 def read_landmarks(path: str | os.PathLike) -> Landmarks:
     """A landmark JSON file: ``{"layout", "points"}``, a plain list (68: iBUG, 468/478:
     MediaPipe, 11: fdp11) or a dict FDP id -> [x, y]. Errors name the file."""
+    return parse_landmarks(read_landmarks_json(path), str(path))
+
+
+def read_landmarks_json(path: str | os.PathLike):
+    """The parsed JSON of a landmark file (``read_landmarks``), unchecked; errors name the file."""
     try:
-        data = json.loads(Path(path).read_text("utf-8"))
+        return json.loads(Path(path).read_text("utf-8"))
     except (OSError, json.JSONDecodeError) as exc:
         raise PhotoFaceError(f"{path}: cannot read landmarks: {exc}") from None
-    return parse_landmarks(data, str(path))
 
 
 def parse_landmarks(data, source: str = "<landmarks>") -> Landmarks:

@@ -304,3 +304,33 @@ def test_a_turned_head_photo_is_refused():
         pixels = renderer.project(pf.mediapipe_points(face).on(face.vertices))
     with pytest.raises(pf.PhotoFaceError, match="not a frontal face: the nose tip is .* the head is turned"):
         pf.fit_photo(face, pf.parse_landmarks(pixels.tolist()), (SIZE, SIZE))
+
+
+def test_the_picker_zooms_and_pans_and_moves_detected_mediapipe_points(shot, tmp_path):
+    """The MediaPipe layout starts from detected points (here the default face's own, with a
+    depth) and saves them moved, each keeping its depth; the page zooms and pans."""
+    from puppet.render import save_png
+
+    photo, project = shot
+    face = load_face()
+    save_png(photo, tmp_path / "photo.png")
+    start = np.c_[project(pf.mediapipe_points(face).on(face.vertices)), np.linspace(-20.0, 20.0, 468)]
+    with pytest.raises(pf.PhotoFaceError, match="moves detected points"):
+        PickerServer(tmp_path / "photo.png", "mediapipe468", tmp_path / "points.json")
+    picker = PickerServer(tmp_path / "photo.png", "mediapipe468", tmp_path / "points.json",
+                          start={"layout": "mediapipe468", "points": start.tolist()})
+    try:
+        page = urllib.request.urlopen(picker.url, timeout=5).read().decode()
+        assert "addEventListener('wheel'" in page and "zoom(" in page and "pointermove" in page
+        served = json.loads(urllib.request.urlopen(picker.url + "start", timeout=5).read())
+        assert np.allclose(served["points"], start)
+        moved = start[:, :2].copy()
+        moved[1] += (3.0, -2.0)  # the nose tip nudged
+        request = urllib.request.Request(picker.url + "points", data=json.dumps({"points": moved.tolist()}).encode(),
+                                         headers={"Content-Type": "application/json"}, method="POST")
+        assert urllib.request.urlopen(request, timeout=5).status == 200
+    finally:
+        saved = picker.wait(timeout=5)
+    landmarks = pf.read_landmarks(saved)
+    assert landmarks.layout == "mediapipe468" and np.allclose(landmarks.points, moved)
+    assert np.allclose(landmarks.depth, start[:, 2])
