@@ -55,7 +55,7 @@ from .errors import PuppetError
 from .face import Face, load_face
 from .facefolder import TexturedFace
 from .faptable import N_FAPS, fap
-from .photodepth import DEPTH_TRUST, DISTANCE, PhotoCamera, Similarity3, Warp3, fit_warp, similarity_3d
+from .photodepth import DEPTH_TRUST, DISTANCE, PhotoCamera, focal_from_exif, Similarity3, Warp3, fit_warp, similarity_3d
 from .photoneutral import neutralise
 from .phototexture import texture_face
 
@@ -535,7 +535,8 @@ def build_face_folder(photo_path: str | os.PathLike, landmarks_path: str | os.Pa
                       out: str | os.PathLike) -> Path:
     """``puppet face-from-photo``: fit, texture, write ``out`` (``puppet.facefolder``) and rig the
     written face (rigged from what was written, so the rig matches the face as loaded). With no
-    ``landmarks_path`` the landmarks are detected (``puppet.photolandmarks``)."""
+    ``landmarks_path`` the landmarks are detected (``puppet.photolandmarks``); the camera's focal
+    length comes from the photo's EXIF where it says it (``photodepth.focal_from_exif``)."""
     from .photolandmarks import detect_landmarks
     from .autorig import build_rig
     from .facefolder import FACE_RIG, load_face_folder, write_face_folder
@@ -546,7 +547,7 @@ def build_face_folder(photo_path: str | os.PathLike, landmarks_path: str | os.Pa
         landmarks = parse_landmarks(detect_landmarks(photo_path), f"{photo_path} (detected landmarks)")
     else:
         landmarks = read_landmarks(landmarks_path)
-    face, report = face_from_photo(photo, landmarks, Path(photo_path).stem)
+    face, report = face_from_photo(photo, landmarks, Path(photo_path).stem, focal=focal_from_exif(photo_path))
     folder = write_face_folder(face, out, source_photo=str(photo_path), report=report)
     save_rig(build_rig(load_face_folder(folder)), folder / FACE_RIG)
     return folder

@@ -334,3 +334,19 @@ def test_the_picker_zooms_and_pans_and_moves_detected_mediapipe_points(shot, tmp
     landmarks = pf.read_landmarks(saved)
     assert landmarks.layout == "mediapipe468" and np.allclose(landmarks.points, moved)
     assert np.allclose(landmarks.depth, start[:, 2])
+
+
+def test_the_focal_length_comes_from_exif_only_for_the_photo_as_taken(tmp_path):
+    """A 35 mm-equivalent 50 mm lens on a 600 x 400 photo: 50 / 43.27 of its diagonal in pixels;
+    once the photo is resized (its EXIF still says 600 x 400) the portrait default is used."""
+    from PIL import Image
+
+    from puppet.photodepth import focal_from_exif
+
+    exif = Image.Exif()
+    exif.get_ifd(0x8769).update({0xA405: 50, 0xA002: 600, 0xA003: 400})
+    Image.new("RGB", (600, 400)).save(tmp_path / "taken.jpg", exif=exif)
+    Image.new("RGB", (300, 200)).save(tmp_path / "resized.jpg", exif=exif)
+    Image.new("RGB", (600, 400)).save(tmp_path / "plain.png")
+    assert focal_from_exif(tmp_path / "taken.jpg") == pytest.approx(50 * np.hypot(600, 400) / 43.27)
+    assert focal_from_exif(tmp_path / "resized.jpg") is None and focal_from_exif(tmp_path / "plain.png") is None
