@@ -484,17 +484,21 @@ def _lift(camera: PhotoCamera, pixels: np.ndarray, depth: np.ndarray | None, mod
 
 def warp_face(face: Face, warp: Warp3) -> Face:
     """``face`` moved by ``warp``: skin by the warp, eyeballs, teeth and tongue rigidly (each
-    eyeball about its centre with the warp's local mean scale, so it stays round; teeth and
-    tongue together by the warp's local linear map at their centroid); feature points and
-    pivots follow. Vertex order, triangles, parts and contours are kept."""
+    eyeball round, set behind its lid opening as on the default face and scaled with the
+    opening's width, so a depth the lids and the eye's centre disagree on never pushes it
+    through the lids; teeth and tongue together by the warp's local linear map at their
+    centroid); feature points and pivots follow. Vertex order, triangles, parts and contours
+    are kept."""
     v = warp(face.vertices)
     points = {k: warp(p[None])[0] for k, p in face.feature_points.items()}
     pivots = {k: (p if k == "jaw_axis" else warp(p[None])[0]) for k, p in face.pivots.items()}
-    for eye, pupil in (("eye_l", "3.5"), ("eye_r", "3.6")):
-        centre, new_centre = face.pivots[eye], pivots[eye]
-        scale = np.cbrt(abs(np.linalg.det(warp.jacobian(centre))))
-        v[face.parts[eye]] = new_centre + scale * (face.vertices[face.parts[eye]] - centre)
-        points[pupil] = new_centre + scale * (face.feature_points[pupil] - centre)
+    for eye, pupil, lids in (("eye_l", "3.5", "left_lid_opening"), ("eye_r", "3.6", "right_lid_opening")):
+        ring, new_ring = face.vertices[face.contours[lids]], v[face.contours[lids]]
+        scale = np.ptp(new_ring[:, 0]) / np.ptp(ring[:, 0])
+        centre = face.pivots[eye]
+        pivots[eye] = new_ring.mean(axis=0) + scale * (centre - ring.mean(axis=0))
+        v[face.parts[eye]] = pivots[eye] + scale * (face.vertices[face.parts[eye]] - centre)
+        points[pupil] = pivots[eye] + scale * (face.feature_points[pupil] - centre)
     mouth = np.concatenate([face.parts[p] for p in ("teeth_upper", "teeth_lower", "tongue") if p in face.parts])
     centre = face.vertices[mouth].mean(axis=0)
     v[mouth] = warp(centre[None])[0] + (face.vertices[mouth] - centre) @ warp.jacobian(centre).T
