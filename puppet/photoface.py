@@ -55,7 +55,16 @@ from .errors import PuppetError
 from .face import Face, load_face
 from .facefolder import TexturedFace
 from .faptable import N_FAPS, fap
-from .photodepth import DEPTH_TRUST, DISTANCE, PhotoCamera, focal_from_exif, Similarity3, Warp3, fit_warp, similarity_3d
+from .photodepth import (
+    DEPTH_TRUST,
+    DISTANCE,
+    PhotoCamera,
+    Similarity3,
+    Warp3,
+    fit_warp,
+    focal_from_exif,
+    similarity_3d,
+)
 from .photoneutral import neutralise
 from .phototexture import texture_face
 
@@ -434,17 +443,7 @@ def fit_photo(face: Face, landmarks: Landmarks, size: tuple[int, int], *, focal:
     check_inside(landmarks, size)
     pixels, points, roles, rows = model_points(face, landmarks)
     model = points.on(face.vertices)
-    flat = similarity_2d(model[:, :2], pixels * [1.0, -1.0])
-    eyes = np.linalg.norm(model[roles["3.7"], :2] - model[roles["3.12"], :2])
-    residual = float(np.sqrt(((flat.inverse(pixels) - model[:, :2]) ** 2).sum(axis=1).mean()) / eyes)
-    misfit = PhotoFaceError(f"the landmarks do not fit a face in layout {landmarks.layout} (residual "
-                            f"{residual:.2f} eye-widths after a similarity, at most {MAX_RESIDUAL}): "
-                            f"wrong order, mirrored, or another layout")
-    if residual > 2 * MAX_RESIDUAL:
-        raise misfit
-    frontal = check_frontal(flat.inverse(pixels), model, roles)  # a turned head misfits too: say so first
-    if residual > MAX_RESIDUAL:
-        raise misfit
+    flat, residual, frontal = _checked(landmarks.layout, pixels, model, roles)
     width = float(np.ptp(face.vertices[face.contours["face_oval"], 0]))
     camera = PhotoCamera(focal or DISTANCE * width * flat.scale, np.asarray(size, float) / 2)
     depth = None if landmarks.depth is None else -landmarks.depth[rows]
@@ -465,6 +464,25 @@ def fit_photo(face: Face, landmarks: Landmarks, size: tuple[int, int], *, focal:
     trust = 0.0 if depth is None else depth_trust
     return PhotoFit(camera, similarity, fit_warp(face, model, targets, trust), fit_warp(face, model, relaxed, trust),
                     faps, report)
+
+
+def _checked(layout: str, pixels: np.ndarray, model: np.ndarray,
+             roles: dict[str, int]) -> tuple[Similarity, float, dict[str, float]]:
+    """(the 2D similarity of the model points onto the landmarks, its residual in eye widths,
+    the frontal measures), or a ``PhotoFaceError``: landmarks in the wrong order or layout (a
+    large residual), or a face that is not frontal (which also misfits a little: said first)."""
+    flat = similarity_2d(model[:, :2], pixels * [1.0, -1.0])
+    eyes = np.linalg.norm(model[roles["3.7"], :2] - model[roles["3.12"], :2])
+    residual = float(np.sqrt(((flat.inverse(pixels) - model[:, :2]) ** 2).sum(axis=1).mean()) / eyes)
+    misfit = PhotoFaceError(f"the landmarks do not fit a face in layout {layout} (residual {residual:.2f} "
+                            f"eye-widths after a similarity, at most {MAX_RESIDUAL}): wrong order, mirrored, "
+                            "or another layout")
+    if residual > 2 * MAX_RESIDUAL:
+        raise misfit
+    frontal = check_frontal(flat.inverse(pixels), model, roles)
+    if residual > MAX_RESIDUAL:
+        raise misfit
+    return flat, residual, frontal
 
 
 def _lift(camera: PhotoCamera, pixels: np.ndarray, depth: np.ndarray | None, model: np.ndarray,
@@ -541,9 +559,9 @@ def build_face_folder(photo_path: str | os.PathLike, landmarks_path: str | os.Pa
     written face (rigged from what was written, so the rig matches the face as loaded). With no
     ``landmarks_path`` the landmarks are detected (``puppet.photolandmarks``); the camera's focal
     length comes from the photo's EXIF where it says it (``photodepth.focal_from_exif``)."""
-    from .photolandmarks import detect_landmarks
     from .autorig import build_rig
     from .facefolder import FACE_RIG, load_face_folder, write_face_folder
+    from .photolandmarks import detect_landmarks
     from .rig import save_rig
 
     photo = read_photo(photo_path)

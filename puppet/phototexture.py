@@ -4,34 +4,36 @@ skin colour everywhere else, with no seam between them.
 Each vertex takes the photo's pixel where the face *as photographed* puts it (``uv``: the face
 posed with the photo's expression and turned as the head was, through the fitted camera), so
 the lips take the photo's lips even when the neutral face has closed the mouth the photo shows
-open. A per-vertex weight says how much of the photo shows over the vertex colour
-(``puppet.render`` mixes the two per pixel); it is the product of
+open. The photo is prepared first (``texture_face``):
 
-* the skin inside the face's outline in the photo, fading out across a band at the outline and
-  as the surface turns away from the camera;
-* away from the eyes, brows, nose and lips, how much the photo looks like skin there
-  (``skin_likeness``): hair on the forehead and the temples fades into the skin colour, so the
-  hairline is the skin's, not the photo's;
-* nothing inside the photo's mouth opening (between the inner lip lines, with a band), on the
-  teeth, tongue and mouth bag: the mouth keeps the face's own materials, and the photo's teeth
-  never land on the lips;
-* the eyeballs inside the lid openings.
+* its baked lighting is evened out (``even_lighting``): the colour of the skin (a mask of the
+  face below the forehead, less eyes, brows, lips, nostrils and what is not skin-coloured),
+  smoothed by a normalised Gaussian, is brought to its median channel by channel, so a shadow
+  beside the nose or a darker, warmer side of the face no longer sits in the texture; that
+  median is the skin colour;
+* what is neither skin nor a feature (hair, clothes, background) is painted with the skin
+  colour, and the mouth opening (teeth, the dark inside) with the lips' colour
+  (``_paint_mouth``): whatever the texture reaches at the face's edge is skin, and at the lips'
+  inner edge lip, never teeth.
 
-Where the weight is 0 the vertex colour shows: the default face's colours toned to the skin
-colour estimated from the photo (the median of the evened face skin). For that to meet the
-photo without a seam, the photo's baked lighting is evened out first (``even_lighting``): the
-skin's brightness smoothed over the face (a normalised Gaussian over a mask of skin: the face
-inside its outline less eyes, brows, lips and whatever is not skin-coloured) divides the photo,
-so a shadow beside the nose or a darker side of the face no longer sits in the texture, and
-the skin at the outline has the estimated colour the sides and back are painted with.
+A per-vertex weight says how much of the photo shows over the vertex colour (``puppet.render``
+mixes the two per pixel; ``photo_weight``): the skin inside the face's outline, fading out across
+a band at the outline, as the surface turns from the camera, above the brows (the hairline is the
+skin's: the head is bald) and at the mouth opening; the eyeballs inside the lid openings; nothing
+on the teeth, tongue and mouth (they keep the face's own materials).
+
+The vertex colours (``_skin_colors``) take the photo's colour (blurred) wherever the photo shows
+at all, so the two agree where it fades out, and carry it smoothly (harmonic on the mesh) round
+the sides, back and neck to the skin colour on the back of the head; the default face's lips,
+brows and lash lines keep their difference from its skin.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from PIL import Image, ImageDraw
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
+from PIL import Image, ImageDraw
 from scipy.ndimage import gaussian_filter
 from scipy.spatial import cKDTree
 
@@ -46,7 +48,7 @@ FACING = (0.25, 0.6)  # cosine toward the camera over which the photo fades in
 MOUTH_BAND = 0.025  # fade band outside the photo's mouth opening, fraction of the face's width
 SHADING_SIGMA = 0.1  # the smoothing of the photo's shading, fraction of the face's width
 GAIN_RANGE = (0.7, 1.5)  # how far evening may darken or brighten the photo
-EVEN_PASSES = 2
+EVEN_PASSES = 2  # evening passes (``even_lighting``)
 FOREHEAD_FADE = (0.15, 0.6)  # of the way from the brows to the outline's top: the photo fades out
 SKIN_DISTANCE = 0.09  # chromaticity distance from the cheeks' colour at which skin likeness is 1/e
 SKIN_LIKENESS = 0.2  # the likeness at which a pixel counts as skin
@@ -155,7 +157,7 @@ def _paint_mouth(image: np.ndarray, face: Face, pixels: np.ndarray, width: float
     ring = [tuple(p) for p in pixels[face.contours["mouth_opening"]]]
     draw = ImageDraw.Draw(mouth)
     draw.polygon(ring, fill=255)
-    draw.line(ring + ring[:1], fill=255, width=max(1, int(round(MOUTH_GROW * width))))
+    draw.line(ring + ring[:1], fill=255, width=max(1, round(MOUTH_GROW * width)))
     inside = np.asarray(mouth) > 0
     lip = (np.asarray(lips) > 0) & ~inside
     if lip.any():
@@ -167,7 +169,7 @@ def _feature_mask(face: Face, pixels: np.ndarray, shape: tuple[int, int], width:
     the photo shows them, whatever their colour."""
     image = Image.new("L", (shape[1], shape[0]), 0)
     draw = ImageDraw.Draw(image)
-    grow = max(2, int(round(FEATURE_GROW * width)))
+    grow = max(2, round(FEATURE_GROW * width))
     for loop in ("left_lid_opening", "right_lid_opening", "vermilion_border"):
         ring = [tuple(p) for p in pixels[face.contours[loop]]]
         draw.polygon(ring, fill=255)

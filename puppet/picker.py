@@ -46,8 +46,8 @@ IBUG_PARTS = [(0, 17, "jaw line, from the photo's left ear level down round the 
 LAYOUT_HINTS = {
     "fdp11": [f"{fid}: {FDP11_HINTS[fid]}" for fid in FDP11],
     "ibug68": [f"{i}: {text}" for lo, hi, text in IBUG_PARTS for i in range(lo, hi)],
-    "mediapipe468": ["drag any point that is off the face's feature into place (the larger dots are the "
-                     "MPEG-4 feature points: eye corners and lids, brows, nose, lips, chin)"],
+    "mediapipe468": [("drag any point that is off the face's feature into place (the larger dots are the "
+                      "MPEG-4 feature points: eye corners and lids, brows, nose, lips, chin)")],
 }
 DRAGGED = ("mediapipe468",)  # layouts whose points come detected and are only dragged
 

@@ -5,12 +5,16 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from photoseam import seam
 from PIL import Image
 
 from puppet.face import load_face
-from puppet.photolandmarks import PHOTO_PYTHON, DetectionError, detect_landmarks, photo_python
-
-from photoseam import seam
+from puppet.photolandmarks import (
+    PHOTO_PYTHON,
+    DetectionError,
+    detect_landmarks,
+    photo_python,
+)
 
 needs_detector = pytest.mark.skipif(photo_python() is None,
                                     reason="no photo environment (.venv-photo: tools/setup.sh makes it)")

@@ -28,7 +28,7 @@ Exact depth is trusted fully (``depth_trust=1``); the detector's as the command 
 
 "Doing nothing" is the default face unchanged, measured the same way. Also measured: how well
 MediaPipe's depth matches ICT's at its landmarks, against the default face's (what
-``photodepth.DEPTH_TRUST`` rests on). Writes docs/photo_face.md and docs/photo_face.png.
+``photodepth.DEPTH_TRUST`` rests on), and how a smile is taken out (``neutralised``). Writes docs/photo_face.md and docs/photo_face.png.
 Needs the photo environment for the MediaPipe rows (they are skipped without it).
 Run: PYTHONPATH=. .venv/bin/python tools/photo_check.py
 """
@@ -42,10 +42,10 @@ from pathlib import Path
 
 import numpy as np
 import trimesh
+from build_mediapipe_map import cast, detected_on_surface
 from PIL import Image, ImageDraw
 from scipy.spatial import cKDTree
 
-from build_mediapipe_map import cast, detected_on_surface
 from puppet import photoface as pf
 from puppet.face import Face, load_face
 from puppet.normals import VertexNormals
@@ -162,6 +162,38 @@ def depth_accuracy(ict: Ict, base: Face, on_ict: np.ndarray, detected: np.ndarra
     return out
 
 
+def neutralised(base: Face) -> str:
+    """The default face smiling with its jaw open (FAP 2 joy, open_jaw 250), rendered frontally
+    with a long lens, its MediaPipe points projected with their exact depth, built again: the
+    lips' gap and the corners' rise above the lips' middle (/ face width), at rest, in the photo
+    and built; the expression measured; the built skin's mean distance to the default's."""
+    from puppet.runtime import Runtime
+
+    posed = Runtime(base).pose({"open_jaw": 250}, expression=(1, 63, 0, 0))
+    with Renderer.for_face(base, width=512, height=512) as renderer:
+        camera = renderer.frame(base.vertices, view="front", fov=8.0)
+        points = pf.mediapipe_points(base).on(posed)
+        distance = (points - camera.eye) @ -camera.basis()[2]
+        focal = 256 / np.tan(np.radians(camera.fov) / 2)
+        depth = (distance - distance.mean()) * focal / distance.mean()
+        landmarks = pf.parse_landmarks(np.c_[renderer.project(points), depth].tolist())
+        built, report = pf.face_from_photo(renderer.render(posed), landmarks)
+    width = float(np.ptp(base.vertices[base.contours["face_oval"], 0]))
+    fv = base.feature_vertices
+
+    def mouth(v: np.ndarray) -> str:
+        upper, lower, left, right = (v[fv[k], 1] for k in ("2.2", "2.3", "2.4", "2.5"))
+        return f"gap {100 * (upper - lower) / width:.2f}%, corners {100 * ((left + right) - (upper + lower)) / 2 / width:+.2f}%"
+
+    skin = base.parts["skin"]
+    error = np.linalg.norm(similarity_3d(built.vertices[skin], base.vertices[skin]).apply(built.vertices[skin])
+                           - base.vertices[skin], axis=1).mean() / width
+    faps = ", ".join(f"{k} {v:.0f}" for k, v in report["expression_faps"].items() if abs(v) >= 50)
+    return (f"Smiling default face (joy, open_jaw 250) built again: at rest {mouth(base.vertices)}; in the photo "
+            f"{mouth(posed)}; built {mouth(built.vertices)}; skin {100 * error:.2f}% from the default's (aligned); "
+            f"measured {faps}.")
+
+
 def main() -> int:
     if not (ICT / "generic_neutral_mesh.obj").is_file():
         print(f"ICT face not found under {ICT}: skipped")
@@ -175,7 +207,6 @@ def main() -> int:
     builds = {"iBUG-68 exact 2D": (exact_ibug[:, :2], {}),
               "iBUG-68 exact 3D": (exact_ibug, {"depth_trust": 1.0})}
     depth = None
-    detected_face = None
     if photo_python() is not None:
         on_ict = ict.mediapipe_points()
         builds["MediaPipe exact 3D"] = (ict.exact(on_ict), {"depth_trust": 1.0})
@@ -196,10 +227,12 @@ def main() -> int:
     print(table)
     if depth:
         print("depth RMS at MediaPipe's landmarks: " + ", ".join(f"{k} {100 * v:.2f}%" for k, v in depth.items()))
+    smile = neutralised(base)
+    print(smile)
     last = list(fits)[-1]
     docs = ROOT / "docs"
     save_png(figure(ict.photo, builds[last][0], base, fits[last]), docs / "photo_face.png")
-    (docs / "photo_face.md").write_text(_report(table, depth, last, fits[last].report), encoding="utf-8")
+    (docs / "photo_face.md").write_text(_report(table, depth, smile, last, fits[last].report), encoding="utf-8")
     ict.renderer.release()
     return 0
 
@@ -233,7 +266,7 @@ def _table(rows: dict[str, dict[str, float]]) -> str:
     return head + body
 
 
-def _report(table: str, depth: dict | None, last: str, report: dict) -> str:
+def _report(table: str, depth: dict | None, smile: str, last: str, report: dict) -> str:
     frontal = ", ".join(f"{k} {v:.3f}" for k, v in report["frontal"].items())
     depth_line = ("MediaPipe's depth against ICT's at its own landmarks (RMS after a similarity, / face width): "
                   + ", ".join(f"{k} {100 * v:.2f}%" for k, v in depth.items()) + ".") if depth else \
@@ -261,6 +294,8 @@ of the two surfaces, which leaves out how the landmark conventions differ.
 
 {table}
 {depth_line}
+
+The expression taken out (`neutralised`): {smile}
 
 Fit of the last row ({last}): similarity residual {report['similarity_residual']:.3f} eye widths;
 frontal measures: {frontal}; head turned {', '.join(f"{k} {v:+.1f}" for k, v in report['head_degrees'].items())}
