@@ -445,8 +445,8 @@ def _pick_landmarks(args: argparse.Namespace) -> int:
 
     start = None
     if args.layout == "mediapipe468":
-        from .photolandmarks import detect_landmarks
         from .photoface import read_landmarks_json
+        from .photolandmarks import detect_landmarks
 
         start = read_landmarks_json(args.start) if args.start else detect_landmarks(args.photo)
     picker = PickerServer(args.photo, args.layout, writable(args.output, "landmark file"), port=args.port, start=start)

@@ -19,7 +19,10 @@ makes is read as expression. Priors settle what one photo leaves open:
 * both sides move alike (``SYMMETRY_WEIGHT``).
 
 Only the mouth and jaw FAPs are measured (``EXPRESSION_FAPS``): brows, lids and cheeks vary too
-much from face to face to tell from one photo whether they moved.
+much from face to face to tell from one photo whether they moved. And only as much as the mouth
+plainly shows an expression (``expression_shown``: lips parted or corners raised beyond the
+default face's at rest): a closed-mouth photo is left as it is, since its lips' shape is the
+performer's own.
 
 ``neutralise`` then takes the measured motion out of the landmarks. Around the mouth
 (``MOUTH_REACH``) what neither the FAPs nor a smooth face explain (a stretched, thinned smiling
