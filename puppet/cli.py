@@ -253,7 +253,9 @@ def _face_from_photo_arguments(from_photo: argparse.ArgumentParser) -> None:
 
 def _pick_landmarks_arguments(pick: argparse.ArgumentParser) -> None:
     pick.add_argument("photo", help="the photo")
-    pick.add_argument("--layout", choices=("fdp11", "ibug68"), default="fdp11", help="points to click (default fdp11)")
+    pick.add_argument("--layout", choices=("fdp11", "ibug68", "mediapipe468"), default="fdp11",
+                      help="points to click (fdp11, the default; ibug68) or to drag into place (mediapipe468)")
+    pick.add_argument("--start", help="mediapipe468: landmark JSON to start from (default: detected, the photo set-up)")
     pick.add_argument("-o", "--output", required=True, help="the landmark JSON to write")
     pick.add_argument("--port", type=_port, default=0, help="port 1-65535 (default: a free one)")
     pick.add_argument("--no-browser", action="store_true", help="print the address only")
@@ -461,8 +463,14 @@ def _pick_landmarks(args: argparse.Namespace) -> int:
     from puppet.io.outputs import writable
     from puppet.view.picker import PickerServer
 
-    picker = PickerServer(args.photo, args.layout, writable(args.output, "landmark file"), port=args.port)
-    print(f"click the points at {picker.url} (Ctrl-C to give up)")
+    start = None
+    if args.layout == "mediapipe468":
+        from puppet.photo.build import read_landmarks_json
+        from puppet.photo.detect import detect_landmarks
+
+        start = read_landmarks_json(args.start) if args.start else detect_landmarks(args.photo)
+    picker = PickerServer(args.photo, args.layout, writable(args.output, "landmark file"), port=args.port, start=start)
+    print(f"{'drag' if start else 'click'} the points at {picker.url} (Ctrl-C to give up)")
     if not args.no_browser:
         webbrowser.open(picker.url)
     try:

@@ -1,66 +1,73 @@
-"""A performer's own face from one frontal photo: the default face warped to the photo's
-landmarks, textured by the photo, ready for the auto-rig.
+"""A performer's own face from one frontal photo: the default face shaped to the photo's
+landmarks in 3D, its expression taken out, textured by the photo all the way round, ready for
+the auto-rig.
 
 Zhou & Liu build the specific face from one frontal photo and 11 feature points; here the
 generic (default) face is deformed instead of a PCA model, which keeps its vertex order, parts,
 contours and feature points, so ``puppet.face.autorig.build_rig`` rigs the result like the default.
 
-Landmarks (2D image points, pixels, x right, y down) come in three layouts, as files any detector
-writes (``read_landmarks``):
+Landmarks (image points, pixels, x right, y down; a third column is depth as MediaPipe gives
+it: pixel scale, smaller is nearer) come in three layouts, as files any detector writes
+(``read_landmarks``), or found in the photo (``puppet.photo.detect``, MediaPipe):
 
 * ``fdp``: a dict of MPEG-4 FDP id -> [x, y]; at least the 11 of ``FDP11`` (eye corners, nose
   tip and base, mouth corners, chin, face sides at the jaw angles); every other FDP of the
   default face given is used too. ``{"layout": "fdp11", "points": [[x, y] * 11]}`` is the same in
   ``FDP11`` order (the picker writes that).
 * ``ibug68``: the 68-point iBUG/300-W layout (dlib, face-alignment, ...), 0-based.
-* ``mediapipe468``: MediaPipe Face Mesh, 468 or 478 points (478: with the irises).
+* ``mediapipe468``: MediaPipe Face Mesh, 468 or 478 points (478: with the irises, not used).
 
-Each landmark has a 3D counterpart on the default face (``model_points``): its FDP, or for iBUG
-points without one a point by a stated rule (``_ibug_points``); MediaPipe uses the FDPs of
-``MEDIAPIPE_FDP`` (the high and medium confidence rows of the CC0 table in
-``shared/assets/mediapipe_face``, with the common nose tip 1 for 9.3) and the face sides 234/454.
+Each landmark is a point on the default face (``model_points``, ``MeshPoints``): its FDP's
+vertex; for iBUG points without one a point by a stated rule (``ibug_points``); for MediaPipe
+where MediaPipe itself finds the landmark on the default face (``data/mediapipe_map.json``,
+``tools/build_mediapipe_map.py``).
 
-The fit (``fit_photo``), in orthographic frontal projection (a portrait lens is nearly that):
+The fit (``fit_photo``):
 
-1. a similarity (scale, in-plane rotation, translation; least squares) from the model points'
-   x, y to the image points (y flipped, since +y is up on the face); its inverse brings the
-   landmarks into the face frame, so the new face keeps the default's units and size;
-2. a thin-plate spline warp of x, y (``scipy.interpolate.RBFInterpolator``, a little smoothing
-   against detector noise) taking the model points onto the landmarks, with anchors on the
-   skull's outline and the neck held where the similarity puts them; behind the ears the warp
-   fades to its affine part, so the back of the head (which projects onto the face) is not
-   given the face's local detail;
-3. depth scaled by the warp's mean scale (sqrt of its affine part's determinant): a plausible
-   depth, since one photo does not show it;
-4. rigid parts move rigidly: each eyeball about its centre with the warp's local mean scale (it
-   stays round), teeth and tongue together by the warp's local affine map at their centroid.
+1. checks: landmarks inside the image; a 2D similarity's residual (wrong order or layout); a
+   frontal face (``check_frontal``: the nose tip off the eyes' mid-line, face halves of unequal
+   width, the nose too high or low between eyes and chin are refused);
+2. a pin-hole camera (``puppet.photo.depth``): each landmark is lifted into 3D at its depth (the
+   detector's; else the default face's), which undoes the lens's perspective; a 3D similarity
+   gives the head's pose and brings the landmarks into the face frame;
+3. the photo's expression is measured with the rig and taken out (``puppet.photo.neutral``);
+4. two smooth 3D warps of the default face: onto the landmarks as photographed (the texture is
+   read through it) and onto the landmarks with the expression out (the new face). Rigid parts
+   move rigidly (``warp_face``).
 
-Non-frontal layouts are refused (``check_frontal``): the nose tip off the eyes' mid-line, the
-two face halves of unequal width, or the nose placed too high or low between eyes and chin.
-
-Texture: each vertex is projected into the photo by the fitted similarity (its ``uv``). A
-per-vertex texture weight says how much of the photo to show: 1 on the skin inside the face oval
-facing the camera and on the eyeballs inside the lid openings, fading to 0 across a band at the
-oval and as the surface turns away; elsewhere (under the chin, the sides, the back, the teeth)
-the vertex colour shows: the default face's colours toned to the median colour of the photo's
-cheeks (the fall-back skin tone). ``puppet.view.renderer`` mixes the two per pixel.
+The texture (``puppet.photo.texture``): the photo where it shows the face, the performer's skin
+colour estimated from it over the sides, back and neck, no seam between them.
 """
 
 from __future__ import annotations
 
+import functools
+import hashlib
+import importlib.resources
 import json
 import os
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from scipy.interpolate import RBFInterpolator
 
 from puppet.errors import PuppetError
 from puppet.face.folder import TexturedFace
 from puppet.face.load import load_face
 from puppet.face.model import Face
-from puppet.runtime.normals import VertexNormals
+from puppet.fap.table import N_FAPS, fap
+from puppet.photo.depth import (
+    DEPTH_TRUST,
+    DISTANCE,
+    PhotoCamera,
+    Similarity3,
+    Warp3,
+    fit_warp,
+    focal_from_exif,
+    similarity_3d,
+)
+from puppet.photo.neutral import neutralise
+from puppet.photo.texture import texture_face
 
 FDP11 = ("3.12", "3.8", "3.11", "3.7", "9.3", "9.15", "8.4", "8.3", "2.1", "2.14", "2.13")
 """The 11 required points, in the order of the ``fdp11`` list form and of the picker."""
@@ -96,18 +103,11 @@ MEDIAPIPE_FDP = {
     358: "9.1", 129: "9.2", 1: "9.3", 2: "9.15",
 }
 """MediaPipe landmark -> FDP: the high/medium rows of the shared CC0 table, nose tip 1."""
-MEDIAPIPE_IRIS_FDP = {473: "3.5", 468: "3.6"}  # iris centres, only in the 478-point form
-MEDIAPIPE_SIDES = {234: "side_r", 454: "side_l"}  # the face outline at the eyes' height
-
-SIDE_KEYS = {"ibug68": (0, 16), "mediapipe468": (234, 454)}
-SMOOTHING = 1e-4  # thin-plate spline smoothing, face units squared
+MEDIAPIPE_MAP = "mediapipe_map.json"  # MediaPipe's 468 landmarks on the default face (puppet/data)
 MAX_RESIDUAL = 0.3  # similarity RMS residual / outer eye-corner distance: else the order is wrong
 MAX_NOSE_OFFSET = 0.12  # nose tip off the eyes' mid-line / outer eye-corner distance
 MIN_HALF_RATIO = 0.7  # narrower / wider face half, measured from the nose tip
 PITCH_RANGE = (0.6, 1.6)  # (eyes to nose tip) / (eyes to chin), relative to the default face
-TEXTURE_MAX = 1024  # longest side of texture.png, pixels
-OVAL_BAND = 0.08  # texture fade-out band inside the face oval, fraction of its width
-FACING = (0.15, 0.45)  # normal z over which the photo fades in (grazing -> facing the camera)
 
 
 class PhotoFaceError(PuppetError, ValueError):
@@ -121,6 +121,7 @@ class Landmarks:
     layout: str  # "fdp", "ibug68" or "mediapipe468"
     points: np.ndarray  # (K, 2)
     keys: list  # per point: FDP id (fdp) or the layout's integer index
+    depth: np.ndarray | None = None  # (K,): a third column, as MediaPipe's z: pixel scale, smaller is nearer
 
 
 @dataclass
@@ -147,11 +148,15 @@ class Similarity:
 def read_landmarks(path: str | os.PathLike) -> Landmarks:
     """A landmark JSON file: ``{"layout", "points"}``, a plain list (68: iBUG, 468/478:
     MediaPipe, 11: fdp11) or a dict FDP id -> [x, y]. Errors name the file."""
+    return parse_landmarks(read_landmarks_json(path), str(path))
+
+
+def read_landmarks_json(path: str | os.PathLike):
+    """The parsed JSON of a landmark file (``read_landmarks``), unchecked; errors name the file."""
     try:
-        data = json.loads(Path(path).read_text("utf-8"))
+        return json.loads(Path(path).read_text("utf-8"))
     except (OSError, json.JSONDecodeError) as exc:
         raise PhotoFaceError(f"{path}: cannot read landmarks: {exc}") from None
-    return parse_landmarks(data, str(path))
 
 
 def parse_landmarks(data, source: str = "<landmarks>") -> Landmarks:
@@ -164,7 +169,8 @@ def parse_landmarks(data, source: str = "<landmarks>") -> Landmarks:
         unknown = [k for k in keys if k not in load_face().feature_points]
         if unknown:
             raise PhotoFaceError(f"{source}: not MPEG-4 feature point ids of the default face: {unknown}")
-        return Landmarks("fdp", _points(list(data.values()), source), keys)
+        points = _points(list(data.values()), source)
+        return Landmarks("fdp", points[:, :2], keys, points[:, 2] if points.shape[1] >= 3 else None)
     points = _points(data, source)
     layout = layout or {11: "fdp11", 68: "ibug68", 468: "mediapipe468", 478: "mediapipe468"}.get(len(points))
     expected = {"fdp11": (11,), "ibug68": (68,), "mediapipe468": (468, 478)}
@@ -174,9 +180,10 @@ def parse_landmarks(data, source: str = "<landmarks>") -> Landmarks:
     if len(points) not in expected[layout]:
         raise PhotoFaceError(f"{source}: layout {layout} needs {' or '.join(map(str, expected[layout]))} "
                              f"points, got {len(points)}")
+    depth = points[:, 2] if points.shape[1] >= 3 else None
     if layout == "fdp11":
-        return Landmarks("fdp", points, list(FDP11))
-    return Landmarks(layout, points, list(range(len(points))))
+        return Landmarks("fdp", points[:, :2], list(FDP11), depth)
+    return Landmarks(layout, points[:, :2], list(range(len(points))), depth)
 
 
 def _points(values, source: str) -> np.ndarray:
@@ -186,9 +193,9 @@ def _points(values, source: str) -> np.ndarray:
         raise PhotoFaceError(f"{source}: points must be [x, y] pairs of numbers") from None
     if points.ndim != 2 or points.shape[1] < 2 or len(points) == 0:
         raise PhotoFaceError(f"{source}: points must be a non-empty list of [x, y] pairs")
-    if not np.isfinite(points[:, :2]).all():
+    if not np.isfinite(points[:, :3]).all():
         raise PhotoFaceError(f"{source}: points must be finite numbers")
-    return points[:, :2]  # MediaPipe writes x, y, z: depth is not used
+    return points[:, :3]  # x, y, and MediaPipe's z where given
 
 
 def check_inside(landmarks: Landmarks, size: tuple[int, int]) -> None:
@@ -203,33 +210,85 @@ def check_inside(landmarks: Landmarks, size: tuple[int, int]) -> None:
 
 # -- correspondences on the default face -----------------------------------------------------------
 
-def model_points(face: Face, landmarks: Landmarks) -> tuple[np.ndarray, np.ndarray, dict[str, int]]:
-    """(image points (M, 2), their 3D counterparts on ``face`` (M, 3), role -> row) for the
-    landmarks the face has a counterpart for. Roles (FDP ids, ``side_r``/``side_l``) are what
-    ``check_frontal`` measures. Missing required points are an error naming them."""
+@dataclass
+class MeshPoints:
+    """Points on a mesh, each a weighted sum of up to three of its vertices: where landmarks sit
+    on a face, wherever its vertices move."""
+
+    vertices: np.ndarray  # (M, 3) int
+    weights: np.ndarray  # (M, 3), rows summing to 1
+
+    def __len__(self) -> int:
+        return len(self.vertices)
+
+    def on(self, positions: np.ndarray) -> np.ndarray:
+        """The points (M, 3) on a mesh with these vertex ``positions`` (N, 3)."""
+        return np.einsum("mk,mkd->md", self.weights, np.asarray(positions)[self.vertices])
+
+    def take(self, rows) -> MeshPoints:
+        return MeshPoints(self.vertices[rows], self.weights[rows])
+
+    @classmethod
+    def at(cls, vertices) -> MeshPoints:
+        """Points on the given vertices."""
+        v = np.asarray(vertices, dtype=np.int64).reshape(-1, 1)
+        return cls(np.repeat(v, 3, axis=1), np.tile([1.0, 0.0, 0.0], (len(v), 1)))
+
+    @classmethod
+    def stack(cls, parts: list[MeshPoints]) -> MeshPoints:
+        return cls(np.vstack([p.vertices for p in parts]), np.vstack([p.weights for p in parts]))
+
+
+def model_points(face: Face, landmarks: Landmarks) -> tuple[np.ndarray, MeshPoints, dict[str, int], np.ndarray]:
+    """(image points (M, 2), their counterparts on ``face`` (``MeshPoints``), role -> row, and
+    which landmarks they are (M,)) for the landmarks the face has a counterpart for. Roles
+    (FDP ids, ``side_r``/``side_l``) are what ``check_frontal`` measures. Missing required
+    points are an error naming them."""
     if landmarks.layout == "fdp":
         missing = [f for f in FDP11 if f not in landmarks.keys]
         if missing:
             raise PhotoFaceError(f"missing required landmark(s) {missing} ({', '.join(FDP11_HINTS[m] for m in missing)})")
-        model = np.array([face.feature_points[k] for k in landmarks.keys])
+        points = MeshPoints.at([_feature_vertex(face, k) for k in landmarks.keys])
         roles = {k: i for i, k in enumerate(landmarks.keys)}
         roles.update(side_r=roles["2.14"], side_l=roles["2.13"])
-        return landmarks.points, model, roles
+        return landmarks.points, points, roles, np.arange(len(points))
     if landmarks.layout == "ibug68":
-        model = _ibug_points(face)
         roles = {fdp: i for i, fdp in IBUG_FDP.items()} | {"side_r": 0, "side_l": 16}
-        return landmarks.points, model, roles
-    table = dict(MEDIAPIPE_FDP) | (MEDIAPIPE_IRIS_FDP if len(landmarks.points) == 478 else {})
-    sides = _side_points(face)
-    index = list(table) + list(MEDIAPIPE_SIDES)
-    model = np.array([face.feature_points[table[i]] for i in table] + [sides[0], sides[1]])
-    roles = {fdp: row for row, fdp in enumerate(table.values())}
-    roles.update(side_r=len(table), side_l=len(table) + 1)
-    return landmarks.points[index], model, roles
+        return landmarks.points, ibug_points(face), roles, np.arange(68)
+    index = np.arange(468)
+    roles = {fdp: i for i, fdp in MEDIAPIPE_FDP.items()} | {"side_r": 234, "side_l": 454}
+    return landmarks.points[index], mediapipe_points(face), roles, index
 
 
-def _ibug_points(face: Face) -> np.ndarray:
-    """The 68 iBUG points on a face of the default topology (3D, face frame), by rules:
+def _feature_vertex(face: Face, fdp: str) -> int:
+    """The vertex of a feature point, or the one nearest it where it has none (the pupils)."""
+    if fdp in face.feature_vertices:
+        return int(face.feature_vertices[fdp])
+    return int(np.argmin(np.linalg.norm(face.vertices - face.feature_points[fdp], axis=1)))
+
+
+def mediapipe_points(face: Face) -> MeshPoints:
+    """MediaPipe Face Mesh's 468 landmarks on the default face (``data/mediapipe_map.json``,
+    built by ``tools/build_mediapipe_map.py`` from MediaPipe's canonical face). Only the
+    default face's topology has them: another face is refused."""
+    table = _mediapipe_map()
+    if int(table["vertex_count"]) != len(face.vertices) or table["face_hash"] != _topology_hash(face):
+        raise PhotoFaceError(f"face {face.name!r}: MediaPipe landmarks are mapped onto the default face only")
+    return MeshPoints(np.array(table["vertices"]), np.array(table["weights"]))
+
+
+@functools.cache
+def _mediapipe_map() -> dict:
+    return json.loads(importlib.resources.files("puppet.data").joinpath(MEDIAPIPE_MAP).read_text("utf-8"))
+
+
+def _topology_hash(face: Face) -> str:
+    """A short hash of a face's triangles: the map's vertex indices are valid on that topology."""
+    return hashlib.sha256(np.ascontiguousarray(face.triangles, dtype=np.int32).tobytes()).hexdigest()[:16]
+
+
+def ibug_points(face: Face) -> MeshPoints:
+    """The 68 iBUG points on a face of the default topology, by rules:
 
     * FDPs where ``IBUG_FDP`` names one;
     * jaw 0-16: the face oval from the right side at the outer eye corners' height, down through
@@ -243,55 +302,52 @@ def _ibug_points(face: Face) -> np.ndarray:
       55, 56, 58, 59: 1/3 and 2/3 along the lower border between the corners and 8.2.
     """
     fp, fv = face.feature_points, face.feature_vertices
-    out = np.zeros((68, 3))
-    for i, fdp in IBUG_FDP.items():
-        out[i] = fp[fdp]
-    out[0:17] = _jaw_points(face)
+    rows: dict[int, MeshPoints] = {i: MeshPoints.at([fv[fdp]]) for i, fdp in IBUG_FDP.items()}
+    rows.update(enumerate(_jaw_points(face)))
     for i, (a, b) in {18: ("4.6", "4.4"), 20: ("4.4", "4.2"), 23: ("4.1", "4.3"), 25: ("4.3", "4.5"),
                       32: ("9.4", "9.15"), 34: ("9.15", "9.5")}.items():
-        out[i] = _nearest_skin(face, (fp[a] + fp[b]) / 2)
-    top = _midline_point(face, (fp["3.8"][1] + fp["3.11"][1]) / 2)
-    out[27] = top
+        rows[i] = MeshPoints.at([_nearest_skin(face, (fp[a] + fp[b]) / 2)])
+    top = _midline_vertex(face, (fp["3.8"][1] + fp["3.11"][1]) / 2)
+    rows[27] = MeshPoints.at([top])
     for i, f in ((28, 1 / 3), (29, 2 / 3)):
-        out[i] = _midline_point(face, top[1] + f * (fp["9.3"][1] - top[1]))
+        rows[i] = MeshPoints.at([_midline_vertex(face, face.vertices[top, 1] + f * (fp["9.3"][1] - face.vertices[top, 1]))])
     lids = {"right_lid_opening": ("3.12", "3.8", (37, 38), (41, 40)),
             "left_lid_opening": ("3.11", "3.7", (43, 44), (47, 46))}
     for loop, (a, b, upper, lower) in lids.items():
-        for rows, up in ((upper, True), (lower, False)):
-            out[list(rows)] = [_along(face, loop, fv[a], fv[b], f, up) for f in (1 / 3, 2 / 3)]
+        for pair, up in ((upper, True), (lower, False)):
+            for i, f in zip(pair, (1 / 3, 2 / 3)):
+                rows[i] = _along(face, loop, fv[a], fv[b], f, up)
     lips = [(49, "8.4", "8.9", 0.5, True), (53, "8.10", "8.3", 0.5, True),
             (55, "8.3", "8.2", 1 / 3, False), (56, "8.3", "8.2", 2 / 3, False),
             (58, "8.2", "8.4", 1 / 3, False), (59, "8.2", "8.4", 2 / 3, False)]
     for i, a, b, f, up in lips:
-        out[i] = _along(face, "vermilion_border", fv[a], fv[b], f, up)
-    return out
+        rows[i] = _along(face, "vermilion_border", fv[a], fv[b], f, up)
+    return MeshPoints.stack([rows[i] for i in range(68)])
 
 
-def _jaw_points(face: Face) -> np.ndarray:
-    """iBUG 0-16 on the face oval (see ``_ibug_points``)."""
-    right, left = _side_points(face)
+def _jaw_points(face: Face) -> list[MeshPoints]:
+    """iBUG 0-16 on the face oval (see ``ibug_points``)."""
+    right, left = _side_vertices(face)
     loop = face.contours["face_oval"]
     chin = int(loop[np.argmin(face.vertices[loop, 1])])
-    start, end = (int(loop[np.argmin(np.linalg.norm(face.vertices[loop] - p, axis=1))]) for p in (right, left))
     steps = np.linspace(0.0, 1.0, 9)
-    down = [_along(face, "face_oval", start, chin, f, False) for f in steps]
-    up = [_along(face, "face_oval", chin, end, f, False) for f in steps[1:]]
-    return np.array(down + up)
+    return [_along(face, "face_oval", right, chin, f, False) for f in steps] + \
+        [_along(face, "face_oval", chin, left, f, False) for f in steps[1:]]
 
 
-def _side_points(face: Face) -> tuple[np.ndarray, np.ndarray]:
+def _side_vertices(face: Face) -> tuple[int, int]:
     """The face oval's vertices at the outer eye corners' height, right (x < 0) then left."""
-    loop = face.contours["face_oval"]
+    loop = np.asarray(face.contours["face_oval"])
     p = face.vertices[loop]
     height = (face.feature_points["3.7"][1] + face.feature_points["3.12"][1]) / 2
     sides = []
     for sign in (-1, 1):
         on_side = np.flatnonzero(sign * p[:, 0] > 0)
-        sides.append(p[on_side[np.argmin(np.abs(p[on_side, 1] - height))]])
+        sides.append(int(loop[on_side[np.argmin(np.abs(p[on_side, 1] - height))]]))
     return sides[0], sides[1]
 
 
-def _along(face: Face, contour: str, a: int, b: int, fraction: float, upper: bool) -> np.ndarray:
+def _along(face: Face, contour: str, a: int, b: int, fraction: float, upper: bool) -> MeshPoints:
     """The point ``fraction`` of the way (arc length) from vertex a to vertex b along a closed
     contour, taking the upper (higher mean y) or lower of its two paths."""
     loop = list(face.contours[contour])
@@ -300,23 +356,26 @@ def _along(face: Face, contour: str, a: int, b: int, fraction: float, upper: boo
     forward = [loop[(i + k) % n] for k in range((j - i) % n + 1)]
     backward = [loop[(i - k) % n] for k in range((i - j) % n + 1)]
     paths = sorted((forward, backward), key=lambda path: face.vertices[path, 1].mean())
-    p = face.vertices[paths[1] if upper else paths[0]]
-    arc = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))]
-    return np.array([np.interp(fraction * arc[-1], arc, p[:, k]) for k in range(3)])
+    path = paths[1] if upper else paths[0]
+    arc = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(face.vertices[path], axis=0), axis=1))]
+    s = int(np.clip(np.searchsorted(arc, fraction * arc[-1], side="right") - 1, 0, len(path) - 2))
+    t = float(np.clip((fraction * arc[-1] - arc[s]) / max(arc[s + 1] - arc[s], 1e-12), 0.0, 1.0))
+    return MeshPoints(np.array([[path[s], path[s + 1], path[s]]]), np.array([[1.0 - t, t, 0.0]]))
 
 
-def _nearest_skin(face: Face, point: np.ndarray) -> np.ndarray:
-    skin = face.vertices[face.parts["skin"]]
-    return skin[np.argmin(np.linalg.norm(skin - point, axis=1))]
+def _nearest_skin(face: Face, point: np.ndarray) -> int:
+    skin = face.parts["skin"]
+    return int(skin[np.argmin(np.linalg.norm(face.vertices[skin] - point, axis=1))])
 
 
-def _midline_point(face: Face, height: float) -> np.ndarray:
+def _midline_vertex(face: Face, height: float) -> int:
     """The front mid-line skin vertex (x = 0, in front of the inner eye corners' depth minus
     a margin) nearest ``height``."""
-    skin = face.vertices[face.parts["skin"]]
-    width = np.ptp(skin[:, 0])
-    front = skin[(np.abs(skin[:, 0]) < 1e-3 * width) & (skin[:, 2] > face.feature_points["3.8"][2] - 0.1 * width)]
-    return front[np.argmin(np.abs(front[:, 1] - height))]
+    skin = face.parts["skin"]
+    v = face.vertices[skin]
+    width = np.ptp(v[:, 0])
+    front = np.flatnonzero((np.abs(v[:, 0]) < 1e-3 * width) & (v[:, 2] > face.feature_points["3.8"][2] - 0.1 * width))
+    return int(skin[front[np.argmin(np.abs(v[front, 1] - height))]])
 
 
 # -- the fit -------------------------------------------------------------------------------------
@@ -360,107 +419,108 @@ def check_frontal(target: np.ndarray, model: np.ndarray, roles: dict[str, int]) 
 
 @dataclass
 class PhotoFit:
-    """The fitted projection and warp of the default face to a photo's landmarks."""
+    """The default face fitted to a photo's landmarks: the camera, the head's pose in it, the
+    warps onto the landmarks as the photo shows them and with its expression removed."""
 
-    similarity: Similarity
-    warp: RBFInterpolator  # face-frame (x, y) -> displacement, the full spline
-    affine: np.ndarray  # (3, 2): [x, y, 1] @ affine = the least-squares affine displacement
-    fade: tuple[float, float]  # z below fade[0]: affine only; above fade[1]: the full spline
-    depth_scale: float
+    camera: PhotoCamera
+    similarity: Similarity3  # face frame -> photo frame: the head's scale, turn and place
+    posed: Warp3  # the default face onto the landmarks as photographed
+    neutral: Warp3  # the same with the expression measured in ``faps`` taken out
+    faps: np.ndarray  # (68,) the photo's expression, FAPU, as the default face's rig shows it
     report: dict
 
-    def displacement(self, p: np.ndarray) -> np.ndarray:
-        """x, y displacement (M, 2) of face-frame points (M, 3): spline, faded to its affine fit
-        behind the face."""
-        affine = np.c_[p[:, :2], np.ones(len(p))] @ self.affine
-        w = np.clip((p[:, 2] - self.fade[0]) / (self.fade[1] - self.fade[0]), 0.0, 1.0)[:, None]
-        return affine + w * (self.warp(p[:, :2]) - affine)
-
-    def apply(self, p: np.ndarray, z_centre: float) -> np.ndarray:
-        """Warped points (M, 3): x, y displaced, depth scaled about ``z_centre``."""
-        out = np.array(p, dtype=float)
-        out[:, :2] += self.displacement(p)
-        out[:, 2] = z_centre + self.depth_scale * (p[:, 2] - z_centre)
-        return out
-
-    def jacobian(self, p: np.ndarray, step: float = 1e-3) -> np.ndarray:
-        """The warp's 2x2 x, y Jacobian at one point (3,), by central differences."""
-        cols = []
-        for k in range(2):
-            d = np.zeros((2, 3))
-            d[:, k] = (step, -step)
-            moved = p[:2] + d[:, :2] + self.displacement(p + d)
-            cols.append((moved[0] - moved[1]) / (2 * step))
-        return np.array(cols).T
+    def pixels(self, points: np.ndarray) -> np.ndarray:
+        """Where face-frame points (M, 3) show in the photo (M, 2)."""
+        return self.camera.project(self.similarity.apply(points))
 
 
-def _anchors(face: Face) -> np.ndarray:
-    """Face-frame x, y of the points the warp keeps where the similarity puts them: the head's
-    frontal outline above the eyes (the farthest skin vertex from the eyes' mid-point in each
-    15 degree sector from 30 to 150 degrees) and the neck cut's left, right and front. Without
-    them the spline's extrapolation stretches the skull after the brows and the neck after the
-    chin."""
-    skin = face.vertices[face.parts["skin"], :2]
-    centre = (face.feature_points["3.7"][:2] + face.feature_points["3.12"][:2]) / 2
-    d = skin - centre
-    angle = np.degrees(np.arctan2(d[:, 1], d[:, 0]))
-    radius = np.linalg.norm(d, axis=1)
-    outline = [skin[np.flatnonzero(s)[np.argmax(radius[s])]]
-               for lo in range(30, 150, 15) if (s := (angle >= lo) & (angle < lo + 15)).any()]
-    neck = face.vertices[face.contours["neck_cut"]]
-    ends = neck[[np.argmin(neck[:, 0]), np.argmax(neck[:, 0]), np.argmax(neck[:, 2])], :2]
-    return np.vstack([outline, ends])
-
-
-def fit_photo(face: Face, landmarks: Landmarks, size: tuple[int, int]) -> PhotoFit:
-    """Fit the similarity and the warp (module docstring) of ``face`` to ``landmarks`` in an
-    image of ``size`` (width, height); bad landmarks are a ``PhotoFaceError``."""
+def fit_photo(face: Face, landmarks: Landmarks, size: tuple[int, int], *, focal: float | None = None,
+              neutral: bool = True, depth_trust: float = DEPTH_TRUST) -> PhotoFit:
+    """Fit ``face`` (the default face) to ``landmarks`` in an image of ``size`` (width, height)
+    seen by a camera of ``focal`` pixels (``puppet.photo.depth``: else a portrait distance), trusting
+    the landmarks' depth where they have one by ``depth_trust`` (``puppet.photo.depth.fit_warp``); with
+    ``neutral`` the photo's expression is measured and taken out (``puppet.photo.neutral``). Bad
+    landmarks are a ``PhotoFaceError``."""
     check_inside(landmarks, size)
-    pixels, model, roles = model_points(face, landmarks)
-    similarity = similarity_2d(model[:, :2], pixels * [1.0, -1.0])
-    target = similarity.inverse(pixels)
+    pixels, points, roles, rows = model_points(face, landmarks)
+    model = points.on(face.vertices)
+    flat, residual, frontal = _checked(landmarks.layout, pixels, model, roles)
+    width = float(np.ptp(face.vertices[face.contours["face_oval"], 0]))
+    camera = PhotoCamera(focal or DISTANCE * width * flat.scale, np.asarray(size, float) / 2)
+    depth = None if landmarks.depth is None else -landmarks.depth[rows]
+    similarity, targets = _lift(camera, pixels, depth, model, flat.scale)
+    faps, relaxed = np.zeros(N_FAPS), targets
+    if neutral:
+        faps, relaxed = neutralise(face, points, targets, roles)
+        # an open jaw tilts the head's fitted pose: take it from the face with the expression out
+        correction = similarity_3d(model, relaxed)
+        similarity = similarity.after(correction)
+        targets, relaxed = correction.inverse(targets), correction.inverse(relaxed)
+    report = {"layout": landmarks.layout, "landmarks": len(pixels), "pixels_per_unit": similarity.scale,
+              "focal_pixels": camera.focal, "focal_given": focal is not None,
+              "depth_from_landmarks": depth is not None, "head_degrees": similarity.angles(),
+              "similarity_residual": residual, "frontal": frontal,
+              "expression_faps": {fap(n).name: round(float(faps[n - 1]), 1) for n in range(1, N_FAPS + 1)
+                                  if abs(faps[n - 1]) >= 0.05}}
+    trust = 0.0 if depth is None else depth_trust
+    return PhotoFit(camera, similarity, fit_warp(face, model, targets, trust), fit_warp(face, model, relaxed, trust),
+                    faps, report)
+
+
+def _checked(layout: str, pixels: np.ndarray, model: np.ndarray,
+             roles: dict[str, int]) -> tuple[Similarity, float, dict[str, float]]:
+    """(the 2D similarity of the model points onto the landmarks, its residual in eye widths,
+    the frontal measures), or a ``PhotoFaceError``: landmarks in the wrong order or layout (a
+    large residual), or a face that is not frontal (which also misfits a little: said first)."""
+    flat = similarity_2d(model[:, :2], pixels * [1.0, -1.0])
     eyes = np.linalg.norm(model[roles["3.7"], :2] - model[roles["3.12"], :2])
-    residual = float(np.sqrt(((target - model[:, :2]) ** 2).sum(axis=1).mean()) / eyes)
+    residual = float(np.sqrt(((flat.inverse(pixels) - model[:, :2]) ** 2).sum(axis=1).mean()) / eyes)
+    misfit = PhotoFaceError(f"the landmarks do not fit a face in layout {layout} (residual {residual:.2f} "
+                            f"eye-widths after a similarity, at most {MAX_RESIDUAL}): wrong order, mirrored, "
+                            "or another layout")
+    if residual > 2 * MAX_RESIDUAL:
+        raise misfit
+    frontal = check_frontal(flat.inverse(pixels), model, roles)
     if residual > MAX_RESIDUAL:
-        raise PhotoFaceError(f"the landmarks do not fit a face in layout {landmarks.layout} (residual "
-                             f"{residual:.2f} eye-widths after a similarity, at most {MAX_RESIDUAL}): "
-                             f"wrong order, mirrored, or another layout")
-    frontal = check_frontal(target, model, roles)
-    sites = np.vstack([model[:, :2], _anchors(face)])
-    shift = np.vstack([target - model[:, :2], np.zeros((len(sites) - len(model), 2))])
-    warp = RBFInterpolator(sites, shift, kernel="thin_plate_spline", smoothing=SMOOTHING)
-    affine = np.linalg.lstsq(np.c_[sites, np.ones(len(sites))], shift, rcond=None)[0]
-    fade = (float(face.pivots["head"][2]), float(min(face.feature_points["10.9"][2], face.feature_points["2.13"][2])))
-    report = {"layout": landmarks.layout, "landmarks": len(pixels),
-              "pixels_per_unit": similarity.scale,
-              "roll_degrees": float(np.degrees(np.arctan2(similarity.rotation[1, 0], similarity.rotation[0, 0]))),
-              "similarity_residual": residual, "frontal": frontal}
-    depth_scale = float(np.sqrt(abs(np.linalg.det(np.eye(2) + affine[:2]))))
-    return PhotoFit(similarity, warp, affine, fade, depth_scale, report)
+        raise misfit
+    return flat, residual, frontal
+
+
+def _lift(camera: PhotoCamera, pixels: np.ndarray, depth: np.ndarray | None, model: np.ndarray,
+          scale: float) -> tuple[Similarity3, np.ndarray]:
+    """The head's pose and the landmarks in the face frame (M, 3): lifted by the camera at their
+    depth (the detector's, its unknown zero at their mean; or the default face's in the fitted
+    pose, which is then refined once)."""
+    guess = depth - depth.mean() if depth is not None else scale * (model[:, 2] - model[:, 2].mean())
+    for _ in range(1 if depth is not None else 2):
+        lifted = camera.lift(pixels, guess)
+        similarity = similarity_3d(model, lifted)
+        guess = similarity.apply(model)[:, 2]
+    return similarity, similarity.inverse(lifted)
 
 
 # -- the new face --------------------------------------------------------------------------------
 
-def warp_face(face: Face, fit: PhotoFit) -> Face:
-    """The default face moved by the fit: skin by the warp, eyeballs, teeth and tongue rigidly;
-    feature points, pivots follow. Vertex order, triangles, parts and contours are kept."""
-    z_centre = float(np.mean([p[2] for p in face.feature_points.values()]))
-    v = fit.apply(face.vertices, z_centre)
-    points = {k: fit.apply(p[None], z_centre)[0] for k, p in face.feature_points.items()}
-    pivots = {k: (p if k == "jaw_axis" else fit.apply(p[None], z_centre)[0]) for k, p in face.pivots.items()}
-    for eye, pupil in (("eye_l", "3.5"), ("eye_r", "3.6")):
+def warp_face(face: Face, warp: Warp3) -> Face:
+    """``face`` moved by ``warp``: skin by the warp, eyeballs, teeth and tongue rigidly (each
+    eyeball round, set behind its lid opening as on the default face and scaled with the
+    opening's width, so a depth the lids and the eye's centre disagree on never pushes it
+    through the lids; teeth and tongue together by the warp's local linear map at their
+    centroid); feature points and pivots follow. Vertex order, triangles, parts and contours
+    are kept."""
+    v = warp(face.vertices)
+    points = {k: warp(p[None])[0] for k, p in face.feature_points.items()}
+    pivots = {k: (p if k == "jaw_axis" else warp(p[None])[0]) for k, p in face.pivots.items()}
+    for eye, pupil, lids in (("eye_l", "3.5", "left_lid_opening"), ("eye_r", "3.6", "right_lid_opening")):
+        ring, new_ring = face.vertices[face.contours[lids]], v[face.contours[lids]]
+        scale = np.ptp(new_ring[:, 0]) / np.ptp(ring[:, 0])
         centre = face.pivots[eye]
-        new_centre = pivots[eye]
-        scale = np.sqrt(abs(np.linalg.det(fit.jacobian(centre))))
-        v[face.parts[eye]] = new_centre + scale * (face.vertices[face.parts[eye]] - centre)
-        points[pupil] = new_centre + scale * (face.feature_points[pupil] - centre)
+        pivots[eye] = new_ring.mean(axis=0) + scale * (centre - ring.mean(axis=0))
+        v[face.parts[eye]] = pivots[eye] + scale * (face.vertices[face.parts[eye]] - centre)
+        points[pupil] = pivots[eye] + scale * (face.feature_points[pupil] - centre)
     mouth = np.concatenate([face.parts[p] for p in ("teeth_upper", "teeth_lower", "tongue") if p in face.parts])
     centre = face.vertices[mouth].mean(axis=0)
-    new_centre = fit.apply(centre[None], z_centre)[0]
-    local = np.eye(3)
-    local[:2, :2] = fit.jacobian(centre)
-    local[2, 2] = fit.depth_scale
-    v[mouth] = new_centre + (face.vertices[mouth] - centre) @ local.T
+    v[mouth] = warp(centre[None])[0] + (face.vertices[mouth] - centre) @ warp.jacobian(centre).T
     for k, i in face.feature_vertices.items():
         points[k] = v[i].copy()
     return Face(name=face.name, vertices=v, triangles=face.triangles.copy(),
@@ -471,109 +531,16 @@ def warp_face(face: Face, fit: PhotoFit) -> Face:
                 source_index=None if face.source_index is None else face.source_index.copy())
 
 
-def texture_face(face: Face, fit: PhotoFit, photo: np.ndarray, name: str = "photo") -> TexturedFace:
-    """``face`` (warped) with the photo as its texture: uv, texture weights, the photo cropped
-    to the head (at most ``TEXTURE_MAX`` pixels) and the fall-back tone in its vertex colours."""
-    pixels = fit.similarity.forward(face.vertices[:, :2])
-    crop, box = _crop(photo, pixels)
-    x0, y0, x1, y1 = box
-    uv = np.c_[(pixels[:, 0] - x0) / (x1 - x0), 1.0 - (pixels[:, 1] - y0) / (y1 - y0)]
-    inside = ((uv >= 0) & (uv <= 1)).all(axis=1)
-    weight = _texture_weight(face) * inside
-    tone = _cheek_tone(photo, fit.similarity.forward(np.array([face.feature_points[k][:2] for k in ("5.1", "5.2")])),
-                       fit.similarity.scale * np.linalg.norm(face.feature_points["3.7"] - face.feature_points["3.12"]))
-    colors = _toned_colors(face, tone)
-    fit.report.update(fallback_tone=[round(float(c), 4) for c in tone], textured_vertices=int((weight > 0).sum()),
-                      texture_size=[int(crop.shape[1]), int(crop.shape[0])], source_photo=name)
-    return TexturedFace(name=name, vertices=face.vertices, triangles=face.triangles, parts=face.parts,
-                        feature_points=face.feature_points, feature_vertices=face.feature_vertices,
-                        pivots=face.pivots, contours=face.contours, colors=colors,
-                        uv=np.clip(uv, 0.0, 1.0).astype(np.float32), triangle_uv=face.triangles.copy(),
-                        source_index=face.source_index, texture=crop, texture_weight=weight.astype(np.float32))
-
-
-def _crop(photo: np.ndarray, pixels: np.ndarray) -> tuple[np.ndarray, tuple[float, float, float, float]]:
-    """The photo cut to the projected head (plus 5%) inside the image, scaled down to at most
-    ``TEXTURE_MAX``; and the box (x0, y0, x1, y1) in photo pixels it covers."""
-    from PIL import Image
-
-    height, width = photo.shape[:2]
-    lo, hi = pixels.min(axis=0), pixels.max(axis=0)
-    pad = 0.05 * (hi - lo)
-    x0, y0 = (int(np.clip(np.floor(c), 0, m)) for c, m in zip(lo - pad, (width - 1, height - 1)))
-    x1, y1 = (int(np.clip(np.ceil(c), lo_ + 1, m)) for c, m, lo_ in zip(hi + pad, (width, height), (x0, y0)))
-    crop = Image.fromarray(photo[y0:y1, x0:x1])
-    factor = min(1.0, TEXTURE_MAX / max(crop.size))
-    if factor < 1.0:
-        crop = crop.resize((max(1, round(crop.width * factor)), max(1, round(crop.height * factor))), Image.LANCZOS)
-    return np.asarray(crop), (x0, y0, x1, y1)
-
-
-def _texture_weight(face: Face) -> np.ndarray:
-    """Per-vertex photo weight: skin inside the face oval facing the camera, eyeballs inside
-    their lid openings (module docstring); 0 elsewhere."""
-    v = face.vertices
-    normals = VertexNormals(face.triangles, len(v))(v)
-    facing = np.clip((normals[:, 2] - FACING[0]) / (FACING[1] - FACING[0]), 0.0, 1.0)
-    weight = np.zeros(len(v))
-    oval = v[face.contours["face_oval"], :2]
-    band = OVAL_BAND * np.ptp(oval[:, 0])
-    skin = face.parts["skin"]
-    weight[skin] = facing[skin] * np.clip(_inside_distance(oval, v[skin, :2]) / band, 0.0, 1.0)
-    for eye, loop in (("eye_l", "left_lid_opening"), ("eye_r", "right_lid_opening")):
-        ix = face.parts[eye]
-        lid = v[face.contours[loop], :2]
-        inside = np.clip(_inside_distance(lid, v[ix, :2]) / (0.1 * np.ptp(lid[:, 0])), 0.0, 1.0)
-        weight[ix] = inside * (normals[ix, 2] > 0)
-    return weight
-
-
-def _inside_distance(polygon: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """Distance (M,) of 2D points to a closed polygon's edges, negative outside it."""
-    a, b = polygon, np.roll(polygon, -1, axis=0)
-    ab = b - a
-    t = np.clip(((points[:, None] - a) * ab).sum(-1) / (ab ** 2).sum(-1), 0.0, 1.0)
-    d = np.linalg.norm(points[:, None] - (a + t[..., None] * ab), axis=-1).min(axis=1)
-    return np.where(_contains(polygon, points), d, -d)
-
-
-def _contains(polygon: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """Even-odd rule: (M,) True for 2D points inside the closed polygon."""
-    a, b = polygon, np.roll(polygon, -1, axis=0)
-    x, y = points[:, None, 0], points[:, None, 1]
-    spans = (a[:, 1] > y) != (b[:, 1] > y)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        cross_x = a[:, 0] + (y - a[:, 1]) * (b[:, 0] - a[:, 0]) / (b[:, 1] - a[:, 1])
-    return (spans & (x < cross_x)).sum(axis=1) % 2 == 1
-
-
-def _cheek_tone(photo: np.ndarray, centres: np.ndarray, eye_width_px: float) -> np.ndarray:
-    """Median sRGB colour (0-1) of the photo in discs (radius 0.15 eye widths) at the cheeks."""
-    rows, cols = np.mgrid[:photo.shape[0], :photo.shape[1]]
-    radius = max(2.0, 0.15 * eye_width_px)
-    near = np.zeros(photo.shape[:2], dtype=bool)
-    for cx, cy in centres:
-        near |= (cols - cx) ** 2 + (rows - cy) ** 2 <= radius ** 2
-    return np.median(photo[near][:, :3], axis=0) / 255.0
-
-
-def _toned_colors(face: Face, tone: np.ndarray) -> np.ndarray:
-    """The face's colours with the skin scaled per channel so its cheeks take ``tone``."""
-    colors = np.array(face.colors if face.colors is not None else np.full((len(face.vertices), 3), 0.7), np.float32)
-    skin = face.parts["skin"]
-    cheeks = np.r_[[face.feature_vertices[k] for k in ("5.1", "5.2")]]
-    near = np.linalg.norm(face.vertices[skin, None] - face.vertices[cheeks], axis=-1).min(axis=1)
-    reference = np.median(colors[skin[np.argsort(near)[:40]]], axis=0)
-    colors[skin] = np.clip(colors[skin] * tone / np.maximum(reference, 1e-3), 0.0, 1.0)
-    return colors
-
-
-def face_from_photo(photo: np.ndarray, landmarks: Landmarks, name: str = "photo") -> tuple[TexturedFace, dict]:
-    """The default face fitted to ``photo`` (H, W, 3 uint8) by ``landmarks`` and textured, and
-    the fit's report (layout, scale, roll, residual, frontal measures, texture)."""
+def face_from_photo(photo: np.ndarray, landmarks: Landmarks, name: str = "photo", *, focal: float | None = None,
+                    neutral: bool = True) -> tuple[TexturedFace, dict]:
+    """The default face fitted to ``photo`` (H, W, 3 uint8) by ``landmarks`` (``fit_photo``),
+    its expression taken out where ``neutral``, textured by the photo as the face shows in it
+    (``puppet.photo.texture``); and the report of the fit and texture."""
     base = load_face()
-    fit = fit_photo(base, landmarks, (photo.shape[1], photo.shape[0]))
-    return texture_face(warp_face(base, fit), fit, photo, name), fit.report
+    fit = fit_photo(base, landmarks, (photo.shape[1], photo.shape[0]), focal=focal, neutral=neutral)
+    shown = fit.similarity.apply(warp_face(base, fit.posed).vertices)
+    face, report = texture_face(warp_face(base, fit.neutral), shown, fit.camera, photo, name)
+    return face, fit.report | report
 
 
 def read_photo(path: str | os.PathLike) -> np.ndarray:
@@ -591,7 +558,8 @@ def build_face_folder(photo_path: str | os.PathLike, landmarks_path: str | os.Pa
                       out: str | os.PathLike) -> Path:
     """``puppet face-from-photo``: fit, texture, write ``out`` (``puppet.face.folder``) and rig the
     written face (rigged from what was written, so the rig matches the face as loaded). With no
-    ``landmarks_path`` the landmarks are detected (``puppet.photo.detect``)."""
+    ``landmarks_path`` the landmarks are detected (``puppet.photo.detect``); the camera's focal
+    length comes from the photo's EXIF where it says it (``puppet.photo.depth.focal_from_exif``)."""
     from puppet.face.autorig import build_rig
     from puppet.face.folder import FACE_RIG, load_face_folder, write_face_folder
     from puppet.face.rig import save_rig
@@ -602,7 +570,7 @@ def build_face_folder(photo_path: str | os.PathLike, landmarks_path: str | os.Pa
         landmarks = parse_landmarks(detect_landmarks(photo_path), f"{photo_path} (detected landmarks)")
     else:
         landmarks = read_landmarks(landmarks_path)
-    face, report = face_from_photo(photo, landmarks, Path(photo_path).stem)
+    face, report = face_from_photo(photo, landmarks, Path(photo_path).stem, focal=focal_from_exif(photo_path))
     folder = write_face_folder(face, out, source_photo=str(photo_path), report=report)
     save_rig(build_rig(load_face_folder(folder)), folder / FACE_RIG)
     return folder
