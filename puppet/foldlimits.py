@@ -11,7 +11,7 @@ a file or a device gives are never changed, only what the face shows.
   (8.1-8.8) are one edge of the lip, 1-3 mm apart, each moved by its own FAP (``LIP_PAIRS``:
   lower_t_midlip 4 and lower_t_midlip_o 51, ..., raise_r_cornerlip 13 and raise_r_cornerlip_o 60).
   One moved alone slides through the other within a few millimetres (stretch_l_cornerlip 6 alone
-  folded at 20 MW, raise_b_midlip 5 alone at 480 MNS). Their difference is kept within the range
+  folded at 20 MW, raise_b_midlip 5 alone at -480 MNS). Their difference is kept within the range
   that folds nothing: the FAP with the larger value leads and moves its own point by exactly
   value x FAPU; the other follows just enough. The visemes and expressions mostly move both
   together and are not touched.
@@ -120,17 +120,12 @@ def _symmetric(limits: dict, other_side) -> dict:
     return out
 
 
-def fold_safe(runtime, *, follow: bool = True) -> Rig:
+def fold_safe(runtime) -> Rig:
     """A copy of the runtime's (calibrated) rig with its lid margin motions faded toward the eye
-    corners (``lid_faded``) and its ``fap_follow`` (unless ``follow`` is False) and ``fap_reach``
-    found anew on that."""
+    corners (``lid_faded``) and its ``fap_follow`` and ``fap_reach`` found anew on that."""
     faded = _with(runtime, fap_motions=lid_faded(runtime.rig))
     rig = copy.copy(faded.rig)
-    if follow:
-        rig.fap_follow, rig.fap_reach = fold_limits(faded)
-    else:
-        rig.fap_follow = {}
-        rig.fap_reach = _reach(_with(faded, fap_follow={}, fap_reach={}))
+    rig.fap_follow, rig.fap_reach = fold_limits(faded)
     return rig
 
 

@@ -24,7 +24,7 @@ tongueOut are skipped and named):
 Images (unless ``--no-images``), in ``--out``: ``realism.png`` (each ARKit shape, the example
 beside the shipped rig's fit, front view; held-out shapes marked) and ``realism_expressions.png``
 (expressions, visemes and the open mouth on the shipped rig, front and three-quarter).
-``--json`` prints the figures as one JSON document instead of the table. About 16 minutes on
+``--json`` prints the figures as one JSON document instead of the table. About 27 minutes on
 2 busy CPU cores (the two held-out calibrations are most of it).
 """
 
