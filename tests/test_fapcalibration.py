@@ -83,12 +83,15 @@ def test_the_encoder_reads_back_a_calibrated_pose(runtime):
 
 @needs_examples
 def test_the_calibrated_face_reproduces_artist_shapes_better_than_the_coarse_rig(face, runtime, examples):
+    """Better by a quarter, except where the fit keeps within the lips' fold-free reach: the
+    smile (raise_l_cornerlip 327 MW where the artist's smile takes 600: 0.48 against 0.32
+    without the fold limits, 0.50 on the coarse rig) and the open jaw (0.33, coarse 0.39)."""
     coarse = puppet.Runtime(face, build_rig(face, grid=False, calibrated=False), dtype=np.float64)
-    for name in ("mouthSmileLeft", "browInnerUp", "jawOpen"):
+    for name, share in (("mouthSmileLeft", 1.0), ("browInnerUp", 0.75), ("jawOpen", 0.9)):
         shape = examples[name]
         now = relative_residual(runtime, fit_faps(runtime, shape), shape)
         before = relative_residual(coarse, fit_faps(coarse, shape, where="moved"), shape)
-        assert now < 0.75 * before, name
+        assert now < share * before, name
     assert capacity(runtime, examples["noseSneerLeft"]) < capacity(coarse, examples["noseSneerLeft"])
 
 
@@ -218,3 +221,47 @@ def test_the_arkit_mappings_are_written_from_the_solved_vectors(tmp_path):
     vectors = json.loads((ROOT / "puppet" / "data" / "arkit_faps.json").read_text())["faps"]
     mapping = puppet.load_mapping(ROOT / "mappings" / "arkit_csv.yaml")
     assert mapping is not None and vectors["jawOpen"]["open_jaw"] > 0
+
+
+def test_a_fit_keeps_within_the_fold_limits_so_the_face_shows_its_values(runtime, examples):
+    """The shipped rig's fold limits (puppet.runtime.foldlimits) bound every fit: each FAP within its
+    reach and each inner / outer lip pair within its follow range, so what the face shows for a
+    fit is the fit itself (the linearisation sees what the face does)."""
+    reach = runtime.faps.reach
+    for name in ("mouthSmileLeft", "mouthPucker", "jawOpen", "mouthRollUpper"):
+        values = fit_faps(runtime, examples[name])
+        assert np.all((values >= reach[0] - 1e-9) & (values <= reach[1] + 1e-9)), name
+        for (a, b), (low, high) in runtime.rig.fap_follow.items():
+            assert low - 1e-5 <= values[a - 1] - values[b - 1] <= high + 1e-5, (name, a, b)
+        np.testing.assert_allclose(runtime.faps.shown(values), values, atol=1e-5, err_msg=name)
+
+
+def test_a_bounded_fit_holds_a_pair_that_crossed_its_range_at_the_limit_it_crossed():
+    """``_bounded`` with a difference range: the same optimum as solving with the pair tied at
+    each limit and keeping the best, and the untied fit where the range does not bind."""
+    from scipy.optimize import lsq_linear
+
+    from puppet.runtime.fapcalibration import _bounded
+
+    rng = np.random.default_rng(3)
+    J = rng.normal(size=(200, 6)) * [1.0, 0.5, 2.0, 1.0, 0.1, 1.0]
+    b = rng.normal(size=200)
+    box = (np.full(6, -5.0), np.full(6, 5.0))
+    free = lsq_linear(J, b, bounds=box, method="bvls").x
+    np.testing.assert_allclose(_bounded(J, b, box, [(0, 1, -10.0, 10.0)]), free, atol=1e-9)
+    gap = free[0] - free[1]
+    low, high = (gap - 1.0, gap - 0.5) if gap > 0 else (gap + 0.5, gap + 1.0)
+    x = _bounded(J, b, box, [(0, 1, low, high)])
+    assert low - 1e-9 <= x[0] - x[1] <= high + 1e-9
+    best = min(np.linalg.norm(J @ _tied(J, b, box, limit) - b) for limit in (low, high))
+    assert np.linalg.norm(J @ x - b) == pytest.approx(best, rel=1e-9)
+
+
+def _tied(J, b, box, limit):
+    """The bounded fit with x0 = x1 + limit, by substitution."""
+    from scipy.optimize import lsq_linear
+
+    K = J[:, 1:].copy()
+    K[:, 0] += J[:, 0]
+    y = lsq_linear(K, b - J[:, 0] * limit, bounds=(box[0][1:], box[1][1:]), method="bvls").x
+    return np.concatenate([[y[0] + limit], y])

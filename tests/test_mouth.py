@@ -45,9 +45,13 @@ def test_open_mouth_is_mostly_dark_with_teeth_showing(open_mouth):
 
 
 def test_closed_mouth_shows_neither_cavity_nor_teeth(face, runtime, open_mouth):
+    """At rest the lips meet (the face builder closes base.obj's slit behind them): what lies
+    between them is their own dark crease, not the cavity, and no tooth (the slit showed the
+    incisal edges as a white line, 40 px, a tenth of the open mouth's teeth)."""
     closed = mouth_pixels(face, runtime, open_jaw=0)
     assert closed.area < 0.15 * open_mouth.area  # the lips' slit only
     assert closed.dark + closed.teeth < 0.1 * open_mouth.area
+    assert closed.teeth < 0.05 * open_mouth.teeth
 
 
 def _mouth_bag(face) -> np.ndarray:

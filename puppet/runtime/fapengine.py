@@ -34,8 +34,8 @@ file; index 0 = FAP 1) into the runtime's inputs: control point displacements an
     For the gaze FAPs (23-26) it caps only the lid skin they carry (``skin_reach``): the eyeball
     itself turns as far as asked, as eyes do past the point where the lids stop following;
   - then the rig's ``fap_follow``: of two FAPs whose feature points lie a hair's breadth apart
-    (inner and outer lip corner), the one with the larger value leads and the other follows just
-    enough that the inner corner never slides through the outer one.
+    (an inner and an outer lip point), the one with the larger value leads and the other follows just
+    enough that the inner lip never slides through the outer one.
 
   ``shown(values)`` gives the values the face then shows, which is what ``encode`` measures back;
   within these limits they are the values themselves (``puppet.runtime.foldlimits`` finds reach and follow).
