@@ -15,8 +15,10 @@ What is read:
   units and unit exponents are read past.
 - Local items: Usage, Usage Minimum/Maximum (a 4-byte usage carries its own page in the high 16
   bits; a shorter one takes the Usage Page in force at its main item, as Linux pages them: a
-  Usage Page item between the usages and their Input re-pages them). Designators, strings and
-  delimiters are read past.
+  Usage Page item between the usages and their Input re-pages them). A Minimum/Maximum range
+  runs over the values as written and is paged by the Maximum's size, as Linux does (a 1-byte
+  Minimum 0 with a 4-byte Maximum 0x0000FFFF gives page 0 usages; hid-tools gives none); a
+  Maximum with no Minimum starts from 0. Designators, strings and delimiters are read past.
 - Long items (prefix 0xFE) are skipped whole.
 - Unknown main items and items of the reserved type are skipped with a warning, as the Linux
   kernel does: some real pads' descriptors end in a stray 0x00 byte (Xbox One S on its Linux
@@ -189,7 +191,7 @@ def parse_descriptor(descriptor: bytes | Sequence[int]) -> list[ReportField]:
     g = _Globals()
     stack: list[_Globals] = []
     usages: list[tuple[int, int, bool]] = []  # (page, usage, short: paged at its main item)
-    usage_min: tuple[int, int, bool] | None = None
+    usage_min = 0  # as written (Linux pages a range by its Usage Maximum's size), 0 until one is given
     depth = 0
     offsets: dict[int, int] = {}  # report id -> next input bit offset
     uses_ids = False
@@ -239,7 +241,7 @@ def parse_descriptor(descriptor: bytes | Sequence[int]) -> list[ReportField]:
             elif tag not in (_OUTPUT, _FEATURE):
                 warnings.warn(f"report descriptor byte {at}: unknown main item 0x{prefix:02x} skipped "
                               "(as Linux skips it)", stacklevel=2)
-            usages, usage_min = [], None  # local items end with every main item
+            usages, usage_min = [], 0  # local items end with every main item
         elif kind == 1:  # global
             if tag == _USAGE_PAGE:
                 g.usage_page = value
@@ -270,26 +272,28 @@ def parse_descriptor(descriptor: bytes | Sequence[int]) -> list[ReportField]:
                 g = stack.pop()
             # physical extents, unit exponent, unit: not used
         elif kind == 2:  # local
-            full = (value >> 16, value & 0xFFFF, False) if size == 4 else (g.usage_page, value, True)
             if tag == _USAGE:
                 _at_most(len(usages) + 1, MAX_USAGES, "usages before a main item", at)
-                usages.append(full)
+                usages.append(_usage(value, size, g.usage_page))
             elif tag == _USAGE_MIN:
-                usage_min = full
+                usage_min = value
             elif tag == _USAGE_MAX:
-                if usage_min is None:
-                    raise DescriptorError(f"report descriptor byte {at}: Usage Maximum without Usage Minimum")
-                last = min(full[1], usage_min[1] + MAX_USAGES - len(usages) - 1)
-                if last < full[1]:
-                    warnings.warn(f"report descriptor byte {at}: Usage Maximum 0x{full[1]:x} cut to 0x{last:x}, "
+                last = min(value, usage_min + MAX_USAGES - len(usages) - 1)
+                if last < value:
+                    warnings.warn(f"report descriptor byte {at}: Usage Maximum 0x{value:x} cut to 0x{last:x}, "
                                   f"{MAX_USAGES:,} usages at the most (as Linux cuts it)", stacklevel=2)
-                usages.extend((usage_min[0], u, full[2]) for u in range(usage_min[1], last + 1))
-                usage_min = None
+                usages.extend(_usage(u, size, g.usage_page) for u in range(usage_min, last + 1))
             # designators, strings, delimiters: not used
         else:
             warnings.warn(f"report descriptor byte {at}: item 0x{prefix:02x} of the reserved type skipped "
                           "(as Linux skips it)", stacklevel=2)
     return fields
+
+
+def _usage(value: int, size: int, page: int) -> tuple[int, int, bool]:
+    """(page, usage, short): a 4-byte usage carries its page in its high 16 bits; a shorter one
+    takes the Usage Page in force (and again at its main item: ``_paged``)."""
+    return (value >> 16, value & 0xFFFF, False) if size == 4 else (page, value & 0xFFFF, True)
 
 
 def _paged(usages: list[tuple[int, int, bool]], page: int) -> tuple[tuple[int, int], ...]:
