@@ -26,7 +26,11 @@ What is read:
 
 Bounds (the kernel's, hid-core.c), so that no descriptor can make the parser allocate without
 limit: Report Size at most 256 bits, Report Count and the usages of one main item at most
-``MAX_USAGES`` (12,288), and a report at most ``MAX_REPORT_BYTES`` (16,384). Past them the
+``MAX_USAGES`` (12,288), and a report at most ``MAX_REPORT_BYTES`` (16,384). The kernel lets a
+descriptor repeat those in many reports and fields; we also bound the whole descriptor's input
+values (``MAX_INPUT_VALUES``, 16,384, each a channel) and the usages its input fields keep
+(``MAX_KEPT_USAGES``, 49,152; a variable field keeps one per value), about three times the most of
+135 real descriptors, so a few hundred bytes cannot ask for millions of channels. Past a bound the
 descriptor is refused with the byte offset, but for a Usage Minimum/Maximum range, which is cut
 to the bound with a warning (vendor pages often declare 0-0xFFFF). Inputs outside any numbered
 report in a descriptor that numbers its reports are kept as report 0 with a warning: no such
@@ -157,6 +161,8 @@ _SIZES = (0, 1, 2, 4)
 MAX_REPORT_SIZE = 256
 MAX_USAGES = 12288
 MAX_REPORT_BYTES = 16384
+MAX_INPUT_VALUES = 16384  # all reports together; the most of 135 real descriptors is 5,122 (an N-trig screen)
+MAX_KEPT_USAGES = 4 * MAX_USAGES  # all input fields together; the most of the 135 is 13,129 (an ITE keyboard)
 
 # item tags: main (type 0), global (type 1), local (type 2)
 _INPUT, _OUTPUT, _COLLECTION, _FEATURE, _END_COLLECTION = 0x8, 0x9, 0xA, 0xB, 0xC
@@ -194,6 +200,7 @@ def parse_descriptor(descriptor: bytes | Sequence[int]) -> list[ReportField]:
     usage_min = 0  # as written (Linux pages a range by its Usage Maximum's size), 0 until one is given
     depth = 0
     offsets: dict[int, int] = {}  # report id -> next input bit offset
+    values = kept = 0  # input values and usages kept, all fields together
     uses_ids = False
     i = 0
     while i < len(data):
@@ -226,12 +233,18 @@ def parse_descriptor(descriptor: bytes | Sequence[int]) -> list[ReportField]:
                     raise DescriptorError(f"report descriptor byte {at}: report {g.report_id} grows to "
                                           f"{offsets[g.report_id] // 8:,} bytes, expected at most "
                                           f"{MAX_REPORT_BYTES:,}")
-                constant = bool(value & 0x01)
+                constant, variable = bool(value & 0x01), bool(value & 0x02)
                 if not constant and g.report_size > 0 and g.report_count > 0:
+                    paged = _paged(usages, g.usage_page)
+                    paged = paged[:g.report_count] if variable else paged  # a variable field uses one per value
+                    values += g.report_count
+                    kept += len(paged)
+                    _at_most(values, MAX_INPUT_VALUES, "input values in all", at)
+                    _at_most(kept, MAX_KEPT_USAGES, "input usages in all", at)
                     fields.append(ReportField(
                         report_id=g.report_id, bit_offset=start, bit_size=g.report_size,
                         count=g.report_count, logical_min=g.logical_min, logical_max=logical_max,
-                        usages=_paged(usages, g.usage_page), variable=bool(value & 0x02), flags=value))
+                        usages=paged, variable=variable, flags=value))
             elif tag == _COLLECTION:
                 depth += 1
             elif tag == _END_COLLECTION:
