@@ -3,7 +3,8 @@ files, mappings, serial byte streams, OSC datagrams, and take folders with a par
 descriptors: tests/test_hid_descriptors.py). Only documented errors may come out (``PuppetError`` and its
 subclasses; ``MappingError`` and ``DeviceError`` for a take's mapping and devices), each input in
 bounded time (hypothesis's deadline) and bounded memory (tracemalloc's peak). Set
-PUPPET_FUZZ_SCALE (default 1) to multiply the examples, for a longer run; ``-s`` prints the tally."""
+PUPPET_FUZZ_SCALE (default 1) to multiply the examples; ``-s`` prints the tally. ``tools/fuzz.py``
+runs these same properties for as long as it is given and prints the counts."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ import json
 import os
 import shutil
 import tempfile
+import time
 import tracemalloc
 import warnings
 from collections import Counter
@@ -27,7 +29,7 @@ from devices.serial_port import MAX_FRAME, MAX_LINE, encode_cobs_frame, encode_s
 from puppet.arkit import import_csv
 from puppet.errors import PuppetError
 from puppet.fapfile import read_fap, write_fap
-from puppet.mapping import MappingError, parse_mapping
+from puppet.mapping import MappingError, load_mapping, parse_mapping
 from puppet.shipped import shipped_mappings
 from puppet.playback import FapPlayback
 from puppet.replay import retake
@@ -37,18 +39,21 @@ DOCUMENTED = (PuppetError, MappingError, DeviceError)
 MEMORY_BOUND = 32_000_000
 SCALE = int(os.environ.get("PUPPET_FUZZ_SCALE", "1"))
 TALLY: Counter = Counter()
+SLOWEST_MS: dict[str, float] = {}
 
 
 @pytest.fixture(scope="module", autouse=True)
 def report():
     yield
     print("\nfuzz tally:", dict(sorted(TALLY.items())))
+    print("fuzz slowest ms:", {kind: round(ms, 1) for kind, ms in sorted(SLOWEST_MS.items())})
 
 
-def _bounded(kind: str, action) -> object:
-    """Run ``action``; count what came out; fail on anything undocumented or a memory peak past
-    the bound."""
+def _bounded(kind: str, action, bound: int = MEMORY_BOUND) -> object:
+    """Run ``action``; count what came out (read, documented error, or anything else, which fails);
+    fail on a memory peak past ``bound`` too."""
     tracemalloc.start()
+    start = time.perf_counter()
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -57,10 +62,16 @@ def _bounded(kind: str, action) -> object:
     except DOCUMENTED:
         TALLY[f"{kind}: documented error"] += 1
         result = None
+    except Exception:
+        TALLY[f"{kind}: other"] += 1
+        raise
     finally:
         peak = tracemalloc.get_traced_memory()[1]
         tracemalloc.stop()
-    assert peak < MEMORY_BOUND, f"{kind}: {peak:,} bytes at the peak"
+        SLOWEST_MS[kind] = max(SLOWEST_MS.get(kind, 0.0), 1000 * (time.perf_counter() - start))
+    if peak >= bound:
+        TALLY[f"{kind}: over the memory bound"] += 1
+    assert peak < bound, f"{kind}: {peak:,} bytes at the peak"
     return result
 
 
@@ -139,10 +150,25 @@ MAPPING_NASTY = ["1e400", "1e308", "-1e308", "1e-320", ".nan", ".inf", "1_000", 
                  "!!python/object:os.system", "{", "[", "'", "\t", "~", "[]", "{}", "yes", "0x1F", "9" * 5000]
 
 
+def _seed_mappings() -> list[list[str]]:
+    """The shipped mappings' lines, an ARKit mapping's targets (1,234 of one shape) cut to their
+    first 20 and last 10: every key, kind and comment it has at a 40th of the parse, and a
+    spoiled line lands in its devices and channels as often as in its targets."""
+    seeds = []
+    for path in sorted(shipped_mappings().values()):
+        lines = path.read_text("utf-8").split("\n")
+        start = lines.index("targets:") + 1
+        seeds.append(lines[:start + 20] + lines[-10:] if len(lines) - start > 40 else lines)
+    return seeds
+
+
+MAPPING_SEEDS = _seed_mappings()
+
+
 @st.composite
 def near_valid_mapping(draw) -> str:
     """A shipped mapping with a few lines spoiled, cut, repeated or given nasty values."""
-    lines = draw(st.sampled_from(sorted(shipped_mappings().values()))).read_text("utf-8").split("\n")
+    lines = list(draw(st.sampled_from(MAPPING_SEEDS)))
     for _ in range(draw(st.integers(1, 4))):
         at = draw(st.integers(0, len(lines) - 1))
         how = draw(st.sampled_from(["value", "drop", "double", "indent", "insert"]))
@@ -160,9 +186,17 @@ def near_valid_mapping(draw) -> str:
 
 
 @settings(max_examples=150 * SCALE, deadline=5000, suppress_health_check=[HealthCheck.too_slow])
-@given(text=st.one_of(st.text(max_size=400), near_valid_mapping()))
+@given(text=st.one_of(st.text(max_size=400), near_valid_mapping(), st.binary(max_size=400)))
 def test_mapping_text(text):
-    _bounded("mapping", lambda: parse_mapping(text, "fuzz.yaml"))
+    """Text through ``parse_mapping``; bytes (not UTF-8, as often as not) through a file and
+    ``load_mapping``."""
+    if isinstance(text, str):
+        _bounded("mapping", lambda: parse_mapping(text, "fuzz.yaml"))
+        return
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "fuzz.yaml"
+        path.write_bytes(text)
+        _bounded("mapping", lambda: load_mapping(path))
 
 
 # -- serial byte streams ------------------------------------------------------------------------------
@@ -239,11 +273,15 @@ def test_osc_datagrams(datagram):
 
 @pytest.fixture(scope="module")
 def good_take(tmp_path_factory) -> Path:
-    root = tmp_path_factory.mktemp("fuzz")
+    return make_good_take(tmp_path_factory.mktemp("fuzz"))
+
+
+def make_good_take(root: Path) -> Path:
+    """A small imported take (20 frames, two channels) in ``root``: what the garbling starts from."""
     csv = root / "face.csv"
     csv.write_text("Timecode,BlendShapeCount,JawOpen,MouthSmileLeft\n"
                    + "".join(f"00:00:00:{i:02d}.000,2,{i / 20:.2f},{(i % 5) / 5:.2f}\n" for i in range(20)))
-    mapping = root / "small.yaml"  # the shipped ARKit mapping takes a second to parse: keep examples quick
+    mapping = root / "small.yaml"  # two targets: the examples stay quick
     mapping.write_text("devices:\n  csv: {url: 'replay:///dev/null'}\nchannels:\n  csv.JawOpen: {smoothing: {type: one_euro, min_cutoff: 1.0, beta: 0.5}}\n"
                        "  csv.MouthSmileLeft: {dead_zone: 0.05}\ntargets:\n"
                        "  - {fap: open_jaw, source: csv.JawOpen, range: [0, 700]}\n"
