@@ -25,7 +25,8 @@ from hypothesis import strategies as st
 
 from devices.base import DeviceError
 from devices.osc_packet import parse_datagram
-from devices.serial_port import MAX_FRAME, MAX_LINE, encode_cobs_frame, encode_slip_frame, make_parser
+from devices.serial_port import (MAX_FRAME, MAX_LINE, encode_ascii_line, encode_cobs_frame, encode_slip_frame,
+                                 make_parser)
 from puppet.arkit import import_csv
 from puppet.errors import PuppetError
 from puppet.fapfile import read_fap, write_fap
@@ -204,12 +205,13 @@ def test_mapping_text(text):
 @st.composite
 def serial_stream(draw) -> tuple[str, list[bytes]]:
     """A protocol and the chunks a port hands over: valid frames and lines, garbage, cuts, floods."""
-    protocol = draw(st.sampled_from(["ascii", "cobs", "slip"]))
+    protocol = draw(st.sampled_from(["ascii", "ascii nmea", "cobs", "slip"]))
     parts = []
     for _ in range(draw(st.integers(1, 12))):
         how = draw(st.sampled_from(["good", "garbage", "flood", "flip"]))
         values = draw(st.lists(st.floats(-1000, 1000), min_size=1, max_size=8))
-        good = (b",".join(b"%g" % v for v in values) + b"\n" if protocol == "ascii"
+        good = (encode_ascii_line(values, checksum="nmea" if protocol == "ascii nmea" else "none")
+                if protocol.startswith("ascii")
                 else encode_cobs_frame(values) if protocol == "cobs" else encode_slip_frame(values))
         if how == "good":
             parts.append(good)
@@ -231,13 +233,14 @@ def serial_stream(draw) -> tuple[str, list[bytes]]:
 def test_serial_framing(case):
     """Every chunk read or counted as bad; readings hold finite numbers only."""
     protocol, chunks = case
-    parser = make_parser(protocol)
+    parser = make_parser(protocol.split()[0], checksum="nmea" if protocol == "ascii nmea" else "none")
 
     def feed() -> list:
         return [reading for chunk in chunks for reading in parser.feed(chunk)]
 
     for reading in _bounded(f"serial {protocol}", feed) or []:
         assert all(np.isfinite(v) for v in reading.values())
+    TALLY[f"serial {protocol}: bad frames skipped"] += parser.bad
 
 
 # -- OSC datagrams -------------------------------------------------------------------------------------
@@ -351,6 +354,8 @@ def _spoil(folder: Path, part: str, how: str, arg) -> None:
                                                                    HealthCheck.function_scoped_fixture])
 @given(spoilt=st.lists(damage(), min_size=1, max_size=2))
 def test_garbled_take_folders(good_take, shared, spoilt):
+    """Replay (``retake``) and play (``FapPlayback``, which render and export read a take through
+    as well) a copy of a good take with one or two of its parts garbled."""
     face, runtime = shared
     with tempfile.TemporaryDirectory() as scratch:
         folder = Path(scratch) / "take_001"
