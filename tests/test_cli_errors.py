@@ -133,6 +133,37 @@ def test_with_a_display_bad_input_is_refused_before_the_window_opens(line, place
     assert not opened
 
 
+ON_XVFB = """
+import contextlib, io, json, sys
+from puppet import cli
+for argv in json.loads(sys.argv[1]):
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        try:
+            code = cli.main(argv)
+        except SystemExit as exit_:
+            code = exit_.code
+    print(json.dumps([argv, code, err.getvalue()]), flush=True)
+"""
+
+
+def test_on_a_real_display_bad_input_is_refused_before_a_window_opens(place):
+    """The same invocations under Xvfb with the real window code: one that got past its checks
+    would open a window and wait there (the timeout)."""
+    import json
+    import shutil
+
+    if shutil.which("xvfb-run") is None:
+        pytest.skip("no xvfb-run here (tools/setup.sh installs xvfb where it can)")
+    argvs = [_argv(line, place) for line in WITH_A_DISPLAY]
+    run = subprocess.run(["xvfb-run", "-a", sys.executable, "-c", ON_XVFB, json.dumps(argvs)], capture_output=True,
+                         text=True, env={**os.environ, "PYTHONPATH": str(ROOT)}, cwd=place["tmp"], timeout=300)
+    results = [json.loads(line) for line in run.stdout.splitlines() if line.startswith("[")]
+    assert len(results) == len(argvs), run.stdout + run.stderr
+    for _, code, err in results:
+        _one_clear_line(code, err)
+
+
 @pytest.mark.parametrize("line", ["render {take} -o /nonexistent/dir/x.mp4", "replay {listed} -o {tmp}/r.fap",
                                   "pick-landmarks {photo} -o {tmp}/p.json --port 99999",
                                   "import-arkit {csv} --name 'bad name!' --takes {tmp}/t"])
