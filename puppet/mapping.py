@@ -132,9 +132,11 @@ TAU_LIMIT = 3600.0      # seconds
 RATE_LIMIT = 1e6        # shaped units per second
 GAMMA_LIMIT = 100.0
 ALIAS_BUDGET = 10_000   # values a document's YAML aliases may add once expanded
+MAX_MAPPING_CHARS = 1 << 20  # a mapping's length (the shipped ARKit mappings are 95 KB)
 """Every number a mapping holds has a sane range (the schema says the same), so that no mapping
 that loads can make a NaN or an infinity anywhere in the shaping: a cutoff of 1e308 Hz, a range
-of +-1e308 or a min and max 1e-320 apart are refused with the file, line and key path."""
+of +-1e308 or a min and max 1e-320 apart are refused with the file, line and key path. A mapping
+of more than ``MAX_MAPPING_CHARS`` is refused unread (40,000 targets, 2.8 MB, held 195 MB)."""
 
 
 def fap_names() -> list[str]:
@@ -174,7 +176,8 @@ def load_mapping(path: str | os.PathLike) -> Mapping:
     """Read, check and compile a mapping file; ``MappingError`` lists every problem."""
     file = str(path)
     try:
-        text = Path(path).read_text(encoding="utf-8")
+        with open(path, encoding="utf-8") as stream:
+            text = stream.read(MAX_MAPPING_CHARS + 1)
     except (OSError, UnicodeDecodeError) as exc:
         raise MappingError(file, [Problem("", None, f"cannot read the mapping: {exc}")]) from None
     return parse_mapping(text, file)
@@ -182,6 +185,9 @@ def load_mapping(path: str | os.PathLike) -> Mapping:
 
 def parse_mapping(text: str, file: str = "<mapping>") -> Mapping:
     """A mapping from YAML text (``file`` names it in errors)."""
+    if len(text) > MAX_MAPPING_CHARS:
+        raise MappingError(file, [Problem("", None, f"expected a mapping of at most {MAX_MAPPING_CHARS >> 20} MiB "
+                                                    f"(the shipped ARKit mappings are 95 KB), found more")])
     try:
         lines, duplicates, added, data = _load(text)
     except yaml.YAMLError as exc:
