@@ -50,9 +50,9 @@ def report():
     print("fuzz slowest ms:", {kind: round(ms, 1) for kind, ms in sorted(SLOWEST_MS.items())})
 
 
-def _bounded(kind: str, action, bound: int = MEMORY_BOUND) -> object:
+def _bounded(kind: str, action) -> object:
     """Run ``action``; count what came out (read, documented error, or anything else, which fails);
-    fail on a memory peak past ``bound`` too."""
+    fail on a memory peak past ``MEMORY_BOUND`` too."""
     tracemalloc.start()
     start = time.perf_counter()
     try:
@@ -70,9 +70,9 @@ def _bounded(kind: str, action, bound: int = MEMORY_BOUND) -> object:
         peak = tracemalloc.get_traced_memory()[1]
         tracemalloc.stop()
         SLOWEST_MS[kind] = max(SLOWEST_MS.get(kind, 0.0), 1000 * (time.perf_counter() - start))
-    if peak >= bound:
+    if peak >= MEMORY_BOUND:
         TALLY[f"{kind}: over the memory bound"] += 1
-    assert peak < bound, f"{kind}: {peak:,} bytes at the peak"
+    assert peak < MEMORY_BOUND, f"{kind}: {peak:,} bytes at the peak"
     return result
 
 
@@ -276,11 +276,8 @@ def test_osc_datagrams(datagram):
 
 @pytest.fixture(scope="module")
 def good_take(tmp_path_factory) -> Path:
-    return make_good_take(tmp_path_factory.mktemp("fuzz"))
-
-
-def make_good_take(root: Path) -> Path:
-    """A small imported take (20 frames, two channels) in ``root``: what the garbling starts from."""
+    """A small imported take (20 frames, two channels): what the garbling starts from."""
+    root = tmp_path_factory.mktemp("fuzz")
     csv = root / "face.csv"
     csv.write_text("Timecode,BlendShapeCount,JawOpen,MouthSmileLeft\n"
                    + "".join(f"00:00:00:{i:02d}.000,2,{i / 20:.2f},{(i % 5) / 5:.2f}\n" for i in range(20)))
