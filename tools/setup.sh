@@ -29,6 +29,17 @@ if ! command -v xvfb-run >/dev/null && [ "$(id -u)" = 0 ] && command -v apt-get 
   apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq xvfb xauth >/dev/null
 fi
 
+# python-rtmidi (the midi extra) has no wheel for the newest Pythons; building it needs ALSA's headers.
+if ! "$PYTHON" -c 'import sys; sys.exit(sys.version_info >= (3, 13))' && ! pkg-config --exists alsa 2>/dev/null; then
+  if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
+    echo "setup: installing libasound2-dev so python-rtmidi can be built for $("$PYTHON" --version 2>&1)"
+    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libasound2-dev pkg-config >/dev/null
+  else
+    echo "setup: python-rtmidi must be built for this Python; install ALSA's headers (sudo apt-get install libasound2-dev)" >&2
+    exit 1
+  fi
+fi
+
 if [ ! -x "$VENV/bin/python" ]; then
   echo "setup: creating $VENV"
   "$PYTHON" -m venv "$VENV"
