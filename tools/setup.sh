@@ -30,7 +30,7 @@ if ! command -v xvfb-run >/dev/null && [ "$(id -u)" = 0 ] && command -v apt-get 
 fi
 
 # python-rtmidi (the midi extra) has no wheel for the newest Pythons; building it needs ALSA's headers.
-if ! "$PYTHON" -c 'import sys; sys.exit(sys.version_info >= (3, 13))' && ! pkg-config --exists alsa 2>/dev/null; then
+if "$PYTHON" -c 'import sys; sys.exit(sys.version_info < (3, 13))' && ! pkg-config --exists alsa 2>/dev/null; then
   if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
     echo "setup: installing libasound2-dev so python-rtmidi can be built for $("$PYTHON" --version 2>&1)"
     apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libasound2-dev pkg-config >/dev/null
