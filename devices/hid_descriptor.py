@@ -15,16 +15,23 @@ What is read:
   units and unit exponents are read past.
 - Local items: Usage, Usage Minimum/Maximum (a 4-byte usage carries its own page in the high 16
   bits; a shorter one takes the Usage Page in force at its main item, as Linux pages them: a
-  Usage Page item between the usages and their Input re-pages them). Designators, strings and
-  delimiters are read past.
+  Usage Page item between the usages and their Input re-pages them). A Minimum/Maximum range
+  runs over the values as written and is paged by the Maximum's size, as Linux does (a 1-byte
+  Minimum 0 with a 4-byte Maximum 0x0000FFFF gives page 0 usages; hid-tools gives none); a
+  Maximum with no Minimum starts from 0. Designators, strings and delimiters are read past.
 - Long items (prefix 0xFE) are skipped whole.
 - Unknown main items and items of the reserved type are skipped with a warning, as the Linux
   kernel does: some real pads' descriptors end in a stray 0x00 byte (Xbox One S on its Linux
   firmware, Xbox Elite 2, 8BitDo SN30 Pro).
 
-Bounds (the kernel's, hid-core.c), so that no descriptor can make the parser allocate without
-limit: Report Size at most 256 bits, Report Count and the usages of one main item at most
-``MAX_USAGES`` (12,288), and a report at most ``MAX_REPORT_BYTES`` (16,384). Past them the
+Bounds (the kernel's, hid-core.c), so that no descriptor can make the parser allocate or work
+without limit: a descriptor at most ``MAX_DESCRIPTOR_BYTES`` (4,096), Push nested at most
+``MAX_PUSH`` (4) deep, Report Size at most 256 bits, Report Count and the usages of one main item
+at most ``MAX_USAGES`` (12,288), and a report at most ``MAX_REPORT_BYTES`` (16,384). The kernel lets a
+descriptor repeat those in many reports and fields; we also bound the whole descriptor's input
+values (``MAX_INPUT_VALUES``, 16,384, each a channel) and the usages its input fields keep
+(``MAX_KEPT_USAGES``, 49,152; a variable field keeps one per value), about three times the most of
+135 real descriptors, so a few hundred bytes cannot ask for millions of channels. Past a bound the
 descriptor is refused with the byte offset, but for a Usage Minimum/Maximum range, which is cut
 to the bound with a warning (vendor pages often declare 0-0xFFFF). Inputs outside any numbered
 report in a descriptor that numbers its reports are kept as report 0 with a warning: no such
@@ -155,6 +162,10 @@ _SIZES = (0, 1, 2, 4)
 MAX_REPORT_SIZE = 256
 MAX_USAGES = 12288
 MAX_REPORT_BYTES = 16384
+MAX_DESCRIPTOR_BYTES = 4096  # Linux's HID_MAX_DESCRIPTOR_SIZE; hidapi reads no more either
+MAX_PUSH = 4  # Linux's HID_GLOBAL_STACK_SIZE
+MAX_INPUT_VALUES = 16384  # all reports together; the most of 135 real descriptors is 5,122 (an N-trig screen)
+MAX_KEPT_USAGES = 4 * MAX_USAGES  # all input fields together; the most of the 135 is 13,129 (an ITE keyboard)
 
 # item tags: main (type 0), global (type 1), local (type 2)
 _INPUT, _OUTPUT, _COLLECTION, _FEATURE, _END_COLLECTION = 0x8, 0x9, 0xA, 0xB, 0xC
@@ -185,13 +196,15 @@ def _signed(value: int, size: int) -> int:
 def parse_descriptor(descriptor: bytes | Sequence[int]) -> list[ReportField]:
     """The input fields a report descriptor declares, in declaration order (padding left out)."""
     data = bytes(descriptor)
+    _at_most(len(data), MAX_DESCRIPTOR_BYTES, "a descriptor of", 0, " bytes")
     fields: list[ReportField] = []
     g = _Globals()
     stack: list[_Globals] = []
-    usages: list[tuple[int, int, bool]] = []  # (page, usage, short: paged at its main item)
-    usage_min: tuple[int, int, bool] | None = None
+    usages = _Usages()
+    usage_min = 0  # as written (Linux pages a range by its Usage Maximum's size), 0 until one is given
     depth = 0
     offsets: dict[int, int] = {}  # report id -> next input bit offset
+    values = kept = 0  # input values and usages kept, all fields together
     uses_ids = False
     i = 0
     while i < len(data):
@@ -224,12 +237,17 @@ def parse_descriptor(descriptor: bytes | Sequence[int]) -> list[ReportField]:
                     raise DescriptorError(f"report descriptor byte {at}: report {g.report_id} grows to "
                                           f"{offsets[g.report_id] // 8:,} bytes, expected at most "
                                           f"{MAX_REPORT_BYTES:,}")
-                constant = bool(value & 0x01)
+                constant, variable = bool(value & 0x01), bool(value & 0x02)
                 if not constant and g.report_size > 0 and g.report_count > 0:
+                    paged = usages.paged(g.usage_page, g.report_count if variable else MAX_USAGES)
+                    values += g.report_count
+                    kept += len(paged)
+                    _at_most(values, MAX_INPUT_VALUES, "input values in all", at)
+                    _at_most(kept, MAX_KEPT_USAGES, "input usages in all", at)
                     fields.append(ReportField(
                         report_id=g.report_id, bit_offset=start, bit_size=g.report_size,
                         count=g.report_count, logical_min=g.logical_min, logical_max=logical_max,
-                        usages=_paged(usages, g.usage_page), variable=bool(value & 0x02), flags=value))
+                        usages=paged, variable=variable, flags=value))
             elif tag == _COLLECTION:
                 depth += 1
             elif tag == _END_COLLECTION:
@@ -239,7 +257,7 @@ def parse_descriptor(descriptor: bytes | Sequence[int]) -> list[ReportField]:
             elif tag not in (_OUTPUT, _FEATURE):
                 warnings.warn(f"report descriptor byte {at}: unknown main item 0x{prefix:02x} skipped "
                               "(as Linux skips it)", stacklevel=2)
-            usages, usage_min = [], None  # local items end with every main item
+            usages, usage_min = _Usages(), 0  # local items end with every main item
         elif kind == 1:  # global
             if tag == _USAGE_PAGE:
                 g.usage_page = value
@@ -263,6 +281,7 @@ def parse_descriptor(descriptor: bytes | Sequence[int]) -> list[ReportField]:
                 _at_most(value, MAX_USAGES, "Report Count", at)
                 g.report_count = value
             elif tag == _PUSH:
+                _at_most(len(stack) + 1, MAX_PUSH, "Push nested", at, " deep")
                 stack.append(g.copy())
             elif tag == _POP:
                 if not stack:
@@ -270,21 +289,17 @@ def parse_descriptor(descriptor: bytes | Sequence[int]) -> list[ReportField]:
                 g = stack.pop()
             # physical extents, unit exponent, unit: not used
         elif kind == 2:  # local
-            full = (value >> 16, value & 0xFFFF, False) if size == 4 else (g.usage_page, value, True)
             if tag == _USAGE:
-                _at_most(len(usages) + 1, MAX_USAGES, "usages before a main item", at)
-                usages.append(full)
+                _at_most(usages.count + 1, MAX_USAGES, "usages before a main item", at)
+                usages.add(value, value, size, g.usage_page)
             elif tag == _USAGE_MIN:
-                usage_min = full
+                usage_min = value
             elif tag == _USAGE_MAX:
-                if usage_min is None:
-                    raise DescriptorError(f"report descriptor byte {at}: Usage Maximum without Usage Minimum")
-                last = min(full[1], usage_min[1] + MAX_USAGES - len(usages) - 1)
-                if last < full[1]:
-                    warnings.warn(f"report descriptor byte {at}: Usage Maximum 0x{full[1]:x} cut to 0x{last:x}, "
+                last = min(value, usage_min + MAX_USAGES - usages.count - 1)
+                if last < value:
+                    warnings.warn(f"report descriptor byte {at}: Usage Maximum 0x{value:x} cut to 0x{last:x}, "
                                   f"{MAX_USAGES:,} usages at the most (as Linux cuts it)", stacklevel=2)
-                usages.extend((usage_min[0], u, full[2]) for u in range(usage_min[1], last + 1))
-                usage_min = None
+                usages.add(usage_min, last, size, g.usage_page)
             # designators, strings, delimiters: not used
         else:
             warnings.warn(f"report descriptor byte {at}: item 0x{prefix:02x} of the reserved type skipped "
@@ -292,22 +307,46 @@ def parse_descriptor(descriptor: bytes | Sequence[int]) -> list[ReportField]:
     return fields
 
 
-def _paged(usages: list[tuple[int, int, bool]], page: int) -> tuple[tuple[int, int], ...]:
-    """(page, usage) pairs, the short usages read since the last one on ``page`` (the Usage Page
-    in force at their main item) moved onto it, as Linux's hid_concatenate_last_usage_page does."""
-    paged = [(p, u) for p, u, _ in usages]
-    for i in range(len(usages) - 1, -1, -1):
-        p, u, short = usages[i]
-        if short and p == page:
-            break
-        if short:
-            paged[i] = (page, u)
-    return tuple(paged)
+class _Usages:
+    """The usages read since the last main item, as runs (first, last, page) of values as written:
+    ``page`` None for 4-byte usages, which carry their own page in the high 16 bits; a shorter
+    one's page is the Usage Page in force when it was read, and again at its main item. Runs are
+    expanded only for an Input, and only as far as it uses them, so an Output or Feature item
+    with a usage range of 12,288 costs nothing."""
+
+    def __init__(self) -> None:
+        self.runs: list[tuple[int, int, int | None]] = []
+        self.count = 0
+
+    def add(self, first: int, last: int, size: int, page: int) -> None:
+        if last >= first:
+            self.runs.append((first, last, None if size == 4 else page))
+            self.count += last - first + 1
+
+    def paged(self, page: int, limit: int) -> tuple[tuple[int, int], ...]:
+        """The first ``limit`` (page, usage) pairs, the short usages read since the last one on
+        ``page`` (the Usage Page in force at their main item) moved onto it, as Linux's
+        hid_concatenate_last_usage_page does."""
+        runs = list(self.runs)
+        for i in range(len(runs) - 1, -1, -1):
+            first, last, own = runs[i]
+            if own is not None and own == page:
+                break
+            if own is not None:
+                runs[i] = (first, last, page)
+        out: list[tuple[int, int]] = []
+        for first, last, own in runs:
+            stop = min(last + 1, first + limit - len(out))
+            out.extend((u >> 16, u & 0xFFFF) if own is None else (own, u) for u in range(first, stop))
+            if len(out) >= limit:
+                break
+        return tuple(out)
 
 
-def _at_most(value: int, limit: int, what: str, at: int) -> None:
+def _at_most(value: int, limit: int, what: str, at: int, unit: str = "") -> None:
     if value > limit:
-        raise DescriptorError(f"report descriptor byte {at}: {what} {value:,}, expected at most {limit:,}")
+        raise DescriptorError(f"report descriptor byte {at}: {what} {value:,}{unit}, expected at most "
+                              f"{limit:,}{unit}")
 
 
 # -- channels and extraction ---------------------------------------------------------------------

@@ -860,6 +860,22 @@ def test_billion_laughs_is_refused_at_once_in_bounded_memory():
     assert "a list of 60 items" in msg and len(msg) < 400
 
 
+def test_a_mapping_over_a_mebibyte_is_refused_unread(tmp_path):
+    """40,000 targets (2.8 MB) held 195 MB and took a minute to check."""
+    import tracemalloc
+
+    path = tmp_path / "huge.yaml"
+    path.write_text("targets:\n" + "  - {fap: open_jaw, source: box.ch0, range: [0, 1]}\n" * 40_000)
+    tracemalloc.start()
+    try:
+        with pytest.raises(MappingError, match=r"huge.yaml: expected a mapping of at most 1 MiB"):
+            load_mapping(path)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 20_000_000
+
+
 @pytest.mark.parametrize(("url", "option", "hint"), [
     ("midi://nanoKONTROL2", "chanel", "did you mean 'channel'?"),
     ("osc://127.0.0.1:39539", "chanel", "expected no options"),
