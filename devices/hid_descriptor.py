@@ -58,7 +58,7 @@ Scaling (``ReportLayout``, unless ``raw=True``):
 from __future__ import annotations
 
 import warnings
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -197,15 +197,23 @@ def parse_descriptor(descriptor: bytes | Sequence[int]) -> list[ReportField]:
     """The input fields a report descriptor declares, in declaration order (padding left out)."""
     data = bytes(descriptor)
     _at_most(len(data), MAX_DESCRIPTOR_BYTES, "a descriptor of", 0, " bytes")
-    fields: list[ReportField] = []
-    g = _Globals()
-    stack: list[_Globals] = []
-    usages = _Usages()
-    usage_min = 0  # as written (Linux pages a range by its Usage Maximum's size), 0 until one is given
-    depth = 0
-    offsets: dict[int, int] = {}  # report id -> next input bit offset
-    values = kept = 0  # input values and usages kept, all fields together
-    uses_ids = False
+    reader = _Reader()
+    for at, prefix, kind, tag, size, value in _items(data):
+        if kind == 0:
+            reader.main(at, prefix, tag, value)
+        elif kind == 1:
+            reader.global_item(at, tag, size, value)
+        elif kind == 2:
+            reader.local_item(at, tag, size, value)
+        else:
+            warnings.warn(f"report descriptor byte {at}: item 0x{prefix:02x} of the reserved type skipped "
+                          "(as Linux skips it)", stacklevel=2)
+    return reader.fields
+
+
+def _items(data: bytes) -> Iterator[tuple[int, int, int, int, int, int]]:
+    """(byte offset, prefix, kind, tag, data size, data value) of each short item; long items
+    (0xFE) are stepped over."""
     i = 0
     while i < len(data):
         prefix = data[i]
@@ -215,96 +223,116 @@ def parse_descriptor(descriptor: bytes | Sequence[int]) -> list[ReportField]:
             i += 3 + data[i + 1]
             continue
         size = _SIZES[prefix & 3]
-        kind = (prefix >> 2) & 3
-        tag = prefix >> 4
         if i + 1 + size > len(data):
             raise DescriptorError(f"report descriptor byte {i}: item 0x{prefix:02x} needs {size} data "
                                   f"bytes, {len(data) - i - 1} left")
-        value = int.from_bytes(data[i + 1:i + 1 + size], "little")
-        at = i
+        yield i, prefix, (prefix >> 2) & 3, prefix >> 4, size, int.from_bytes(data[i + 1:i + 1 + size], "little")
         i += 1 + size
-        if kind == 0:  # main
-            if tag == _INPUT:
-                if g.report_id == 0 and uses_ids:
-                    warnings.warn(f"report descriptor byte {at}: an input without a Report ID in a descriptor "
-                                  "that numbers its reports (no such report arrives)", stacklevel=2)
-                logical_max = g.logical_max
-                if g.logical_min >= 0 > logical_max:  # 0x25 0xFF meaning 255, a common slip
-                    logical_max &= (1 << (8 * g.logical_max_size)) - 1
-                start = offsets.get(g.report_id, 0)
-                offsets[g.report_id] = start + g.report_size * g.report_count
-                if offsets[g.report_id] > 8 * MAX_REPORT_BYTES:
-                    raise DescriptorError(f"report descriptor byte {at}: report {g.report_id} grows to "
-                                          f"{offsets[g.report_id] // 8:,} bytes, expected at most "
-                                          f"{MAX_REPORT_BYTES:,}")
-                constant, variable = bool(value & 0x01), bool(value & 0x02)
-                if not constant and g.report_size > 0 and g.report_count > 0:
-                    paged = usages.paged(g.usage_page, g.report_count if variable else MAX_USAGES)
-                    values += g.report_count
-                    kept += len(paged)
-                    _at_most(values, MAX_INPUT_VALUES, "input values in all", at)
-                    _at_most(kept, MAX_KEPT_USAGES, "input usages in all", at)
-                    fields.append(ReportField(
-                        report_id=g.report_id, bit_offset=start, bit_size=g.report_size,
-                        count=g.report_count, logical_min=g.logical_min, logical_max=logical_max,
-                        usages=paged, variable=variable, flags=value))
-            elif tag == _COLLECTION:
-                depth += 1
-            elif tag == _END_COLLECTION:
-                if depth == 0:
-                    raise DescriptorError(f"report descriptor byte {at}: End Collection without Collection")
-                depth -= 1
-            elif tag not in (_OUTPUT, _FEATURE):
-                warnings.warn(f"report descriptor byte {at}: unknown main item 0x{prefix:02x} skipped "
-                              "(as Linux skips it)", stacklevel=2)
-            usages, usage_min = _Usages(), 0  # local items end with every main item
-        elif kind == 1:  # global
-            if tag == _USAGE_PAGE:
-                g.usage_page = value
-            elif tag == _LOGICAL_MIN:
-                g.logical_min = _signed(value, size)
-            elif tag == _LOGICAL_MAX:
-                g.logical_max = _signed(value, size)
-                g.logical_max_size = size
-            elif tag == _REPORT_SIZE:
-                _at_most(value, MAX_REPORT_SIZE, "Report Size", at)
-                g.report_size = value
-            elif tag == _REPORT_ID:
-                if not 1 <= value <= 255:
-                    raise DescriptorError(f"report descriptor byte {at}: Report ID {value} (must be 1..255)")
-                if not uses_ids and offsets:
-                    warnings.warn(f"report descriptor byte {at}: a Report ID after unnumbered inputs "
-                                  "(no report without an ID arrives)", stacklevel=2)
-                uses_ids = True
-                g.report_id = value
-            elif tag == _REPORT_COUNT:
-                _at_most(value, MAX_USAGES, "Report Count", at)
-                g.report_count = value
-            elif tag == _PUSH:
-                _at_most(len(stack) + 1, MAX_PUSH, "Push nested", at, " deep")
-                stack.append(g.copy())
-            elif tag == _POP:
-                if not stack:
-                    raise DescriptorError(f"report descriptor byte {at}: Pop without Push")
-                g = stack.pop()
-            # physical extents, unit exponent, unit: not used
-        elif kind == 2:  # local
-            if tag == _USAGE:
-                _at_most(usages.count + 1, MAX_USAGES, "usages before a main item", at)
-                usages.add(value, value, size, g.usage_page)
-            elif tag == _USAGE_MIN:
-                usage_min = value
-            elif tag == _USAGE_MAX:
-                last = min(value, usage_min + MAX_USAGES - usages.count - 1)
-                if last < value:
-                    warnings.warn(f"report descriptor byte {at}: Usage Maximum 0x{value:x} cut to 0x{last:x}, "
-                                  f"{MAX_USAGES:,} usages at the most (as Linux cuts it)", stacklevel=2)
-                usages.add(usage_min, last, size, g.usage_page)
-            # designators, strings, delimiters: not used
-        else:
-            warnings.warn(f"report descriptor byte {at}: item 0x{prefix:02x} of the reserved type skipped "
-                          "(as Linux skips it)", stacklevel=2)
-    return fields
+
+
+class _Reader:
+    """The state of a descriptor read item by item: globals (and their Push stack), the local
+    usages since the last main item, the collections open, each report's next bit offset, and
+    the fields and usages kept so far (all bounded, see the MAX_ limits)."""
+
+    def __init__(self) -> None:
+        self.fields: list[ReportField] = []
+        self.g = _Globals()
+        self.stack: list[_Globals] = []
+        self.usages = _Usages()
+        self.usage_min = 0  # as written (Linux pages a range by its Usage Maximum's size), 0 until one is given
+        self.depth = 0
+        self.offsets: dict[int, int] = {}  # report id -> next input bit offset
+        self.values = self.kept = 0  # input values and usages kept, all fields together
+        self.uses_ids = False
+
+    def main(self, at: int, prefix: int, tag: int, value: int) -> None:
+        if tag == _INPUT:
+            self.input(at, value)
+        elif tag == _COLLECTION:
+            self.depth += 1
+        elif tag == _END_COLLECTION:
+            if self.depth == 0:
+                raise DescriptorError(f"report descriptor byte {at}: End Collection without Collection")
+            self.depth -= 1
+        elif tag not in (_OUTPUT, _FEATURE):
+            warnings.warn(f"report descriptor byte {at}: unknown main item 0x{prefix:02x} skipped "
+                          "(as Linux skips it)", stacklevel=3)
+        self.usages, self.usage_min = _Usages(), 0  # local items end with every main item
+
+    def input(self, at: int, value: int) -> None:
+        g = self.g
+        if g.report_id == 0 and self.uses_ids:
+            warnings.warn(f"report descriptor byte {at}: an input without a Report ID in a descriptor "
+                          "that numbers its reports (no such report arrives)", stacklevel=4)
+        logical_max = g.logical_max
+        if g.logical_min >= 0 > logical_max:  # 0x25 0xFF meaning 255, a common slip
+            logical_max &= (1 << (8 * g.logical_max_size)) - 1
+        start = self.offsets.get(g.report_id, 0)
+        self.offsets[g.report_id] = start + g.report_size * g.report_count
+        if self.offsets[g.report_id] > 8 * MAX_REPORT_BYTES:
+            raise DescriptorError(f"report descriptor byte {at}: report {g.report_id} grows to "
+                                  f"{self.offsets[g.report_id] // 8:,} bytes, expected at most "
+                                  f"{MAX_REPORT_BYTES:,}")
+        constant, variable = bool(value & 0x01), bool(value & 0x02)
+        if constant or g.report_size == 0 or g.report_count == 0:
+            return
+        paged = self.usages.paged(g.usage_page, g.report_count if variable else MAX_USAGES)
+        self.values += g.report_count
+        self.kept += len(paged)
+        _at_most(self.values, MAX_INPUT_VALUES, "input values in all", at)
+        _at_most(self.kept, MAX_KEPT_USAGES, "input usages in all", at)
+        self.fields.append(ReportField(
+            report_id=g.report_id, bit_offset=start, bit_size=g.report_size,
+            count=g.report_count, logical_min=g.logical_min, logical_max=logical_max,
+            usages=paged, variable=variable, flags=value))
+
+    def global_item(self, at: int, tag: int, size: int, value: int) -> None:
+        """Usage page, logical range, report size / ID / count, Push and Pop (physical extents,
+        unit exponent and unit are not used)."""
+        g = self.g
+        if tag == _USAGE_PAGE:
+            g.usage_page = value
+        elif tag == _LOGICAL_MIN:
+            g.logical_min = _signed(value, size)
+        elif tag == _LOGICAL_MAX:
+            g.logical_max = _signed(value, size)
+            g.logical_max_size = size
+        elif tag == _REPORT_SIZE:
+            _at_most(value, MAX_REPORT_SIZE, "Report Size", at)
+            g.report_size = value
+        elif tag == _REPORT_ID:
+            if not 1 <= value <= 255:
+                raise DescriptorError(f"report descriptor byte {at}: Report ID {value} (must be 1..255)")
+            if not self.uses_ids and self.offsets:
+                warnings.warn(f"report descriptor byte {at}: a Report ID after unnumbered inputs "
+                              "(no report without an ID arrives)", stacklevel=3)
+            self.uses_ids = True
+            g.report_id = value
+        elif tag == _REPORT_COUNT:
+            _at_most(value, MAX_USAGES, "Report Count", at)
+            g.report_count = value
+        elif tag == _PUSH:
+            _at_most(len(self.stack) + 1, MAX_PUSH, "Push nested", at, " deep")
+            self.stack.append(g.copy())
+        elif tag == _POP:
+            if not self.stack:
+                raise DescriptorError(f"report descriptor byte {at}: Pop without Push")
+            self.g = self.stack.pop()
+
+    def local_item(self, at: int, tag: int, size: int, value: int) -> None:
+        """Usages and usage ranges (designators, strings and delimiters are not used)."""
+        if tag == _USAGE:
+            _at_most(self.usages.count + 1, MAX_USAGES, "usages before a main item", at)
+            self.usages.add(value, value, size, self.g.usage_page)
+        elif tag == _USAGE_MIN:
+            self.usage_min = value
+        elif tag == _USAGE_MAX:
+            last = min(value, self.usage_min + MAX_USAGES - self.usages.count - 1)
+            if last < value:
+                warnings.warn(f"report descriptor byte {at}: Usage Maximum 0x{value:x} cut to 0x{last:x}, "
+                              f"{MAX_USAGES:,} usages at the most (as Linux cuts it)", stacklevel=3)
+            self.usages.add(self.usage_min, last, size, self.g.usage_page)
 
 
 class _Usages:
