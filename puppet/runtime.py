@@ -118,11 +118,12 @@ class Runtime:
         inputs = rig.input_points
         self._inputs = np.array([index[n] for n in inputs], dtype=np.int64)
         points = [rig.control_points[index[n]] for n in inputs]
-        self._attached = {
-            part: np.array([i for i, p in enumerate(points) if p.attach == part], dtype=np.int64)
-            for part in rig.rigid_parts
-        }
-        self._attach_weight = np.array([[p.attach_weight] for p in points])
+        weight = np.array([[p.attach_weight] for p in points])
+        self._carry = {}  # part -> (its attached inputs, their rest positions, their weights)
+        for part in rig.rigid_parts:
+            idx = np.array([i for i, p in enumerate(points) if p.attach == part], dtype=np.int64)
+            if part != "head" and len(idx):
+                self._carry[part] = (idx, self._p0[self._inputs[idx]], weight[idx])
 
     def _init_regions(self, cache: bool) -> None:
         rig = self.rig
@@ -255,22 +256,29 @@ class Runtime:
         rigid = self._checked(rigid)
         contracting = self._contracting(muscles, mode)
         d = self._effective(np.asarray(displacements, dtype=float), rigid)
-        muscle_inputs = None
+        share = None
         if contracting and mode == "control":  # the muscles' share, attached points carried as the FAPs'
-            muscle_inputs = self._carried(self._control_muscles.displace(contracting), rigid)
+            share = self._carried(self._control_muscles.displace(contracting), rigid)
         if out is None:
             out = np.empty_like(self.rest)
         elif out.shape != self.rest.shape or out.dtype != self.dtype or not out.flags.c_contiguous:
             raise ValueError(f"out must be a C-contiguous {self.rest.shape} {self.dtype} array")
         if self.mode == "precomputed":
+            if share is not None:  # one product spreads both shares; the guard corrects the muscles' alone
+                d += share
             np.copyto(out, self.rest)
             B = self.B
             _sparsetools.csr_matvecs(B.shape[0], B.shape[1], 3, B.indptr, B.indices, B.data,
                                      d.astype(self.dtype, copy=False).ravel(), out.ravel())
         else:
             self._deform_realtime(d, out)
-        if contracting:
-            self._muscles_on_skin(contracting, mode, muscle_inputs, out)
+            if share is not None:
+                columns, spread = self._muscle_spread
+                out += (spread @ share[columns]).astype(self.dtype, copy=False)
+        if share is not None:
+            self._guard_muscles(share[self._muscle_spread[0]], out)
+        elif contracting:
+            out += self._muscle_model(mode).displace(contracting).astype(self.dtype, copy=False)
         for part in self._rigid_vertices:
             if part in rigid:
                 self._move_part(part, self.rest, out, rigid[part][:, :3], rigid[part][:, 3])
@@ -321,12 +329,38 @@ class Runtime:
 
     @functools.cached_property
     def _fold_guard(self) -> EdgeConstraints:
-        """Edge constraints over the triangles the muscles' share reaches; only DFFD vertices move."""
-        reached = np.diff(self._muscle_spread[1].indptr) > 0
+        """Edge constraints over the triangles the muscles' share reaches, on those triangles'
+        vertices alone (``_guard_vertices``, in that order); only DFFD vertices move."""
+        return self._guard_set_up[1]
+
+    @functools.cached_property
+    def _guard_vertices(self) -> np.ndarray:
+        """The fold guard's vertices (face numbering): where it measures and corrects the share."""
+        return self._guard_set_up[0]
+
+    @functools.cached_property
+    def _guard_set_up(self) -> tuple[np.ndarray, EdgeConstraints, sp.csr_matrix]:
+        """(the guard's vertices, its edge constraints, the rows of ``_muscle_spread`` for them)."""
+        spread = self._muscle_spread[1]
+        reached = np.diff(spread.indptr) > 0
         movable = np.zeros(len(self.rest), dtype=bool)
         for region in self._regions:
             movable[region.vertices] = True
-        return EdgeConstraints(self.face.vertices, np.asarray(self.face.triangles), movable, reached)
+        tri = np.asarray(self.face.triangles, dtype=np.int64)
+        watched = tri[reached[tri].any(axis=1) & movable[tri].any(axis=1)]
+        vertices, local = np.unique(watched, return_inverse=True)
+        guard = EdgeConstraints(self.face.vertices[vertices], local.reshape(-1, 3), movable[vertices], reached[vertices])
+        return vertices, guard, sp.csr_matrix(spread[vertices])
+
+    def _guard_muscles(self, share: np.ndarray, out: np.ndarray) -> None:
+        """The fold guard on the muscles' share ``share`` (their inputs, ``_muscle_spread``'s
+        columns), measured on the guard's vertices alone; where it had to act, its correction is
+        added to ``out`` (which already holds the share as DFFD spreads it)."""
+        vertices, guard, spread = self._guard_set_up
+        moved = spread @ share
+        fixed = moved.copy()
+        if guard.relax(fixed, self._guarded(np.flatnonzero(np.any(share != 0, axis=1)))):
+            out[vertices] += (fixed - moved).astype(self.dtype, copy=False)
 
     def _guarded(self, moving: np.ndarray) -> np.ndarray:
         """The fold guard's triangles that the muscles' share can squeeze when it moves the inputs
@@ -337,7 +371,8 @@ class Runtime:
         if key not in cache:
             if len(cache) >= 64:
                 cache.clear()
-            cache[key] = self._fold_guard.touching(np.diff(self._muscle_spread[1][:, moving].tocsr().indptr) > 0)
+            spread = self._guard_set_up[2]
+            cache[key] = self._fold_guard.touching(np.diff(spread[:, moving].tocsr().indptr) > 0)
         return cache[key]
 
     @functools.cached_property
@@ -353,19 +388,6 @@ class Runtime:
             self._muscle_models[mode] = MuscleModel(self.face.vertices, self.face.triangles, self.rig.muscles,
                                                     mode, movable=skin)
         return self._muscle_models[mode]
-
-    def _muscles_on_skin(self, contracting: Mapping[str, float], mode: str, muscle_inputs: np.ndarray | None,
-                         out: np.ndarray) -> None:
-        """After the FAPs' DFFD: the muscles' share spread and fold-guarded (control-point mode), or
-        a vertex mode's displacement, added to ``out``."""
-        if mode == "control":
-            columns, spread = self._muscle_spread
-            share = muscle_inputs[columns]
-            moved = self.face.vertices + spread @ share
-            self._fold_guard.guard(moved, self._guarded(np.flatnonzero(np.any(share != 0, axis=1))))
-            out += (moved - self.face.vertices).astype(self.dtype, copy=False)
-        else:
-            out += self._muscle_model(mode).displace(contracting).astype(self.dtype, copy=False)
 
     def muscle_faps(self, muscles: Mapping[str, float], mode: str = "control") -> np.ndarray:
         """The 68 FAP values (FAPU) that the muscles' motion alone measures on the face
@@ -430,7 +452,9 @@ class Runtime:
         return self.faps.controls(self.faps.low_level(values, viseme, expression))
 
     def _checked(self, rigid: Mapping[str, np.ndarray] | None) -> dict[str, np.ndarray]:
-        """The rigid motions as float arrays, each a 3x4 [R | t] for a part this rig has."""
+        """The rigid motions as float arrays, each a 3x4 [R | t] for a part this rig has, less
+        those that do not move (a part at rest costs nothing: the FAP engine gives every part a
+        motion every frame, most of them the identity)."""
         rigid = {k: np.asarray(m, dtype=float) for k, m in (rigid or {}).items()}
         unknown = set(rigid) - set(self.rig.rigid_parts)
         if unknown:
@@ -441,7 +465,7 @@ class Runtime:
         for name, part in self.rig.rigid_parts.items():
             if part.parent in rigid:
                 rigid[name] = compose(rigid[part.parent], rigid.get(name, _IDENTITY))
-        return rigid
+        return {name: motion for name, motion in rigid.items() if not np.array_equal(motion, _IDENTITY)}
 
     def _move_part(self, part: str, source: np.ndarray, out: np.ndarray, R: np.ndarray,
                    t: np.ndarray | None = None) -> None:
@@ -461,27 +485,31 @@ class Runtime:
             out[rows] = moved
 
     def _effective(self, d: np.ndarray, rigid: Mapping[str, np.ndarray]) -> np.ndarray:
+        """The inputs (active points, then the fixed points parts carry) for displacements ``d``
+        of the active points: attached points ride on their parts' motions."""
         k = len(self.control_points)
         if d.shape != (k, 3):
             raise ValueError(f"displacements must be ({k}, 3), got {d.shape}")
-        d = np.vstack([d, np.zeros((len(self._inputs) - k, 3))])
-        for part, idx in self._attached.items():
-            if part in rigid and part != "head" and len(idx):
-                p0 = self._p0[self._inputs[idx]]
-                carried = (p0 + d[idx]) @ rigid[part][:, :3].T + rigid[part][:, 3] - p0
-                w = self._attach_weight[idx]
-                d[idx] = w * carried + (1 - w) * d[idx]
-        return d
+        out = np.zeros((len(self._inputs), 3))
+        out[:k] = d
+        for part, (idx, p0, w) in self._carry.items():
+            motion = rigid.get(part)
+            if motion is not None:
+                own = out[idx]
+                carried = (p0 + own) @ motion[:, :3].T + motion[:, 3] - p0
+                out[idx] = w * carried + (1 - w) * own
+        return out
 
     def _carried(self, extra: np.ndarray, rigid: Mapping[str, np.ndarray]) -> np.ndarray:
         """What ``extra`` displacements (K, 3) add to ``_effective``'s inputs: its carry is affine
         in the displacements, so an addition is carried by the rotations alone."""
         out = np.zeros((len(self._inputs), 3))
         out[: len(extra)] = extra
-        for part, idx in self._attached.items():
-            if part in rigid and part != "head" and len(idx):
-                w = self._attach_weight[idx]
-                out[idx] = w * (out[idx] @ rigid[part][:, :3].T) + (1 - w) * out[idx]
+        for part, (idx, _, w) in self._carry.items():
+            motion = rigid.get(part)
+            if motion is not None:
+                own = out[idx]
+                out[idx] = w * (own @ motion[:, :3].T) + (1 - w) * own
         return out
 
     def _turn_head(self, motion: np.ndarray, out: np.ndarray) -> None:
