@@ -215,18 +215,42 @@ class FapEngine:
 
     def controls(self, values: np.ndarray) -> tuple[np.ndarray, dict[str, np.ndarray]]:
         """Control point displacements (K, 3) and rigid motions for 68 low-level FAP values, as
-        the face shows them (``shown``)."""
+        the face shows them (``shown``). A part's motion is made again only when the FAPs it
+        follows change (the motions are shared from frame to frame, so they are read-only)."""
         v = self.shown(values)
         d = (self._translations @ np.clip(v, self.skin_reach[0], self.skin_reach[1])).reshape(-1, 3)
-        motions = {"jaw": self._jaw(v), "head": self._head(v)}
-        for part, (yaw, pitch, thrust) in EYE_FAPS.items():
-            motions[part] = self._eye(part, v[yaw - 1], v[pitch - 1], v[thrust - 1])
+        return d, {part: self._motion(part, make, v) for part, (make, _) in self._parts.items()}
+
+    @functools.cached_property
+    def _parts(self) -> dict[str, tuple]:
+        """{rigid part: (its motion from the 68 values, the FAPs (0-based) it follows)}."""
+        parts = {"jaw": (self._jaw, [2, 13, 14]), "head": (self._head, [n - 1 for n in HEAD_FAPS])}
+        for part, numbers in EYE_FAPS.items():
+            parts[part] = (functools.partial(self._eye_of, part), [n - 1 for n in numbers])
         for number, (part, point, sign) in LID_FAPS.items():
-            if part in self.rig.rigid_parts:
-                motions[part] = self._lid(part, point, sign * v[number - 1] * self.fapu["IRISD0"])
-        if "tongue" in self.rig.rigid_parts:
-            motions["tongue"] = self._tongue(v)
-        return d, {k: m for k, m in motions.items() if k in self.rig.rigid_parts}
+            parts[part] = (functools.partial(self._lid_of, part, point, sign, number - 1), [number - 1])
+        parts["tongue"] = (self._tongue, [n - 1 for n in TONGUE_FAPS])
+        return {part: entry for part, entry in parts.items() if part in self.rig.rigid_parts}
+
+    def _motion(self, part: str, make, v: np.ndarray) -> np.ndarray:
+        key = v[self._parts[part][1]].tobytes()
+        last = self._last_motions.get(part)
+        if last is None or last[0] != key:
+            motion = make(v)
+            motion.setflags(write=False)
+            last = self._last_motions[part] = (key, motion)
+        return last[1]
+
+    @functools.cached_property
+    def _last_motions(self) -> dict[str, tuple[bytes, np.ndarray]]:
+        return {}
+
+    def _eye_of(self, part: str, v: np.ndarray) -> np.ndarray:
+        yaw, pitch, thrust = EYE_FAPS[part]
+        return self._eye(part, v[yaw - 1], v[pitch - 1], v[thrust - 1])
+
+    def _lid_of(self, part: str, point: str, sign: int, index: int, v: np.ndarray) -> np.ndarray:
+        return self._lid(part, point, sign * v[index] * self.fapu["IRISD0"])
 
     def _jaw(self, v: np.ndarray) -> np.ndarray:
         jaw = self.rig.rigid_parts["jaw"]

@@ -253,7 +253,11 @@ class Runtime:
                mode: str = "control") -> np.ndarray:
         """Vertex positions (N, 3) for active control point displacements (K, 3), rigid motions
         and muscle contractions {name: c} applied in ``mode`` (module docstring)."""
-        rigid = self._checked(rigid)
+        return self._deform(displacements, self._checked(rigid), out, muscles, mode)
+
+    def _deform(self, displacements: np.ndarray, rigid: dict[str, np.ndarray], out: np.ndarray | None,
+                muscles: Mapping[str, float] | None, mode: str) -> np.ndarray:
+        """``deform`` with the rigid motions checked (``_checked``)."""
         contracting = self._contracting(muscles, mode)
         d = self._effective(np.asarray(displacements, dtype=float), rigid)
         share = None
@@ -291,8 +295,9 @@ class Runtime:
                             muscles: Mapping[str, float] | None = None,
                             mode: str = "control") -> tuple[np.ndarray, np.ndarray]:
         """Positions and unit vertex normals for one frame."""
-        vertices = self.deform(displacements, rigid, out=out, muscles=muscles, mode=mode)
-        return vertices, self.normals(vertices, rigid, out=normals_out)
+        rigid = self._checked(rigid)
+        vertices = self._deform(displacements, rigid, out, muscles, mode)
+        return vertices, self._normals(vertices, rigid, normals_out)
 
     # -- muscles ----------------------------------------------------------------------------
 
@@ -402,7 +407,10 @@ class Runtime:
     def normals(self, vertices: np.ndarray, rigid: Mapping[str, np.ndarray] | None = None,
                 *, out: np.ndarray | None = None) -> np.ndarray:
         """Unit normals of vertices deformed with these rigid motions (as given to ``deform``)."""
-        rigid = self._checked(rigid)
+        return self._normals(vertices, self._checked(rigid), out)
+
+    def _normals(self, vertices: np.ndarray, rigid: dict[str, np.ndarray], out: np.ndarray | None) -> np.ndarray:
+        """``normals`` with the rigid motions checked (``_checked``)."""
         if out is None:
             out = np.empty_like(self.rest)
         head = rigid.get("head")
