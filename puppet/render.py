@@ -777,8 +777,16 @@ def save_png(image: np.ndarray, path: str | Path) -> None:
     Image.fromarray(np.asarray(image, dtype=np.uint8)).save(path, format="PNG")
 
 
+VIDEO_PRESET = "veryfast"
+"""libx264's preset for every video: at imageio's default quality (CRF 25) it encodes a face
+take with 2.4x less CPU than x264's default ("medium": 2.9 -> 1.2 ms a 320x240 frame, 7.2 -> 3.6
+at 640x480) into files no larger (the demo take: 21 -> 17 KiB at 320x240); the encoder runs
+beside the renderer, so in a batch it takes cores the other takes could use."""
+
+
 def write_video(frames: Iterable[np.ndarray], path: str | Path, fps: float = 30.0) -> int:
-    """Encode (H, W, 3) uint8 frames to an H.264 MP4 (yuv420p) and return the frame count.
+    """Encode (H, W, 3) uint8 frames to an H.264 MP4 (yuv420p, ``VIDEO_PRESET``) and return the
+    frame count.
 
     yuv420p needs even dimensions, so an odd last row or column is duplicated. Every frame
     must have the first frame's size.
@@ -795,6 +803,7 @@ def write_video(frames: Iterable[np.ndarray], path: str | Path, fps: float = 30.
         codec="libx264",
         pix_fmt_out="yuv420p",
         macro_block_size=2,
+        output_params=["-preset", VIDEO_PRESET],
     )
     writer.send(None)
     count = 0
