@@ -115,7 +115,7 @@ class FapEngine:
         solved += [(n, part, point, sign, "IRISD0") for n, (part, point, sign) in LID_FAPS.items()]
         for number, part, point, sign, unit in solved:
             if part in parts:
-                drops = _drop_reach(self.face.feature_points[point] - parts[part].pivot, parts[part].axis)
+                drops = _drop_reach(self._arc(part, point))
                 low, high = np.sort(sign * drops / self.fapu[unit])
                 reach[:, number - 1] = max(low, -TRANSLATION_LIMIT), min(high, TRANSLATION_LIMIT)
         return reach
@@ -255,14 +255,26 @@ class FapEngine:
     def _jaw(self, v: np.ndarray) -> np.ndarray:
         jaw = self.rig.rigid_parts["jaw"]
         drop = v[2] * self.fapu["MNS0"]
-        angle = _angle_for_drop(self.face.feature_points["2.1"] - jaw.pivot, jaw.axis, drop)
+        angle = _angle_for_drop(self._arc("jaw", "2.1"), drop)
         shift = v[13] * self.fapu["MNS0"] * Z - v[14] * self.fapu["MW0"] * X
         return rigid.about(jaw.pivot, rigid.rotation(jaw.axis, angle), shift)
 
     def _lid(self, part: str, point: str, drop: float) -> np.ndarray:
         lid = self.rig.rigid_parts[part]
-        angle = _angle_for_drop(self.face.feature_points[point] - lid.pivot, lid.axis, drop)
+        angle = _angle_for_drop(self._arc(part, point), drop)
         return rigid.about(lid.pivot, rigid.rotation(lid.axis, angle))
+
+    def _arc(self, part: str, point: str) -> tuple[float, float, float]:
+        """``_arc`` of a feature point about a rigid part's axis, made once."""
+        key = (part, point)
+        if key not in self._arcs:
+            self._arcs[key] = _arc(self.face.feature_points[point] - self.rig.rigid_parts[part].pivot,
+                                   self.rig.rigid_parts[part].axis)
+        return self._arcs[key]
+
+    @functools.cached_property
+    def _arcs(self) -> dict[tuple[str, str], tuple[float, float, float]]:
+        return {}
 
     def _eye(self, part: str, yaw: float, pitch: float, thrust: float) -> np.ndarray:
         au = self.fapu["AU"]
@@ -376,26 +388,28 @@ def _own_displacement(point, delta: np.ndarray, motion: np.ndarray | None) -> np
     return np.linalg.solve(A, delta - w * (R @ p0 + t - p0))
 
 
-def _angle_for_drop(offset: np.ndarray, axis: np.ndarray, drop: float) -> float:
-    """The turn about ``axis`` that lowers a point at ``offset`` from the pivot by ``drop`` in y."""
+def _arc(offset: np.ndarray, axis: np.ndarray) -> tuple[float, float, float]:
+    """(A, radius, psi) of a point at ``offset`` from a pivot turning about ``axis``: turned by t,
+    the y of its offset from the axis goes from A to radius cos(t - psi)."""
     a = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
     r = offset - (offset @ a) * a
-    A, C = float(r[1]), float(a[2] * r[0] - a[0] * r[2])  # C: (a x r)_y, in scalars (per frame, per lid)
+    A, C = float(r[1]), float(a[2] * r[0] - a[0] * r[2])  # C: (a x r)_y
     radius = math.hypot(A, C)
+    return A, radius, math.atan2(C, A)
+
+
+def _angle_for_drop(arc: tuple[float, float, float], drop: float) -> float:
+    """The turn about the arc's axis that lowers its point by ``drop`` in y."""
+    A, radius, psi = arc
     if radius < 1e-12 or drop == 0:
         return 0.0
-    psi = math.atan2(C, A)
     target = min(1.0, max(-1.0, (A - drop) / radius))
     return psi - math.copysign(math.acos(target), psi) if psi else math.acos(target)
 
 
-def _drop_reach(offset: np.ndarray, axis: np.ndarray) -> np.ndarray:
-    """(lowest, highest) drop ``_angle_for_drop`` can reach for a point at ``offset``: its arc's
-    top and bottom."""
-    a = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
-    r = offset - (offset @ a) * a
-    A, C = float(r[1]), float(a[2] * r[0] - a[0] * r[2])
-    radius = math.hypot(A, C)
+def _drop_reach(arc: tuple[float, float, float]) -> np.ndarray:
+    """(lowest, highest) drop ``_angle_for_drop`` can reach on an arc: its top and bottom."""
+    A, radius, _ = arc
     return np.array([A - radius, A + radius])
 
 
