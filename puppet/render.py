@@ -653,7 +653,8 @@ class Renderer:
         those are on, straight into ``out`` when neither is, or when ``out`` is a screen that
         multisamples by itself and there is no post pass. The FXAA pass runs only over the
         mesh's screen box (the background is a smooth gradient, nothing to smooth), the rest of
-        the frame copied as drawn."""
+        the frame copied as drawn; it needs the scene finished, which it waits for with the GIL
+        let go (``wait_for_gl``)."""
         own_samples = out is self._output or not out.samples
         first = self._scene or out
         if self._multi is not None and own_samples:
@@ -662,6 +663,7 @@ class Renderer:
         else:
             self._draw_scene(first)
         if self._scene is not None:
+            wait_for_gl(self.ctx)  # the copy would wait for the scene holding the GIL
             self.ctx.copy_framebuffer(out, self._scene)
             out.use()
             out.scissor = self._screen_box(vertices)
