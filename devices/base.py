@@ -130,7 +130,7 @@ class Device(ABC):
         self._ready = threading.Condition()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
-        self.wake: threading.Event | None = None  # set with every Sample queued (``samples_waiting``)
+        self.wake: threading.Event | None = None  # set with every Sample queued: one event can wake a loop reading many devices
 
     # -- what an adapter implements ------------------------------------------------------
 
