@@ -100,14 +100,18 @@ def test_calibration_from_the_window_guides_rest_then_sweep_and_writes_the_mappi
     mapping = tmp_path / "sliders.yaml"
     mapping.write_bytes(shipped_mappings()["arduino_sliders"].read_bytes())
     window = headless_window(SIZE, _Keys)
-    session = open_session(mapping, devices=SIM_BOX, record_root=tmp_path)
+    start = time.monotonic()  # the box's clock starts with the session: 3 s at rest, then sweeps
+    session = open_session(mapping, devices={"box": SIM_BOX["box"] + "&motion=calibrate&rest=3"},
+                           record_root=tmp_path)
     live = LiveView(session, window)
     try:
         live._on_key(_Keys.K, _Keys.ACTION_PRESS, None)
         calibration = live.calibration
         assert isinstance(calibration, GuidedCalibration)
-        start = time.monotonic()
-        calibration._ends = [(phase, start + 0.2 * (k + 1)) for k, (phase, _) in enumerate(calibration._ends)]
+        now = time.monotonic()
+        assert now < start + 2.4, "the window took too long to open: the box stopped resting"
+        ends = (now + 0.1, now + 0.6, max(now + 0.7, start + 3.2), start + 4.4)  # sweeping from start + 3
+        calibration._ends = [(phase, end) for (phase, _), end in zip(calibration._ends, ends)]
         seen = set()
         while live.calibration is not None:
             live.step()
