@@ -4,8 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from puppet.fap.table import UnknownFapError, faps
+from puppet.runtime.fapengine import FapEngine
 
 
 def _translational(runtime) -> list:
@@ -232,3 +235,23 @@ def test_fap_1_and_2_fields_a_face_cannot_show_pose_as_none_or_held(runtime):
     viseme, expression = limit_fields(np.array([20, -3, 900, 0]), np.array([9, -5, 2, 1e12, 0, 0]))
     assert viseme == (0, 0, 63.0) and expression == (0, 0.0, 2, 63.0)
     assert np.isfinite(runtime.pose({}, viseme=viseme, expression=expression)).all()
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.lists(st.lists(st.sampled_from([0.0, 120.0, -300.0, 800.0, 20000.0]), min_size=68, max_size=68),
+                min_size=2, max_size=5))
+def test_rigid_motions_kept_between_frames_are_those_a_fresh_engine_makes(runtime, face, frames):
+    """The engine remakes a part's motion only when the FAPs it follows change: over any
+    sequence of frames each motion equals what an engine that never saw the earlier ones makes,
+    and a kept motion cannot be changed by a caller."""
+    for values in frames:
+        values = np.array(values)
+        values[:2] = 0.0
+        d, motions = runtime.faps.controls(values)
+        d0, motions0 = FapEngine(runtime).controls(values)
+        np.testing.assert_array_equal(d, d0)
+        assert motions.keys() == motions0.keys()
+        for part in motions:
+            np.testing.assert_array_equal(motions[part], motions0[part], err_msg=part)
+    with pytest.raises(ValueError):
+        motions["jaw"][0, 3] = 1.0

@@ -12,7 +12,7 @@ import pytest
 from devices import State, open_device
 from puppet import MappingError, load_mapping
 from puppet.face.autorig import build_rig
-from puppet.face.muscles import MUSCLE_NAMES, folded_triangles
+from puppet.face.muscles import MUSCLE_NAMES, EdgeConstraints, control_point_displacements, folded_triangles
 from puppet.face.rig import rig_from_dict, rig_to_dict
 from puppet.fap.table import fap
 from puppet.io.fapfile import read_fap
@@ -140,8 +140,34 @@ def test_normal_contractions_fold_nothing(runtime, face, pose):
 
 def test_the_fold_guard_costs_nothing_at_ordinary_contraction(runtime, face):
     calm = runtime.pose(muscles={"zygomatic_major_l": 1.0})
-    assert not runtime._fold_guard.squeezed(calm)  # so the guard left this frame as DFFD made it
+    assert not runtime._fold_guard.squeezed(calm[runtime._guard_vertices])  # so the guard left this frame as DFFD made it
     assert not folded_triangles(face.vertices, calm, _skin_triangles(face)).any()
+
+
+
+@pytest.mark.parametrize("contraction", [0.5, 1.0, 3.0, 10.0])
+def test_the_guarded_muscles_are_the_fold_guard_of_their_share_on_the_whole_skin(runtime, face, contraction):
+    """The runtime spreads the FAPs' and the muscles' shares in one product and runs the fold guard
+    on the guard's own vertices: that is, within float32 rounding, the definition -- the FAP frame
+    plus the muscles' share spread by B's columns and fixed by edge constraints over every
+    triangle the share reaches, on the whole mesh."""
+    faps = {"raise_l_cornerlip": 120, "raise_b_midlip": -60}  # no rigid part moves: nothing is carried
+    muscles = dict.fromkeys(runtime.muscle_names, contraction)
+    k = len(runtime.control_points)
+    active = np.array([runtime.rig.point(n).position for n in runtime.control_points])
+    share = control_point_displacements(runtime.rig.muscles, muscles, active)
+    spread = runtime.B[:, :k].astype(float).tocsr()
+    reached = np.diff(spread[:, np.flatnonzero(np.any(share != 0, axis=1))].tocsr().indptr) > 0
+    movable = np.zeros(len(face.vertices), bool)
+    for region in runtime.rig.regions:
+        if region.kind == "dffd":
+            movable[region.vertices] = True
+    moved = spread @ share
+    EdgeConstraints(face.vertices, face.triangles, movable, reached).relax(moved)
+    expected = runtime.pose(faps) + moved
+    got = runtime.pose(faps, muscles=muscles)
+    height = np.ptp(face.vertices[:, 1])
+    assert np.abs(got - expected).max() < 1e-5 * height
 
 
 # -- mappings ------------------------------------------------------------------------------------------

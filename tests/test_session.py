@@ -198,3 +198,17 @@ def test_a_take_whose_write_fails_is_never_marked_complete_and_the_face_goes_on(
     session.close()
     meta = open_take(folder).meta
     assert meta["complete"] is False and "ValueError" in meta["error"]
+
+
+def test_a_loop_waiting_for_input_wakes_with_a_sample_and_not_without(session):
+    """``wait_for_input`` returns as soon as a Sample is queued (the loop then shows it at once),
+    and waits its time out while the box sends nothing."""
+    box = session.devices["box"]
+    assert box.wait_state(State.OPEN, 5.0)
+    assert session.wait_for_input(5.0)
+    assert session.frame().n_samples > 0
+    box.joystick.unplug()
+    assert box.wait_state(State.LOST, 5.0)
+    session.frame()                                # drains what came before the plug was pulled
+    assert not session.wait_for_input(0.05)
+    assert session.frame().n_samples == 0

@@ -121,6 +121,7 @@ EDGE_OVERRELAX = 1.0  # the sweeps' averaged corrections are scaled by this (1: 
 EDGE_DAMP = 0.75  # the fallback shrinks a squeezed triangle's vertices' displacement by this factor
 EDGE_DAMP_STEPS = 12  # this many times at most, then drops it
 EDGE_DAMP_RINGS = (0.85, 0.95)  # and the rings of vertices around them by these factors
+SAFE_MARGIN = 0.999  # a triangle's reach (EdgeConstraints._reach) is used a hair short of the bound
 
 
 @dataclass
@@ -203,23 +204,46 @@ def control_point_displacements(muscles: Sequence[Muscle], contractions: Mapping
 
 class ControlPointMuscles:
     """``control_point_displacements`` for one fixed set of points, their fields computed once
-    (the runtime's control-point mode: per frame only the contracting muscles' few points)."""
+    (the runtime's control-point mode). Every (muscle, point in its zone) pair is one entry of
+    flat arrays, summed per point by one sparse product: a frame is a handful of whole-array
+    steps however many muscles contract."""
 
     def __init__(self, muscles: Sequence[Muscle], points: np.ndarray) -> None:
         self.muscles = list(muscles)
         self.points = np.asarray(points, dtype=float)
-        self._fields = {m.name: _field(m, self.points) for m in self.muscles}
+        self._column = {m.name: j for j, m in enumerate(self.muscles)}
+        fields = [_field(m, self.points) for m in self.muscles]
+        self._rows = np.concatenate([np.zeros(0, np.int64), *(f[0] for f in fields)])
+        self._muscle = np.concatenate([np.zeros(0, np.int64), *(np.full(len(f[0]), j) for j, f in enumerate(fields))])
+        self._direction = np.concatenate([np.zeros((0, 3)), *(f[1] for f in fields)])
+        self._travel = np.concatenate([np.zeros(0), *(f[2] for f in fields)])
+        self._dist = np.concatenate([np.zeros(0), *(f[3] for f in fields)])
+        self._sum = sp.csr_matrix((np.ones(len(self._rows)), (self._rows, np.arange(len(self._rows)))),
+                                  shape=(len(self.points), len(self._rows)))
 
     def moved(self) -> np.ndarray:
         """Indices of the points some muscle moves."""
-        return np.unique(np.concatenate([np.zeros(0, np.int64), *(f[0] for f in self._fields.values())]))
+        return np.unique(self._rows)
+
+    def contractions(self, contractions: Mapping[str, float]) -> np.ndarray:
+        """{name: c} as one value per muscle, in order (0 for those not named); an unknown name
+        is an error that lists the known."""
+        c = np.zeros(len(self.muscles))
+        for name, value in contractions.items():
+            j = self._column.get(name)
+            if j is None:
+                _contracting(self.muscles, contractions)  # raises, naming the unknown
+            c[j] = value
+        return c
 
     def displace(self, contractions: Mapping[str, float], out: np.ndarray | None = None) -> np.ndarray:
         """Displacements (n, 3) for contractions {name: c}, added to ``out`` when given."""
-        out = np.zeros_like(self.points) if out is None else out
-        for m in _contracting(self.muscles, contractions):
-            rows, direction, travel, dist = self._fields[m.name]
-            out[rows] += repelled_travel(float(contractions[m.name]) * travel, dist)[:, None] * direction
+        c = self.contractions(contractions)
+        travel = repelled_travel(c[self._muscle] * self._travel, self._dist)
+        moved = self._sum @ (travel[:, None] * self._direction)
+        if out is None:
+            return moved
+        out += moved
         return out
 
 
@@ -364,6 +388,8 @@ class EdgeConstraints:
         order = np.argsort(flat, kind="stable")
         self._vt_ptr = np.searchsorted(flat[order], np.arange(self.n + 1))
         self._vt_tri = order // 3
+        self._reference = (np.zeros_like(rest), self._reach(np.zeros_like(rest))[1])  # see _bad
+        self._plans: dict[bytes, _SweepPlan] = {}
 
     # -- geometry ----------------------------------------------------------------------------
 
@@ -392,6 +418,56 @@ class EdgeConstraints:
         perp2 *= self._floor2 if idx is self._all else self._floor2[:, idx]
         return (area < 0) | (area * area < perp2.max(axis=0))
 
+    def _reach(self, displacement: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(which triangles have a squeezed corner, how far every corner of each may then move,
+        in any directions, before some corner could come below its floor) for ``displacement``
+        from rest: the exact check of every triangle, and a sound bound for the next frames.
+
+        For corner v over edge (a, b), in the plane normal to the rest normal (height h, edge
+        length L, v's foot at a + t (b - a)), corners moved by at most r turn the edge by an
+        angle whose sine is at most 2r / L and move the edge's point at t by at most
+        (|1 - t| + |t|) r, so the height stays at least h (1 - 2r / L) - (1 + |1 - t| + |t|) r:
+        above the floor f while r <= (h - f) / (2h / L + 1 + |1 - t| + |t|). A squeezed triangle
+        may move no distance (its reach is -inf: it is checked whenever asked)."""
+        x = self.rest + displacement
+        area, perp2 = self._area_perp2(x, self._all)
+        squeezed = (area < 0) | (area * area < (perp2 * self._floor2).max(axis=0))
+        xt = np.ascontiguousarray(x.T)
+        p = [xt[:, c] for c in self._corners]
+        n = self._normal_t
+        reach = np.empty((3, len(self.triangles)))
+        for k, (a, b) in enumerate(((1, 2), (0, 2), (0, 1))):  # corner k and its opposite edge
+            edge, rel = p[b] - p[a], p[k] - p[a]
+            along = (rel * edge).sum(axis=0) - (rel * n).sum(axis=0) * (edge * n).sum(axis=0)  # in the plane
+            length2 = np.maximum(perp2[k], 1e-300)
+            t = along / length2
+            length = np.sqrt(length2)
+            h = area / length
+            reach[k] = (h - self.floor[:, k]) / (2 * h / length + 1 + np.abs(1 - t) + np.abs(t))
+        reach = reach.min(axis=0)
+        return squeezed, np.where(squeezed | (reach <= 0), -np.inf, SAFE_MARGIN * reach)
+
+    def _bad(self, displacement: np.ndarray, idx: np.ndarray) -> np.ndarray:
+        """The triangles of ``idx`` with a squeezed corner under ``displacement`` from rest.
+
+        Exact, and cheap while the field changes little from frame to frame: a reference field
+        (rest at first) and each triangle's reach from it (``_reach``) are kept, and only the
+        triangles with a corner that drifted farther than that from the reference are checked.
+        When over a quarter of them did, every triangle is checked and the field becomes the
+        reference."""
+        reference, reach = self._reference
+        drift = displacement - reference
+        drift = np.sqrt(np.einsum("ij,ij->i", drift, drift))
+        c0, c1, c2 = self._corners
+        if idx is not self._all:
+            c0, c1, c2, reach = c0[idx], c1[idx], c2[idx], reach[idx]
+        near = idx[np.maximum(np.maximum(drift[c0], drift[c1]), drift[c2]) > reach]
+        if 4 * len(near) <= len(idx):
+            return near[self._squeezed(self.rest + displacement, near)]
+        squeezed, reach = self._reach(displacement)
+        self._reference = (displacement.copy(), reach)
+        return idx[squeezed[idx]]
+
     def touching(self, vertices: np.ndarray) -> np.ndarray:
         """Indices of the watched triangles that touch ``vertices`` (ids or a bool mask): what a
         displacement that moves only those vertices can squeeze (``among`` below)."""
@@ -411,10 +487,10 @@ class EdgeConstraints:
         whether it had to. ``among``: the watched triangles that can be squeezed, when the caller
         knows (``touching`` the vertices it moved); all by default."""
         idx = self._all if among is None else among
-        bad = idx[self._squeezed(positions, idx)]
+        displacement = positions - self.rest
+        bad = self._bad(displacement, idx)
         if len(bad) == 0:
             return False
-        displacement = positions - self.rest
         self._fix(displacement, bad)
         positions[...] = self.rest + displacement
         return True
@@ -422,21 +498,31 @@ class EdgeConstraints:
     def relax(self, displacement: np.ndarray, among: np.ndarray | None = None) -> bool:
         """Fix ``displacement`` (V, 3) from the rest mesh in place (class docstring); returns
         whether some corner was squeezed. ``among`` as for ``guard``."""
-        idx = self._all if among is None else among
-        bad = idx[self._squeezed(self.rest + displacement, idx)]
+        bad = self._bad(displacement, self._all if among is None else among)
         if len(bad) == 0:
             return False
         self._fix(displacement, bad)
         return True
 
     def _fix(self, displacement: np.ndarray, bad: np.ndarray) -> None:
-        grown = self._grow(bad, EDGE_RINGS)
-        watched = self._grow(grown, 1)
-        free = np.zeros(self.n, bool)
-        free[self.triangles[grown].ravel()] = True
-        left = self._sweep(displacement, watched, free)
+        left = self._sweep(displacement, self._plan(bad))
         if len(left):
             self._damp(displacement, left)
+
+    def _plan(self, bad: np.ndarray) -> _SweepPlan:
+        """The sweeps' neighbourhood of squeezed triangles ``bad``, cached per set (a pose held or
+        moving slowly squeezes the same few triangles frame after frame)."""
+        key = bad.tobytes()
+        plan = self._plans.get(key)
+        if plan is None:
+            if len(self._plans) >= 64:
+                self._plans.clear()
+            grown = self._grow(bad, EDGE_RINGS)
+            watched = self._grow(grown, 1)
+            free = np.zeros(self.n, bool)
+            free[self.triangles[grown].ravel()] = True
+            plan = self._plans[key] = _SweepPlan(self, watched, free)
+        return plan
 
     def _touching(self, verts: np.ndarray) -> np.ndarray:
         """The watched triangles that touch vertices ``verts`` (sorted, unique)."""
@@ -450,43 +536,20 @@ class EdgeConstraints:
             tris = self._touching(np.unique(self.triangles[tris]))
         return tris
 
-    def _sweep(self, displacement: np.ndarray, watched: np.ndarray, free: np.ndarray) -> np.ndarray:
-        """The sweeps (class docstring, step 1) on triangles ``watched``, moving only ``free`` movable
-        vertices; returns the watched triangles still squeezed. The three corners of every triangle
-        are one batch (corner k of triangle i is row k * T + i), so a sweep is a few whole-array steps."""
-        verts, local = np.unique(self.triangles[watched], return_inverse=True)
-        local = local.reshape(-1, 3)
-        v, a, b = (np.concatenate([local[:, (k + j) % 3] for k in range(3)]) for j in range(3))
-        x = self.rest[verts] + displacement[verts]
-        w_v = self.inv_mass[verts] * free[verts]
-        normal = np.tile(self.normal[watched], (3, 1))
-        floor = self.floor[watched].T.ravel()
-        m = len(verts)
-        for _ in range(EDGE_ITERATIONS):
-            edge = x[b] - x[a]
-            rel = x[v] - x[a]
-            across = np.cross(normal, edge)
-            across /= np.maximum(np.sqrt(np.einsum("ij,ij->i", across, across)), 1e-300)[:, None]
-            height = np.einsum("ij,ij->i", rel, across)
-            low = np.flatnonzero(height < floor)
-            if len(low) == 0:
+    def _sweep(self, displacement: np.ndarray, plan: _SweepPlan) -> np.ndarray:
+        """The sweeps (class docstring, step 1) on the plan's watched triangles, moving only its
+        free movable vertices; returns the watched triangles still squeezed after them. The three
+        corners of every triangle are one batch (corner k of triangle i is row k * T + i),
+        coordinates as rows (x, y, z): a sweep is a few whole-array steps."""
+        verts = plan.verts
+        x = np.ascontiguousarray((self.rest[verts] + displacement[verts]).T)  # (3, m)
+        for sweep in range(EDGE_ITERATIONS + 1):
+            low, rows = plan.squeezed(x)
+            if len(low) == 0 or sweep == EDGE_ITERATIONS:
                 break
-            e = edge[low]
-            t = np.clip(np.einsum("ij,ij->i", rel[low], e) / np.maximum(np.einsum("ij,ij->i", e, e), 1e-300), 0, 1)
-            corner_ids = np.stack([v[low], a[low], b[low]])  # (3, c)
-            grad = np.stack([np.ones(len(low)), t - 1.0, -t])  # d height / d position, along `across`
-            wg = w_v[corner_ids] * grad
-            denom = (wg * grad).sum(axis=0)
-            ok = denom > 0
-            step = np.where(ok, (EDGE_TARGET * floor[low] - height[low]) / np.where(ok, denom, 1.0), 0.0)
-            ids_all = corner_ids.ravel()
-            vec_all = ((wg * step)[..., None] * across[low][None]).reshape(-1, 3)
-            moving = np.any(vec_all != 0, axis=1)
-            count = np.maximum(np.bincount(ids_all, weights=moving, minlength=m), 1.0)
-            for j in range(3):
-                x[:, j] += EDGE_OVERRELAX * np.bincount(ids_all, weights=vec_all[:, j], minlength=m) / count
-        displacement[verts] = x - self.rest[verts]
-        return watched[self._squeezed(self.rest + displacement, watched)]
+            plan.correct(x, low, rows)
+        displacement[verts] = x.T - self.rest[verts]
+        return plan.watched[np.unique(low % len(plan.watched))]
 
     def _damp(self, displacement: np.ndarray, bad: np.ndarray) -> None:
         """The fallback (class docstring, step 2), from squeezed triangles ``bad``: the displacement
@@ -509,6 +572,53 @@ class EdgeConstraints:
             displacement[verts] = scale[verts, None] * start[verts]
             near = self._touching(verts)
             bad = near[self._squeezed(self.rest + displacement, near)]
+
+
+class _SweepPlan:
+    """What ``EdgeConstraints._sweep`` needs around one set of squeezed triangles, in local
+    vertex numbering: every watched corner as a row (vertex ``v`` over edge ``a`` -> ``b``, the
+    rest normal, the floor) and each vertex's inverse mass (0 where it may not move)."""
+
+    def __init__(self, edges: EdgeConstraints, watched: np.ndarray, free: np.ndarray) -> None:
+        self.watched = watched
+        self.verts, local = np.unique(edges.triangles[watched], return_inverse=True)
+        local = local.reshape(-1, 3)
+        self.v, self.a, self.b = (np.concatenate([local[:, (k + j) % 3] for k in range(3)]) for j in range(3))
+        normal = np.tile(edges.normal[watched], (3, 1)).T  # (3, rows)
+        self._n1, self._n2 = normal[[1, 2, 0]], normal[[2, 0, 1]]  # for the cross product's two terms
+        self.floor = edges.floor[watched].T.ravel()
+        self.w = edges.inv_mass[self.verts] * free[self.verts]
+        m = len(self.verts)
+        self._gather = np.arange(3)[:, None, None] * m + np.stack([self.a, self.b, self.v])[None]
+
+    def squeezed(self, x: np.ndarray) -> tuple[np.ndarray, tuple[np.ndarray, ...]]:
+        """The rows of positions ``x`` (3, m) whose corner is below its floor, and for those rows
+        (edge, corner - edge start, unit in-plane normal of the edge, height)."""
+        corners = np.take(x, self._gather)  # (3 coordinates, edge start / edge end / corner, rows)
+        edge = corners[:, 1] - corners[:, 0]
+        rel = corners[:, 2] - corners[:, 0]
+        across = self._n1 * edge[[2, 0, 1]] - self._n2 * edge[[1, 2, 0]]  # normal x edge
+        across /= np.maximum(np.sqrt((across * across).sum(axis=0)), 1e-300)
+        height = (rel * across).sum(axis=0)
+        low = np.flatnonzero(height < self.floor)
+        return low, (edge[:, low], rel[:, low], across[:, low], height[low])
+
+    def correct(self, x: np.ndarray, low: np.ndarray, rows: tuple[np.ndarray, ...]) -> None:
+        """One sweep's projection of the squeezed rows ``low`` (``rows``: as ``squeezed`` gives
+        them) into ``x`` in place."""
+        e, r, across, height = rows
+        t = np.clip((r * e).sum(axis=0) / np.maximum((e * e).sum(axis=0), 1e-300), 0, 1)
+        ids = np.concatenate([self.v[low], self.a[low], self.b[low]])  # the corner, then the edge's ends
+        grad = np.concatenate([np.ones(len(low)), t - 1.0, -t])  # d height / d position, along `across`
+        wg = self.w[ids] * grad
+        denom = (wg * grad).reshape(3, -1).sum(axis=0)
+        ok = denom > 0
+        step = np.where(ok, (EDGE_TARGET * self.floor[low] - height) / np.where(ok, denom, 1.0), 0.0)
+        share = wg * np.tile(step, 3)  # each corner's move along its row's `across`
+        m = x.shape[1]
+        count = np.maximum(np.bincount(ids, weights=share != 0, minlength=m), 1.0)
+        for j, direction in enumerate(np.tile(across, (1, 3))):
+            x[j] += EDGE_OVERRELAX * np.bincount(ids, weights=share * direction, minlength=m) / count
 
 
 def folded_triangles(rest: np.ndarray, deformed: np.ndarray, triangles: np.ndarray) -> np.ndarray:

@@ -53,6 +53,7 @@ from __future__ import annotations
 import heapq
 import os
 import statistics
+import threading
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -118,6 +119,7 @@ class LiveSession:
                                  f"Samples would not reach the mapping's {name!r} channels")
         self.devices: dict[str, Device] = {}
         self.urls: dict[str, str] = {}
+        self._wake = threading.Event()  # set by every device when it queues a Sample
         try:
             for name, url in self.mapping.devices.items():
                 self.devices[name] = overrides.pop(name) if name in overrides else open_device(url, name)
@@ -126,6 +128,7 @@ class LiveSession:
             for name, device in self.devices.items():
                 self.urls[name] = device.url or f"override:{type(device).__name__}"
             for device in self.devices.values():
+                device.wake = self._wake
                 device.start()
         except BaseException:
             self._close_devices()
@@ -210,6 +213,15 @@ class LiveSession:
         self.frames += 1
         return Frame(self._vertices, self._normals, pose, now, self.newest_sample_ns, states, len(samples),
                      tuple(sample.t_ns for sample in samples))
+
+    def wait_for_input(self, timeout: float) -> bool:
+        """Wait until some device has a Sample queued (at most ``timeout`` seconds): a loop that
+        starts its frame then, rather than on a clock of its own, shows a Sample as soon as it
+        can. Returns whether one is there."""
+        self._wake.clear()
+        if any(device.backlog for device in self.devices.values()):
+            return True
+        return self._wake.wait(timeout)
 
     def neutral(self, now_ns: int | None = None) -> None:
         """Every channel back to rest (the neutral key), at the next frame (and so in the take)."""
@@ -342,7 +354,8 @@ def measure_latency(session: LiveSession, renderer, seconds: float = 3.0) -> dic
     ``sample_to_mesh_ms`` until its vertices and normals are ready, before drawing;
     ``frame_work_ms`` is a frame's own work from taking the Samples in to the mesh ready, and
     ``draw_ms`` its drawing and read-back: a Sample waits for the frame being drawn when it
-    arrives, then for its own. Medians and 99th percentiles. The device's own transport (USB, the pty) comes before the Sample's
+    arrives, then for its own. The loop starts a frame as soon as a Sample is queued
+    (``wait_for_input``), as a live loop free of a display's clock would. Medians and 99th percentiles. The device's own transport (USB, the pty) comes before the Sample's
     timestamp and is not included.
     """
     if renderer.camera is None:
@@ -353,6 +366,7 @@ def measure_latency(session: LiveSession, renderer, seconds: float = 3.0) -> dic
     start = time.monotonic_ns()
     end = start + int(seconds * 1e9)
     while time.monotonic_ns() < end:
+        session.wait_for_input(0.1)
         f = session.frame()
         ready = time.monotonic_ns()
         renderer.render(f.vertices, f.normals)
