@@ -91,7 +91,7 @@ def test_eyeballs_turn_left_and_down_for_positive_values(runtime, face):
 def test_the_eyes_turn_past_where_the_lids_stop_following_and_stop_at_50_degrees(runtime, face):
     """A gaze FAP's reach caps the lid skin it carries (``skin_reach``), not the eyeball: looking
     further down turns the eye on and folds nothing more; past 50 degrees the eye stops."""
-    from puppet.face.muscles import folded_triangles
+    from puppet.runtime.musclesolver import folded_triangles
 
     au, pitch = face.fapu["AU"], 25
     lids_stop = runtime.faps.skin_reach[1, pitch - 1]

@@ -15,11 +15,11 @@ from scipy.spatial import cKDTree
 import puppet
 from puppet.face.autorig import build_rig
 from puppet.face.examples import ExampleError, load_examples, read_target
-from puppet.face.muscles import folded_triangles
 from puppet.face.rig import load_rig, save_rig
 from puppet.face.subdivide import subdivide
 from puppet.fap.table import clamp_ranges, fap
 from puppet.runtime.fapcalibration import calibrate, capacity, fit_faps, fold_free_reach, mirror_fap, relative_residual
+from puppet.runtime.musclesolver import folded_triangles
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT.parent / "shared" / "assets" / "makehuman" / "faceunits_arkit"

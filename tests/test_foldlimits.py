@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 
 from puppet.face.autorig import _lid_share
-from puppet.face.muscles import folded_triangles
 from puppet.face.rig import load_rig, save_rig
 from puppet.fap.highlevel import high_level_faps
 from puppet.fap.table import clamp_ranges, fap
 from puppet.io.fapfile import read_fap, write_fap
 from puppet.runtime.foldlimits import LIP_PAIRS
+from puppet.runtime.musclesolver import folded_triangles
 
 
 def _folds(face, vertices) -> int:

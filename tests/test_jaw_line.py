@@ -8,7 +8,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 import puppet
-from puppet.face.muscles import folded_triangles
+from puppet.runtime.musclesolver import folded_triangles
 
 JAW_POSES = [{"open_jaw": 250}, {"open_jaw": 500}, {"open_jaw": 824},
              {"shift_jaw": 104}, {"shift_jaw": -104}, {"thrust_jaw": 300}, {"thrust_jaw": 600},

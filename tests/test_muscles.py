@@ -9,19 +9,21 @@ from hypothesis import strategies as st
 from scipy.interpolate import LinearNDInterpolator
 
 from puppet.face.muscles import (
-    EdgeConstraints,
     LinearMuscle,
-    MuscleModel,
     Sphincter,
-    control_point_displacements,
     default_muscles,
     flat_grid,
-    folded_triangles,
     frame_coefficients,
     mirror_muscle,
     muscles_from_json,
     muscles_to_json,
     place,
+)
+from puppet.runtime.musclesolver import (
+    EdgeConstraints,
+    MuscleModel,
+    control_point_displacements,
+    folded_triangles,
     repelled_travel,
 )
 

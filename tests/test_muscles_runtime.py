@@ -12,13 +12,14 @@ import pytest
 from devices import State, open_device
 from puppet import MappingError, load_mapping
 from puppet.face.autorig import build_rig
-from puppet.face.muscles import MUSCLE_NAMES, EdgeConstraints, control_point_displacements, folded_triangles
+from puppet.face.muscles import MUSCLE_NAMES
 from puppet.face.rig import rig_from_dict, rig_to_dict
 from puppet.fap.table import fap
 from puppet.io.fapfile import read_fap
 from puppet.io.takes import open_take
 from puppet.live.retake import retake
 from puppet.live.session import LiveSession
+from puppet.runtime.musclesolver import EdgeConstraints, control_point_displacements, folded_triangles
 from puppet.runtime.runtime import MUSCLE_MODES, Runtime
 
 JOYSTICK = "sim://joystick?protocol=ascii&rate=200&channels=6"

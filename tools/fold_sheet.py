@@ -18,8 +18,8 @@ from pathlib import Path
 import numpy as np
 
 import puppet
-from puppet.face.muscles import folded_triangles
 from puppet.face.rig import load_rig
+from puppet.runtime.musclesolver import folded_triangles
 from puppet.view.renderer import Renderer
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))

@@ -54,14 +54,8 @@ from PIL import Image, ImageDraw
 from scipy.interpolate import LinearNDInterpolator
 
 from puppet.face.load import load_face
-from puppet.face.muscles import (
-    EdgeConstraints,
-    LinearMuscle,
-    MuscleModel,
-    control_point_displacements,
-    flat_grid,
-    folded_triangles,
-)
+from puppet.face.muscles import LinearMuscle, flat_grid
+from puppet.runtime.musclesolver import EdgeConstraints, MuscleModel, control_point_displacements, folded_triangles
 from puppet.runtime.runtime import Runtime
 
 CONTRACTIONS = (0, 3, 5, 10)

@@ -42,10 +42,10 @@ import puppet
 from puppet.bench.assets import shared_assets
 from puppet.face.autorig import build_rig
 from puppet.face.examples import load_examples
-from puppet.face.muscles import folded_triangles
 from puppet.fap.table import clamp_ranges, fap
 from puppet.runtime.fapcalibration import HELD_OUT, HELD_OUT_SIDE, calibrate, capacity, fit_faps, relative_residual
 from puppet.runtime.foldlimits import within_limits
+from puppet.runtime.musclesolver import folded_triangles
 from puppet.view.mouthcheck import mouth_pixels
 from puppet.view.renderer import Renderer
 

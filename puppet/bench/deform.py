@@ -40,7 +40,6 @@ figures run it pinned: ``OPENBLAS_NUM_THREADS=1 taskset -c 1 puppet bench``.
 from __future__ import annotations
 
 import contextlib
-import functools
 import os
 import statistics
 import tempfile

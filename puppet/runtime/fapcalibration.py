@@ -56,10 +56,10 @@ from scipy.optimize import lsq_linear
 from scipy.spatial import cKDTree
 
 from puppet.face.autorig import build_rig
-from puppet.face.muscles import folded_triangles
 from puppet.face.rig import Rig
 from puppet.fap.table import N_FAPS, clamp_ranges, fap, faps
 from puppet.runtime.fapengine import LID_FAPS
+from puppet.runtime.musclesolver import folded_triangles
 from puppet.runtime.runtime import Runtime
 
 HELD_OUT = ("browOuterUpLeft", "browOuterUpRight", "cheekSquintLeft", "cheekSquintRight",

@@ -74,11 +74,11 @@ import scipy.sparse as sp
 from scipy.sparse import _sparsetools
 
 from puppet.face.autorig import rig_for_face
-from puppet.face.muscles import ControlPointMuscles, EdgeConstraints, MuscleModel
 from puppet.face.rig import Rig, rig_to_dict
 from puppet.face.rigid import compose
 from puppet.runtime import coefcache
 from puppet.runtime.dffd import DffdError, RegionDeformer
+from puppet.runtime.musclesolver import ControlPointMuscles, EdgeConstraints, MuscleModel
 from puppet.runtime.normals import VertexNormals
 from puppet.runtime.spreading import spread_matrix
 
