@@ -568,9 +568,9 @@ def test_the_pose_draws_on_the_runtime(runtime):
     m.feed(Sample(1 * MS, "box", {"ch0": 600, "ch1": 400}))
     m.feed(Sample(2 * MS, "pad", {"X": -20, "A": 0}))
     pose = m.pose()
-    vertices = runtime.pose(pose.fap, viseme=pose.viseme, expression=pose.expression)
-    assert vertices.shape == runtime.pose().shape and np.isfinite(vertices).all()
-    assert not np.allclose(vertices, runtime.pose())
+    vertices = runtime.deform_faps(pose.fap, viseme=pose.viseme, expression=pose.expression)
+    assert vertices.shape == runtime.deform_faps().shape and np.isfinite(vertices).all()
+    assert not np.allclose(vertices, runtime.deform_faps())
 
 
 def test_combine_sum_max_last():

@@ -65,7 +65,7 @@ def test_tongue_stays_behind_the_lower_incisors(face, runtime):
     tongue, lower = face.parts["tongue"], face.parts["teeth_lower"]
     front = np.abs(face.vertices[lower, 0]) < 0.05  # the lower incisors
     for open_jaw in JAW_OPENINGS:
-        v = runtime.pose({"open_jaw": open_jaw})
+        v = runtime.deform_faps({"open_jaw": open_jaw})
         incisors = v[lower[front]]
         # in the jaw's frame the tongue rides with the teeth: compare along the jaw's forward axis
         assert v[tongue, 2].max() < incisors[:, 2].max(), open_jaw
@@ -75,5 +75,5 @@ def test_mouth_bag_never_comes_out_in_front_of_the_lips(face, runtime):
     bag = _mouth_bag(face)
     lips = np.asarray(face.contours["mouth_opening"])  # the inner lip line
     for open_jaw in JAW_OPENINGS:
-        v = runtime.pose({"open_jaw": open_jaw})
+        v = runtime.deform_faps({"open_jaw": open_jaw})
         assert v[bag, 2].max() <= v[lips, 2].max() + 1e-9, open_jaw

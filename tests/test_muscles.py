@@ -13,11 +13,11 @@ from puppet.face.muscles import (
     Sphincter,
     default_muscles,
     flat_grid,
-    frame_coefficients,
     mirror_muscle,
     muscles_from_json,
     muscles_to_json,
     place,
+    place_coefficients,
 )
 from puppet.runtime.musclesolver import (
     EdgeConstraints,
@@ -160,7 +160,7 @@ def test_placement_round_trips_and_follows_a_similarity_transform():
     rng = np.random.default_rng(1)
     fp = {"a": rng.normal(size=3), "b": rng.normal(size=3), "c": rng.normal(size=3)}
     point = rng.normal(size=3)
-    coef = frame_coefficients(point, fp, ["a", "b", "c"])
+    coef = place_coefficients(point, fp, ["a", "b", "c"])
     np.testing.assert_allclose(place(fp, ["a", "b", "c"], coef), point)
     angle = 0.4
     rot = np.array([[np.cos(angle), 0, np.sin(angle)], [0, 1, 0], [-np.sin(angle), 0, np.cos(angle)]])

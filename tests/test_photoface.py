@@ -35,7 +35,7 @@ def shot():
     except Exception as exc:  # noqa: BLE001 -- no EGL here: the reason is the skip message
         pytest.skip(f"headless EGL OpenGL context unavailable: {exc}")
     with renderer:
-        renderer.frame(face.vertices, view="front", fov=8.0)
+        renderer.aim(face.vertices, view="front", fov=8.0)
         yield renderer.render(face.vertices), renderer.project
 
 
@@ -107,7 +107,7 @@ def test_the_command_writes_a_folder_that_loads_rigs_and_animates(shot, fdp11, t
     assert len(face.vertices) == len(load_face().vertices)
     runtime = Runtime(face, load_folder_rig(tmp_path / "me"))
     chin = face.feature_vertices["2.1"]
-    moved = runtime.pose({"open_jaw": 500})
+    moved = runtime.deform_faps({"open_jaw": 500})
     assert moved[chin, 1] < face.vertices[chin, 1] - 0.01 * _face_width(face)
     plain = Face(face.name, face.vertices, face.triangles, face.parts, colors=face.colors)
     textured, untextured = render_face(face, width=200, height=200), render_face(plain, width=200, height=200)
@@ -202,13 +202,13 @@ def smiling():
     from puppet.view.renderer import Renderer
 
     face = load_face()
-    posed = Runtime(face).pose({"open_jaw": 250}, expression=(1, 63, 0, 0))
+    posed = Runtime(face).deform_faps({"open_jaw": 250}, expression=(1, 63, 0, 0))
     try:
         renderer = Renderer.for_face(face, width=SIZE, height=SIZE)
     except Exception as exc:  # noqa: BLE001 -- no EGL here: the reason is the skip message
         pytest.skip(f"headless EGL OpenGL context unavailable: {exc}")
     with renderer:
-        camera = renderer.frame(face.vertices, view="front", fov=8.0)
+        camera = renderer.aim(face.vertices, view="front", fov=8.0)
         points = pf.mediapipe_points(face).on(posed)
         distance = (points - camera.eye) @ -camera.basis()[2]
         focal = SIZE / 2 / np.tan(np.radians(camera.fov) / 2)
@@ -297,7 +297,7 @@ def test_a_turned_head_photo_is_refused():
     except Exception as exc:  # noqa: BLE001
         pytest.skip(f"headless EGL OpenGL context unavailable: {exc}")
     with renderer:
-        front = renderer.frame(face.vertices, view="front")
+        front = renderer.aim(face.vertices, view="front")
         turn = np.radians(60)
         distance = np.linalg.norm(front.eye - front.target)
         renderer.look_at(front.target + distance * np.array([np.sin(turn), 0.0, np.cos(turn)]), front.target)

@@ -79,7 +79,7 @@ def default_face_views(tmp_path_factory):
         pytest.skip(f"headless EGL OpenGL context unavailable: {exc}")
     paths = {}
     with renderer:
-        front = renderer.frame(face.vertices[face.parts["skin"]], view="front", margin=1.3)
+        front = renderer.aim(face.vertices[face.parts["skin"]], view="front", margin=1.3)
         projected = renderer.project(np.asarray(face.vertices))
         distance = np.linalg.norm(front.eye - front.target)
         for yaw in (0, 60, 90):

@@ -40,7 +40,7 @@ def egl() -> None:
 @pytest.fixture(scope="module")
 def renderer(egl: None, sphere: trimesh.Trimesh):
     with Renderer(sphere.faces, len(sphere.vertices), width=WIDTH, height=HEIGHT) as r:
-        r.frame(sphere.vertices)
+        r.aim(sphere.vertices)
         yield r
 
 
@@ -97,7 +97,7 @@ def test_same_input_renders_identically(renderer: Renderer, sphere: trimesh.Trim
 def test_views_frame_the_object(view: str, sphere: trimesh.Trimesh) -> None:
     mesh = trimesh.Trimesh(sphere.vertices * [0.8, 1.0, 0.9], sphere.faces, process=False)
     with Renderer(mesh.faces, len(mesh.vertices), width=WIDTH, height=HEIGHT) as r:
-        r.frame(mesh.vertices, view=view)
+        r.aim(mesh.vertices, view=view)
         image = r.render(mesh.vertices)
         projected = r.project(mesh.vertices)
     assert not _is_grey(image[HEIGHT // 2, WIDTH // 2])
@@ -110,7 +110,7 @@ def test_look_at_from_behind(renderer: Renderer, sphere: trimesh.Trimesh) -> Non
     try:
         image = renderer.render(sphere.vertices)
     finally:
-        renderer.frame(sphere.vertices)
+        renderer.aim(sphere.vertices)
     assert not _is_grey(image[HEIGHT // 2, WIDTH // 2])
     assert _is_grey(image[0, 0])
 

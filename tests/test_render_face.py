@@ -21,7 +21,7 @@ def scene():
     except Exception as exc:  # no EGL here: the reason is the skip message
         pytest.skip(f"headless EGL OpenGL context unavailable: {exc}")
     skin = face.vertices[face.parts["skin"]]
-    renderer.frame(skin[skin[:, 1] > face.feature_points["2.1"][1] - 0.3], view="front")
+    renderer.aim(skin[skin[:, 1] > face.feature_points["2.1"][1] - 0.3], view="front")
     yield face, runtime, renderer
     renderer.release()
 

@@ -10,7 +10,7 @@ import pytest
 
 from puppet.face.load import load_face
 from puppet.runtime.runtime import Runtime
-from puppet.view.rendertake import frame_head
+from puppet.view.rendertake import aim_at_head
 
 render = pytest.importorskip("puppet.view.renderer")
 
@@ -30,12 +30,12 @@ def studio_4x(face, **size) -> render.Renderer:
 def face_and_poses():
     face = load_face()
     runtime = Runtime(face)
-    return face, {name: runtime.pose(**kwargs) for name, kwargs in POSES.items()}
+    return face, {name: runtime.deform_faps(**kwargs) for name, kwargs in POSES.items()}
 
 
 def _images(renderer: render.Renderer, face, poses: dict) -> dict:
     with renderer:
-        frame_head(renderer, face, "front")
+        aim_at_head(renderer, face, "front")
         return {name: renderer.render(vertices) for name, vertices in poses.items()}
 
 
@@ -123,7 +123,7 @@ def test_a_window_framebuffer_gets_the_offscreen_image(face_and_poses, old_and_n
     with ctx:
         screen = ctx.simple_framebuffer(SIZE)
         renderer = render.Renderer.for_face(face, width=SIZE[0], height=SIZE[1], ctx=ctx)
-        frame_head(renderer, face, "front")
+        aim_at_head(renderer, face, "front")
         renderer.draw(poses["joy"], framebuffer=screen)
         data = screen.read(components=3, alignment=1)
         renderer.release()
@@ -136,7 +136,7 @@ def test_culling_back_faces_changes_a_wide_open_mouth_by_a_few_pixels(face_and_p
     culled image (the default) and the two-sided one differ in under 0.1% of the pixels."""
     face, _ = face_and_poses
     runtime = Runtime(face)
-    poses = {"open": runtime.pose({"open_jaw": 1000}), "open_smile": runtime.pose({"open_jaw": 700}, expression=(1, 63, 0, 0))}
+    poses = {"open": runtime.deform_faps({"open_jaw": 1000}), "open_smile": runtime.deform_faps({"open_jaw": 700}, expression=(1, 63, 0, 0))}
     size = {"width": SIZE[0], "height": SIZE[1]}
     culled = _images(render.Renderer.for_face(face, **size), face, poses)
     both = _images(render.Renderer.for_face(face, cull=False, **size), face, poses)

@@ -233,7 +233,7 @@ def test_the_window_table_holds_extreme_takes_without_overflow(tmp_path, face):
         warnings.simplefilter("error")
         table = HeldTable(fap, Runtime(face))
         assert table.ensure(3)
-        vertices, normals = table.pose(2)
+        vertices, normals = table.mesh(2)
     assert np.isfinite(vertices).all() and np.isfinite(normals).all()
     assert read_fap(fap).values[0, 2] == 1e300
 

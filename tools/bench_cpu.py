@@ -53,11 +53,11 @@ def frame_work(frames: int) -> None:
 
     cases = {
         "FAP frame: controls + deform": lambda i: runtime.deform(*runtime.fap_controls(fap), out=out),
-        "every muscle 0.5: controls + deform": lambda i: runtime.pose(fap, muscles=every, out=out),
+        "every muscle 0.5: controls + deform": lambda i: runtime.deform_faps(fap, muscles=every, out=out),
         "every muscle 0.5: controls + deform + normals": lambda i: runtime.deform_with_normals(
             *runtime.fap_controls(fap), muscles=every, out=out, normals_out=normals),
         "every muscle 0.45-0.55 moving, jaw working: + normals": moving,
-        "zygomatic pair at 3: controls + deform": lambda i: runtime.pose(
+        "zygomatic pair at 3: controls + deform": lambda i: runtime.deform_faps(
             fap, muscles={"zygomatic_major_l": 3.0, "zygomatic_major_r": 3.0}, out=out),
     }
     for name, frame in cases.items():

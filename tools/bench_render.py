@@ -30,7 +30,7 @@ sys.path.insert(0, str(ROOT))
 from puppet.face.load import load_face
 from puppet.runtime.runtime import Runtime
 from puppet.view import renderer as render
-from puppet.view.rendertake import frame_head
+from puppet.view.rendertake import aim_at_head
 
 _LAMBERT_VS = """
 #version 330
@@ -129,7 +129,7 @@ def main() -> None:
     new_default = render.Renderer.for_face(face, **options)
     renderers[f"new default ({new_default.samples}x MSAA, {new_default.antialias})"] = new_default
     for r in renderers.values():
-        frame_head(r, face, "front")
+        aim_at_head(r, face, "front")
     view_projection = new_default._view_projection()
     lambert = Lambert(face, size, view_projection)
     runs = {name: r.render for name, r in renderers.items()}

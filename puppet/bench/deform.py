@@ -26,7 +26,7 @@ normals -> draw -> read-back of a 640x480 offscreen image, with the frames per s
 share of the frame spent deforming (controls + DFFD + normals). A third table
 (``puppet.bench.inputs``) pushes samples through each device adapter and its shipped mapping.
 
-A muscle table (``bench_muscles``, default face): median ms of one frame (``Runtime.pose``:
+A muscle table (``bench_muscles``, default face): median ms of one frame (``Runtime.deform_faps``:
 FAPs + muscles, positions) for the same contractions in each muscle mode -- ``control``
 (control points + DFFD + fold guard), ``classic`` and ``improved`` (vertex modes) -- with the same
 FAP frame without muscles as the baseline, in the same run. A held pose repeats one frame; a
@@ -168,7 +168,7 @@ def bench_frame_split(face: Face, frames: int, rig=None, size: tuple[int, int] =
     steps = {"controls": [], "dffd": [], "normals": [], "draw": [], "read": []}
     out, normals = np.empty_like(runtime.rest), np.empty_like(runtime.rest)
     with Renderer.for_face(face, width=size[0], height=size[1]) as renderer:
-        renderer.frame(face.vertices)
+        renderer.aim(face.vertices)
         for i in range(frames + 1):
             t = [time.perf_counter()]
             d, motions = inputs(i)
@@ -204,11 +204,11 @@ def bench_muscles(face: Face, frames: int, rig=None) -> list[dict]:
     for pose_name, (names, value) in MUSCLE_POSES.items():
         poses = _muscle_frames(runtime.muscle_names if names is None else names, value)
         row = {"face": face.name, "pose": pose_name,
-               "fap_only_ms": 1e3 * median_time(lambda: runtime.pose(fap, out=out), repeat)}
+               "fap_only_ms": 1e3 * median_time(lambda: runtime.deform_faps(fap, out=out), repeat)}
         for mode in MUSCLE_MODES:
             frame = iter(range(10**9))
             row[f"{mode}_ms"] = 1e3 * median_time(
-                lambda mode=mode, frame=frame: runtime.pose(fap, muscles=poses[next(frame) % len(poses)], mode=mode, out=out),
+                lambda mode=mode, frame=frame: runtime.deform_faps(fap, muscles=poses[next(frame) % len(poses)], mode=mode, out=out),
                 repeat)
         rows.append(row)
     return rows

@@ -23,8 +23,8 @@ Two kinds of muscle, both plain data (``muscles_to_json`` / ``muscles_from_json`
   moves in the frontal (x, y) plane toward the centre by ``c * squeeze * F(q) * (centre - P)_xy``,
   F(q) = cos^2(pi/2 q) for q < 1: ``squeeze`` is the fraction of the way to the centre at c = 1.
 
-Adaptive placement (Zhou & Liu): a muscle end is stored as coefficients in the frame of three
-MPEG-4 feature points (``place`` / ``frame_coefficients``), so the same recipe places it on any
+Adaptive placement (Zhou & Liu): a muscle end is stored as coefficients in the basis of three
+MPEG-4 feature points (``place`` / ``place_coefficients``), so the same recipe places it on any
 face that has the feature points; ``default_muscles(face)`` does this for the default set and
 puts each end on the nearest skin vertex (the muscle formulas use 3D distances to the ends, so an
 end floating off the skin would shift every zone).
@@ -78,9 +78,9 @@ Muscle = LinearMuscle | Sphincter
 
 # -- adaptive placement ---------------------------------------------------------------------------
 
-def _frame(corners: np.ndarray) -> np.ndarray:
+def _basis(corners: np.ndarray) -> np.ndarray:
     """Rows A, B - A, C - A and the triangle's normal scaled to its size (sqrt of twice the area),
-    turned forward (+z) so that mirroring a face mirrors the frame."""
+    turned forward (+z) so that mirroring a face mirrors the basis."""
     a, b, c = corners
     n = np.cross(b - a, c - a)
     size = np.linalg.norm(n)
@@ -89,21 +89,21 @@ def _frame(corners: np.ndarray) -> np.ndarray:
 
 
 def place(feature_points: Mapping[str, np.ndarray], ids: Sequence[str], coefficients: Sequence[float]) -> np.ndarray:
-    """The point w_a A + w_b B + w_c C + h n of the frame of feature points ``ids`` = (A, B, C),
+    """The point w_a A + w_b B + w_c C + h n of the basis of feature points ``ids`` = (A, B, C),
     for ``coefficients`` (w_a, w_b, w_c, h): barycentric weights (normalised to sum 1) and an
     offset along the triangle's forward normal in units of the triangle's size. The same
     coefficients place the same anatomical point on another face (Zhou & Liu's adaptive muscles)."""
-    frame = _frame(np.array([feature_points[i] for i in ids], dtype=float))
+    basis = _basis(np.array([feature_points[i] for i in ids], dtype=float))
     wa, wb, wc, h = (float(x) for x in coefficients)
     total = wa + wb + wc
-    return frame[0] + (wb * frame[1] + wc * frame[2]) / total + h * frame[3]
+    return basis[0] + (wb * basis[1] + wc * basis[2]) / total + h * basis[3]
 
 
-def frame_coefficients(point: np.ndarray, feature_points: Mapping[str, np.ndarray], ids: Sequence[str]) -> np.ndarray:
+def place_coefficients(point: np.ndarray, feature_points: Mapping[str, np.ndarray], ids: Sequence[str]) -> np.ndarray:
     """The coefficients (w_a, w_b, w_c, h) that ``place`` turns back into ``point``: how a muscle
     end drawn on one face is written down for every face."""
-    frame = _frame(np.array([feature_points[i] for i in ids], dtype=float))
-    wb, wc, h = np.linalg.solve(frame[1:].T, np.asarray(point, float) - frame[0])
+    basis = _basis(np.array([feature_points[i] for i in ids], dtype=float))
+    wb, wc, h = np.linalg.solve(basis[1:].T, np.asarray(point, float) - basis[0])
     return np.array([1.0 - wb - wc, wb, wc, h])
 
 

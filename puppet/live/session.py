@@ -9,7 +9,7 @@
 2. feed each Sample to the mapping (and, while recording, to the take's raw log; frame ticks
    that fall before a Sample are written first, see *Recording*);
 3. take the mapping's Pose at ``now`` and deform the face into buffers allocated once
-   (``Frame.vertices`` / ``Frame.normals`` *are* those buffers: copy them to keep a frame).
+   (``LiveFrame.vertices`` / ``LiveFrame.normals`` *are* those buffers: copy them to keep a frame).
 
 Holding the pose
     While every device is OPEN the Pose is taken at ``now``, so smoothing settles between
@@ -72,7 +72,7 @@ from puppet.runtime.runtime import Runtime
 
 
 @dataclass
-class Frame:
+class LiveFrame:
     """One frame of the live loop. ``vertices`` and ``normals`` are the session's buffers,
     overwritten by the next frame; ``newest_sample_ns`` is the newest Sample ever fed (None before
     any); ``n_samples`` how many Samples this frame fed, ``sample_ns`` their timestamps."""
@@ -152,7 +152,7 @@ class LiveSession:
 
     # -- the live loop ----------------------------------------------------------------------
 
-    def frame(self, now_ns: int | None = None) -> Frame:
+    def frame(self, now_ns: int | None = None) -> LiveFrame:
         """Drain, map, deform: one frame at ``now_ns`` (default: ``time.monotonic_ns()``)."""
         try:
             return self._frame(now_ns)
@@ -161,7 +161,7 @@ class LiveSession:
                 self._end_take(f"the live loop failed: {type(exc).__name__}: {exc}")
             raise
 
-    def _frame(self, now_ns: int | None) -> Frame:
+    def _frame(self, now_ns: int | None) -> LiveFrame:
         states = self.states
         batches = [d.drain() for d in self.devices.values()]
         now = time.monotonic_ns() if now_ns is None else int(now_ns)
@@ -201,17 +201,13 @@ class LiveSession:
             self.pose_error = self.mapping.held_problem
             warnings.warn(self.pose_error, RuntimeWarning, stacklevel=2)
         if samples or pose_ns != self._last_pose_ns or not self._have_mesh or self.layer is not None:
-            fap, viseme, expression = pose.fap, pose.viseme, pose.expression
-            if self.layer is not None:
-                fap, viseme, expression = self._layered(now, pose)
-            d, motions = self.runtime.fap_controls(fap, viseme=viseme, expression=expression)
-            self.runtime.deform_with_normals(d, motions, out=self._vertices, normals_out=self._normals,
-                                             muscles=pose.muscles)
+            shown = pose if self.layer is None else Pose(*self._layered(now, pose), pose.muscles)
+            self.runtime.deform_pose(shown, out=self._vertices, normals_out=self._normals)
             self._have_mesh = True
         # else: nothing changed since the last frame (a held pose): the buffers already hold it
         self._last_pose_ns = pose_ns
         self.frames += 1
-        return Frame(self._vertices, self._normals, pose, now, self.newest_sample_ns, states, len(samples),
+        return LiveFrame(self._vertices, self._normals, pose, now, self.newest_sample_ns, states, len(samples),
                      tuple(sample.t_ns for sample in samples))
 
     def wait_for_input(self, timeout: float) -> bool:
@@ -359,7 +355,7 @@ def measure_latency(session: LiveSession, renderer, seconds: float = 3.0) -> dic
     timestamp and is not included.
     """
     if renderer.camera is None:
-        renderer.frame(session.runtime.rest)
+        renderer.aim(session.runtime.rest)
     renderer.render(session.runtime.rest, session.runtime.rest_normals)  # warm-up (shaders, buffers)
     drawn, mesh, work, draw = [], [], [], []
     frames = 0

@@ -76,6 +76,7 @@ from scipy.sparse import _sparsetools
 from puppet.face.autorig import rig_for_face
 from puppet.face.rig import Rig, rig_to_dict
 from puppet.face.rigid import compose
+from puppet.fap.pose import Pose
 from puppet.runtime import coefcache
 from puppet.runtime.dffd import DffdError, RegionDeformer
 from puppet.runtime.musclesolver import ControlPointMuscles, EdgeConstraints, MuscleModel
@@ -439,7 +440,15 @@ class Runtime:
 
         return FapEngine(self)
 
-    def pose(self, fap: Mapping[int | str, float] | np.ndarray | None = None, *,
+    def deform_pose(self, pose: Pose, *, out: np.ndarray | None = None, normals_out: np.ndarray | None = None,
+                    mode: str = "control") -> tuple[np.ndarray, np.ndarray]:
+        """Positions and unit vertex normals of the face showing ``pose``: its FAPs, FAP 1 / 2
+        blends and muscle contractions (in ``mode``), written into ``out`` and ``normals_out``
+        when given (what a live loop or a player does every frame)."""
+        d, motions = self.fap_controls(pose.fap, viseme=pose.viseme, expression=pose.expression)
+        return self.deform_with_normals(d, motions, out=out, normals_out=normals_out, muscles=pose.muscles, mode=mode)
+
+    def deform_faps(self, fap: Mapping[int | str, float] | np.ndarray | None = None, *,
              viseme: tuple | None = None, expression: tuple | None = None,
              muscles: Mapping[str, float] | None = None, mode: str = "control",
              out: np.ndarray | None = None) -> np.ndarray:
@@ -454,7 +463,7 @@ class Runtime:
     def fap_controls(self, fap: Mapping[int | str, float] | np.ndarray | None = None, *,
                      viseme: tuple | None = None,
                      expression: tuple | None = None) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-        """The displacements and rigid motions ``pose`` deforms with."""
+        """The displacements and rigid motions ``deform_faps`` deforms with."""
         from puppet.fap.highlevel import fap_values
 
         if fap is None:

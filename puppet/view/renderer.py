@@ -52,7 +52,7 @@ SKIN_SPECULAR = 0.3
 """Default per-vertex specular strength: a soft sheen. Eyes and teeth want about 1."""
 
 DEFAULT_FOV = 27.0
-"""Vertical field of view in degrees of ``Renderer.frame``: a portrait lens, little distortion."""
+"""Vertical field of view in degrees of ``Renderer.aim``: a portrait lens, little distortion."""
 
 VIEW_DIRECTIONS = {
     "front": (0.0, 0.0, 1.0),
@@ -511,7 +511,7 @@ class Renderer:
         )
         return self.camera
 
-    def frame(
+    def aim(
         self,
         vertices: np.ndarray,
         view: str = "front",
@@ -695,7 +695,7 @@ class Renderer:
         if shape != (self.n_vertices, 3):
             raise ValueError(f"expected vertices of shape ({self.n_vertices}, 3), got {shape}")
         if self.camera is None:
-            self.frame(vertices)
+            self.aim(vertices)
 
     def _set_frame_uniforms(self) -> None:
         """The camera's uniforms: view-projection, eye and the camera-attached lights."""
@@ -759,7 +759,7 @@ def render_face(
     face's texture when it has one (``texture_kwargs``)."""
     vertices = face.vertices if vertices is None else vertices
     with Renderer.for_face(face, width=width, height=height) as r:
-        r.frame(vertices, view=view)
+        r.aim(vertices, view=view)
         return r.render(vertices)
 
 
