@@ -44,7 +44,7 @@ def test_the_folder_holds_mesh_feature_points_and_rig_and_loads_with_its_own_rig
     assert np.abs(moved).max() > 0
 
 
-def test_render_and_export_take_the_folder(rigged, capsys):
+def test_render_and_export_take_the_folder(rigged, capsys, egl):
     assert main(["render", str(rigged / "take.fap"), "-o", str(rigged / "take.mp4"), "--size", "160x120",
                  "--face", str(rigged / "head")]) == 0
     assert (rigged / "take.mp4").stat().st_size > 0

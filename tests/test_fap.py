@@ -47,6 +47,7 @@ def test_every_translational_fap_moves_its_point_by_value_times_fapu_along_its_d
     assert len(capped) <= 6, capped  # squeezing the brows, flaring the nostrils: a few mm is all they do
 
 
+@pytest.mark.slow
 def test_every_translational_fap_moves_no_vertex_outside_its_regions(runtime, face):
     owner = np.empty(len(face.vertices), dtype=object)
     for region in runtime.rig.regions:

@@ -81,6 +81,7 @@ def test_the_encoder_reads_back_a_calibrated_pose(runtime):
     assert np.abs(encoded - runtime.faps.shown(values)).max() < 1e-6  # the inner corners follow the outer (foldlimits)
 
 
+@pytest.mark.slow
 @needs_examples
 def test_the_calibrated_face_reproduces_artist_shapes_better_than_the_coarse_rig(face, runtime, examples):
     """Better by a quarter, except where the fit keeps within the lips' fold-free reach: the
@@ -95,6 +96,7 @@ def test_the_calibrated_face_reproduces_artist_shapes_better_than_the_coarse_rig
     assert capacity(runtime, examples["noseSneerLeft"]) < capacity(coarse, examples["noseSneerLeft"])
 
 
+@pytest.mark.slow
 @needs_examples
 def test_a_smile_fit_raises_and_widens_the_lip_corner(face, runtime, examples):
     values = fit_faps(runtime, examples["mouthSmileLeft"])
@@ -145,6 +147,7 @@ def test_a_rig_file_keeps_its_motions_and_reach(tmp_path, runtime):
     assert np.allclose(again.fap_motions[number][some], rig.fap_motions[number][some], atol=1e-5)
 
 
+@pytest.mark.slow
 def test_the_calibration_carries_over_to_a_face_rigged_anew(face, runtime):
     finer = subdivide(face, 1)
     rig = build_rig(finer)
@@ -159,6 +162,7 @@ def test_the_calibration_carries_over_to_a_face_rigged_anew(face, runtime):
     assert np.linalg.norm(got - want) < 0.5 * np.linalg.norm(without - want)
 
 
+@pytest.mark.slow
 @needs_examples
 def test_a_calibration_fits_its_examples_better_and_keeps_its_held_out_ones_apart(face, examples):
     few = {n: examples[n] for n in ("mouthSmileLeft", "jawOpen", "browInnerUp")}
@@ -195,6 +199,7 @@ def test_the_shipped_calibration_moves_the_right_side_as_the_left_mirrored(face,
         assert np.linalg.norm(mirrored[skin] - moved_right[skin]) < apart * np.linalg.norm(moved_right[skin]), left
 
 
+@pytest.mark.slow
 @needs_examples
 def test_a_shape_held_out_on_one_side_is_learned_from_its_mirror_twin(face, examples):
     few = {n: examples[n] for n in ("mouthSmileLeft", "mouthSmileRight", "jawOpen")}
@@ -223,6 +228,7 @@ def test_the_arkit_mappings_are_written_from_the_solved_vectors(tmp_path):
     assert mapping is not None and vectors["jawOpen"]["open_jaw"] > 0
 
 
+@pytest.mark.slow
 def test_a_fit_keeps_within_the_fold_limits_so_the_face_shows_its_values(runtime, examples):
     """The shipped rig's fold limits (puppet.runtime.foldlimits) bound every fit: each FAP within its
     reach and each inner / outer lip pair within its follow range, so what the face shows for a

@@ -3,7 +3,6 @@ incisors, the mouth bag behind the lips (issue 11)."""
 
 from __future__ import annotations
 
-import moderngl
 import numpy as np
 import pytest
 
@@ -22,15 +21,6 @@ def face():
 @pytest.fixture(scope="module")
 def runtime(face):
     return puppet.Runtime(face, rig=build_rig(face))
-
-
-@pytest.fixture(scope="module")
-def egl() -> None:
-    """Skip the test unless a headless EGL context can be created."""
-    try:
-        moderngl.create_context(standalone=True, backend="egl").release()
-    except Exception as exc:  # any failure means no usable headless GL here
-        pytest.skip(f"headless EGL OpenGL context unavailable: {exc}")
 
 
 @pytest.fixture(scope="module")

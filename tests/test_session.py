@@ -97,12 +97,10 @@ def test_a_slow_loop_still_writes_every_tick(session):
     assert len(open_take(folder).stream()) == 11
 
 
-def test_measure_latency_offscreen_counts_every_sample(session, face):
-    render = pytest.importorskip("puppet.view.renderer")
-    try:
-        renderer = render.Renderer(face.triangles, len(face.vertices), face.colors, width=320, height=240)
-    except Exception as exc:  # no EGL here: the reason is the skip message
-        pytest.skip(f"headless EGL OpenGL context unavailable: {exc}")
+def test_measure_latency_offscreen_counts_every_sample(session, face, egl):
+    from puppet.view.renderer import Renderer
+
+    renderer = Renderer(face.triangles, len(face.vertices), face.colors, width=320, height=240)
     try:
         _run_until(session, lambda f: f.states["box"] is State.OPEN and f.n_samples > 0)
         fed = session.samples_fed

@@ -137,7 +137,7 @@ def test_play_checks_the_folder_before_its_window_opens(damaged, capsys, monkeyp
     assert {p.name: p.read_bytes() for p in folder.iterdir()} == before
 
 
-def test_a_take_fap_without_take_json_still_renders_with_a_warning(good, tmp_path, capsys):
+def test_a_take_fap_without_take_json_still_renders_with_a_warning(good, tmp_path, capsys, egl):
     folder = tmp_path / "bare_001"
     shutil.copytree(good, folder)
     (folder / "take.json").unlink()
