@@ -91,9 +91,12 @@ def _cockpit_parts(pixels: np.ndarray) -> set[str]:
                                     ("REC", (255, 51, 51))) if shows(status, rgb)}
     if status.std() > 20:
         parts.add("text and graphs")
-    yellow = (np.abs(monitor - np.array((230, 179, 0))).max(axis=2) < 40).any(axis=1)
-    rows = np.count_nonzero(np.diff(yellow.astype(int)) == 1)  # runs of rows with a bar in them
-    if rows >= 6:
+    def runs(rgb: tuple[int, int, int]) -> int:  # runs of rows with that colour in them
+        rows = (np.abs(monitor - np.array(rgb)).max(axis=2) < 12).any(axis=1)
+        return int(np.count_nonzero(np.diff(rows.astype(int)) == 1))
+
+    # a bar per channel row (its frame shows at any value) and values filling some of them
+    if runs((43, 61, 88)) >= 6 and runs((230, 179, 0)) >= 3:
         parts.add("channel bars")
     return parts
 
