@@ -60,6 +60,7 @@ ICT = ROOT.parent / "shared" / "assets" / "ict_facekit"
 FACE_AREA = 9409  # ICT vertices 0-9408 are the face block
 SIZE = 800
 MARGIN = 1.6
+EXACT_NOISE = 0.001  # landmark error of exact projected points, face widths (puppet.photo.depth.LANDMARK_NOISE)
 
 
 class Ict:
@@ -205,12 +206,13 @@ def main() -> int:
     area = face_area(base)
     shown = visible(base, area)
     exact_ibug = ict.exact(ict.landmarks)
-    builds = {"iBUG-68 exact 2D": (exact_ibug[:, :2], {}),
-              "iBUG-68 exact 3D": (exact_ibug, {"depth_trust": 1.0})}
+    exact = {"landmark_noise": EXACT_NOISE}
+    builds = {"iBUG-68 exact 2D": (exact_ibug[:, :2], exact),
+              "iBUG-68 exact 3D": (exact_ibug, exact | {"depth_trust": 1.0})}
     depth = None
     if photo_python() is not None:
         on_ict = ict.mediapipe_points()
-        builds["MediaPipe exact 3D"] = (ict.exact(on_ict), {"depth_trust": 1.0})
+        builds["MediaPipe exact 3D"] = (ict.exact(on_ict), exact | {"depth_trust": 1.0})
         with tempfile.TemporaryDirectory() as work:
             save_png(ict.photo, Path(work) / "ict.png")
             detected = np.array(detect_landmarks(Path(work) / "ict.png")["points"])
@@ -219,41 +221,59 @@ def main() -> int:
     else:
         print("no photo environment (tools/setup.sh): the MediaPipe rows are skipped")
     rows = {"doing nothing (generic face)": measure(base, ict, ibug, area, shown)}
+    warp_only = dict(rows)
     fits = {}
     for name, (points, options) in builds.items():
-        fit = pf.fit_photo(base, pf.parse_landmarks(points.tolist()), (SIZE, SIZE), **options)
-        fits[name] = fit
-        rows[name] = measure(pf.warp_face(base, fit.neutral), ict, ibug, area, shown)
-    table = _table(rows)
+        landmarks = pf.parse_landmarks(points.tolist())
+        fits[name] = pf.fit_photo(base, landmarks, (SIZE, SIZE), **options)
+        rows[name] = measure(fits[name].face(), ict, ibug, area, shown)
+        without = pf.fit_photo(base, landmarks, (SIZE, SIZE), shape=False, **options)
+        warp_only[name] = measure(without.face(), ict, ibug, area, shown)
+    table, without_model = _table(rows), _table(warp_only)
     print(table)
+    print("without the shape model (the warp alone):\n" + without_model)
     if depth:
         print("depth RMS at MediaPipe's landmarks: " + ", ".join(f"{k} {100 * v:.2f}%" for k, v in depth.items()))
     smile = neutralised(base)
     print(smile)
     last = list(fits)[-1]
     docs = ROOT / "docs"
-    save_png(figure(ict.photo, builds[last][0], base, fits[last]), docs / "photo_face.png")
-    (docs / "photo_face.md").write_text(_report(table, depth, smile, last, fits[last].report), encoding="utf-8")
+    save_png(figure(ict.photo, builds[last][0], fits[last]), docs / "photo_face.png")
+    save_png(views(ict.face, base, fits), docs / "photo_face_views.png")
+    (docs / "photo_face.md").write_text(_report(table, without_model, depth, smile, last, fits[last].report),
+                                        encoding="utf-8")
     ict.renderer.release()
     return 0
 
 
-def figure(photo: np.ndarray, points: np.ndarray, base: Face, fit: pf.PhotoFit) -> np.ndarray:
+def figure(photo: np.ndarray, points: np.ndarray, fit: pf.PhotoFit) -> np.ndarray:
     """The photo with the landmarks (red) and the built face's contours as photographed
     (green); the built face textured; its shape untextured."""
     overlay = Image.fromarray(photo)
     draw = ImageDraw.Draw(overlay)
-    posed = pf.warp_face(base, fit.posed)
+    posed = fit.face(posed=True)
     for name in ("face_oval", "vermilion_border", "mouth_opening", "left_lid_opening", "right_lid_opening"):
         loop = fit.pixels(posed.vertices[posed.contours[name]])
         draw.line([tuple(p) for p in np.vstack([loop, loop[:1]])], fill=(40, 220, 60), width=2)
     for x, y in points[:, :2]:
         draw.ellipse((x - 1.5, y - 1.5, x + 1.5, y + 1.5), fill=(230, 40, 40))
     textured, _ = pf.face_from_photo(photo, pf.parse_landmarks(points.tolist()), "ict")
-    shape = Face(textured.name, textured.vertices, textured.triangles, textured.parts, colors=None)
     panels = [np.asarray(overlay), render_face(textured, width=SIZE, height=SIZE),
-              render_face(shape, width=SIZE, height=SIZE)]
+              render_face(_untextured(textured), width=SIZE, height=SIZE)]
     return np.concatenate(panels, axis=1)
+
+
+def views(ict: Face, base: Face, fits: dict[str, pf.PhotoFit], size: int = 320) -> np.ndarray:
+    """Rows: ICT, the generic face, then each built face (untextured); columns: front,
+    three-quarter, profile. Each face framed on itself."""
+    faces = [ict, base] + [fit.face() for fit in fits.values()]
+    rows = [np.concatenate([render_face(_untextured(face), width=size, height=size, view=view)
+                            for view in ("front", "three_quarter", "profile")], axis=1) for face in faces]
+    return np.concatenate(rows, axis=0)
+
+
+def _untextured(face) -> Face:
+    return Face(face.name, face.vertices, face.triangles, face.parts, colors=None)
 
 
 def _table(rows: dict[str, dict[str, float]]) -> str:
@@ -267,7 +287,7 @@ def _table(rows: dict[str, dict[str, float]]) -> str:
     return head + body
 
 
-def _report(table: str, depth: dict | None, smile: str, last: str, report: dict) -> str:
+def _report(table: str, without_model: str, depth: dict | None, smile: str, last: str, report: dict) -> str:
     frontal = ", ".join(f"{k} {v:.3f}" for k, v in report["frontal"].items())
     depth_line = ("MediaPipe's depth against ICT's at its own landmarks (RMS after a similarity, / face width): "
                   + ", ".join(f"{k} {100 * v:.2f}%" for k, v in depth.items()) + ".") if depth else \
