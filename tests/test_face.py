@@ -64,6 +64,12 @@ def first_hits(origins, direction, vertices, triangles):
     return dist, tri
 
 
+def lips_closed() -> dict[str, np.ndarray]:
+    """The skin vertices the face builder moved to close the lips at rest, per lip's wall."""
+    doc = json.loads((REPO / "puppet" / "data" / "default_face.json").read_text())["lips_closed"]
+    return {wall: np.asarray(doc[wall]) for wall in ("upper", "lower")}
+
+
 def lip_line(face: Face, x: np.ndarray) -> np.ndarray:
     """Height midway between the upper and lower arcs of the lips' meeting line, at each x."""
     loop = face.contours["mouth_opening"].tolist()
@@ -126,7 +132,13 @@ def test_source_index_points_at_the_same_base_vertex(face):
     si = face.source_index
     kept = si >= 0
     assert kept.sum() == len(face.parts["skin"])
-    np.testing.assert_array_equal(face.vertices[kept], base[si[kept]])
+    sealed = np.zeros(len(si), dtype=bool)
+    for wall in lips_closed().values():
+        sealed[wall] = True
+    np.testing.assert_array_equal(face.vertices[kept & ~sealed], base[si[kept & ~sealed]])
+    # the lips closed at rest: the slit's inner walls moved in y only, by at most its width
+    moved = face.vertices[sealed] - base[si[sealed]]
+    assert np.all(moved[:, [0, 2]] == 0) and 0 < np.abs(moved[:, 1]).max() < 0.015
 
 
 def test_all_84_feature_points_and_their_vertices(face):
@@ -248,6 +260,8 @@ def test_open_mouth_is_not_see_through(face):
     skin = face.parts["skin"]
     p = v[skin]
     lower[skin] = (p[:, 1] < cut_y[skin]) & (np.abs(p[:, 0]) < 0.3) & (p[:, 2] > 0.7) & (p[:, 1] > 6.0)
+    walls = lips_closed()  # the closed lips' inner walls overlap across the line: each goes with its lip
+    lower[walls["upper"]], lower[walls["lower"]] = False, True
     lower[face.parts["teeth_lower"]] = True
     lower[face.parts["tongue"]] = True
     angle = np.radians(15)
@@ -277,15 +291,15 @@ def test_open_mouth_is_not_see_through(face):
 def test_teeth_and_tongue_sit_inside_the_mouth(face):
     """Every teeth and tongue vertex lies in the mouth cavity: rays from it in six directions
     all meet the skin (the cavity is enclosed by the closed lips). The incisal edges sit at the
-    height of the lips' meeting line (so they show as soon as the lips part), where a ray may
-    leave through the slit between the closed lips: vertices in that band are not sampled."""
+    height of the lips' meeting line (so they show as soon as the lips part): the ones there are
+    sampled too, since the lips are closed at rest and no ray leaves between them."""
     skin_tri = part_triangles(face, "skin")
     idx = np.concatenate([face.parts["teeth_upper"], face.parts["teeth_lower"], face.parts["tongue"]])
     slit = face.vertices[face.contours["mouth_opening"], 1]
     y = face.vertices[idx, 1]
-    idx = idx[(y < slit.min() - 0.005) | (y > slit.max() + 0.005)]
+    band = idx[(y > slit.min() - 0.005) & (y < slit.max() + 0.005)]
     rng = np.random.default_rng(0)
-    sample = face.vertices[rng.choice(idx, 60, replace=False)]
+    sample = face.vertices[np.concatenate([rng.choice(idx, 60, replace=False), band])]
     for direction in np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0.0, 0.0, -1]]):
         _, tri = first_hits(sample, direction.astype(float), face.vertices, skin_tri)
         assert np.all(tri >= 0), direction

@@ -36,14 +36,23 @@ What it does, in order (each step is a function below):
    shortened toward its root and narrowed above the floor of the mouth) until no tooth vertex is
    inside it and none of its vertices is inside a tooth; its ``source_index`` is -1 since its
    positions are no longer base.obj's (vertex i is base vertex 13380 + i).
-5. Vertex albedo (skin, lips, brows, lash line, mouth interior, teeth, gums, tongue, eyes). The
+5. Lips closed at rest: base.obj's lips stand a slit apart (0.7 mm at the mid-line, 1 mm beside
+   it), and through it the front view saw the teeth as a white line between lips that should
+   read as closed. The first ring of the mouth bag behind the lips' meeting line (the inner
+   lips' walls of the slit, out of sight from the front) is moved in y onto the meeting line,
+   overlapping by ``LIP_SEAL`` (``close_lips``): a ray through the slit stops on the wet inner
+   lip. The meeting line itself, the feature points and so the FAPU are base.obj's; the lips
+   part as before when the jaw opens (the upper wall stays with the upper lip, the lower one
+   goes with the lower). ``source_index`` still names the base vertex of those 38 vertices;
+   the JSON lists them (``lips_closed``).
+6. Vertex albedo (skin, lips, brows, lash line, mouth interior, teeth, gums, tongue, eyes). The
    mouth's occlusion is baked in: the bag darkens fast along its surface behind the lips, the
    tongue and teeth with their depth behind the lips, so an open mouth shows a dark cavity.
-6. Feature points: the candidates' 84 FDP points carried to the new vertex indices; changed are
+7. Feature points: the candidates' 84 FDP points carried to the new vertex indices; changed are
    3.5/3.6 (eyeball front poles), 9.8-9.11 (generated teeth), 4.5/4.6 (brow tails: the candidate
    was on the temple) and the tongue points 6.1-6.4 move with the tongue (see ``feature_points``);
    contours carried the same way, plus the neck loop; pivots from the candidates.
-7. Write ``default_face.npz``, ``default_face.json``, ``PROVENANCE.md`` and ``LICENSE-CC0.md``.
+8. Write ``default_face.npz``, ``default_face.json``, ``PROVENANCE.md`` and ``LICENSE-CC0.md``.
 
 Vertex order of the output (generated parts take the place of the helpers they replace, in the
 order of their base.obj vertex ranges): skin (body, ascending base index), tongue (13380-13605),
@@ -145,6 +154,7 @@ GUM_COLUMNS_PER_TOOTH = 6
 GUM_MARGIN_F, GUM_PAPILLA_F, GUM_SIDE_F, GUM_RIDGE_F = -0.04, 0.30, -0.32, -0.42
 GUM_MIN_DEPTH_F = -0.17  # where the mouth bag is shallow, the gum's deep rows may come up to here
 CLEARANCE = 0.004  # dm kept between teeth/gums and the mouth-bag skin
+LIP_SEAL = 0.0005  # dm: how far the closed lips' inner walls overlap across the meeting line
 
 # -- colours (linear-ish albedo, 0..1) ---------------------------------------------------------------
 SKIN = np.array([0.87, 0.67, 0.57])
@@ -759,7 +769,7 @@ def fit_tongue(P: np.ndarray, T: np.ndarray, upper: Jaw, lower: Jaw) -> tuple[np
 
 
 # =============================================================================================
-# 5. colours
+# 5. closed lips, colours
 # =============================================================================================
 
 def skin_graph(vertices: np.ndarray, triangles: np.ndarray, mask: np.ndarray) -> sp.csr_matrix:
@@ -787,6 +797,38 @@ def side_of_loop(graph: sp.csr_matrix, loop, seed: int) -> np.ndarray:
     h = sp.coo_matrix((g.data[m], (g.row[m], g.col[m])), shape=graph.shape)
     _, comp = connected_components(h, directed=False)
     return (comp == comp[seed]) & keep
+
+
+def close_lips(V: np.ndarray, T: np.ndarray, skin_mask: np.ndarray, mouth) -> tuple[np.ndarray, dict]:
+    """(V with the lips closed at rest, {"upper": ..., "lower": ...} the vertices moved of each
+    lip's wall): every mouth-bag vertex next to the
+    upper (lower) half of the lips' meeting line ``mouth`` moved in y to the line's middle at its
+    |x|, less (plus) ``LIP_SEAL``; those next to both halves (at the corners) stay."""
+    graph = skin_graph(V, T, skin_mask)
+    top = int(np.argmax(np.where(skin_mask, V[:, 1], -np.inf)))
+    loop = np.asarray(mouth)
+    bag = skin_mask & ~side_of_loop(graph, loop, top)
+    bag[loop] = False
+    ends = sorted((int(np.argmin(V[loop, 0])), int(np.argmax(V[loop, 0]))))
+    arcs = [loop[ends[0] + 1:ends[1]], np.concatenate([loop[ends[1] + 1:], loop[:ends[0]]])]
+    upper, lower = sorted(arcs, key=lambda arc: -V[arc, 1].mean())
+
+    def line(arc: np.ndarray, x: np.ndarray) -> np.ndarray:
+        order = np.argsort(np.abs(V[arc, 0]))
+        return np.interp(np.abs(x), np.abs(V[arc[order], 0]), V[arc[order], 1])
+
+    def next_to(arc: np.ndarray) -> set[int]:
+        return {int(w) for v in arc for w in graph[v].indices if bag[w]}
+
+    up, down = next_to(upper), next_to(lower)
+    out = V.copy()
+    moved = {}
+    for name, wall, sign in (("upper", up - down, -1.0), ("lower", down - up, 1.0)):
+        side = np.array(sorted(wall), dtype=np.int64)
+        x = V[side, 0]
+        out[side, 1] = (line(upper, x) + line(lower, x)) / 2 + sign * LIP_SEAL
+        moved[name] = side
+    return out, moved
 
 
 def skin_colors(V, T, skin_mask, contours, fp, eye_centres) -> tuple[np.ndarray, dict]:
@@ -990,10 +1032,13 @@ def build(source: Path) -> tuple[dict[str, np.ndarray], dict, str]:
         "note": "the skin's open boundary: the closed edge loop around the lower neck where the head "
                 "was cut from the body (base vertices 815 front, 858 back)"}
 
-    # -- colours
+    # -- lips closed at rest, then colours
     skin_mask = np.zeros(len(V), dtype=bool)
     skin_mask[parts["skin"]] = True
     loops = {k: np.asarray(v["indices"]) for k, v in contours.items()}
+    V, sealed = close_lips(V, T, skin_mask, loops["mouth_opening"])
+    if set(np.concatenate(list(sealed.values())).tolist()) & {e["index"] for e in fp_doc.values() if "index" in e}:
+        raise SystemExit("build_default_face: closing the lips would move a feature point")
     col, color_info = skin_colors(V, T, skin_mask, loops, fp_xyz,
                                   {"left": eye_centres["left"], "right": eye_centres["right"]})
     front_z = float(fp_xyz["2.2"][2])
@@ -1025,6 +1070,10 @@ def build(source: Path) -> tuple[dict[str, np.ndarray], dict, str]:
                                                        skin_dist(lower.vertices).min())), 4)
     doc = json_document(src, V, T, parts, fp_doc, contours, cand, eye_centres, radius, neck_loop,
                         upper_fit, lower_fit, tongue_fit, scale, color_info, checks, offset, jaws)
+    doc["lips_closed"] = {wall: sealed[wall].tolist() for wall in ("upper", "lower")} | {
+        "note": "skin vertices moved from base.obj (source_index still names their base vertex): the "
+                "mouth bag's first ring behind the upper and lower halves of the lips' meeting line, moved "
+                f"in y onto the line's middle, overlapping by {LIP_SEAL} dm, so the lips are closed at rest"}
     provenance = provenance_text(src, doc)
     return arrays, doc, provenance
 
@@ -1265,8 +1314,8 @@ def json_document(src, V, T, parts, fp_doc, contours, cand, eye_centres, radius,
                   "note": "tooth sizes are average adult sizes (mm) times the scale (mouth width 8.3-8.4 "
                           "over 50 mm); arches along the helper teeth's incisal rows, set back where "
                           "needed to keep a clearance inside the mouth bag; lower arch behind the upper "
-                          f"by {LOWER_INSET} dm; at rest the teeth are apart (upper incisal row raised {UPPER_REST_LIFT} dm, "
-                          f"lower lowered {LOWER_REST_DROP} dm from the helpers') so the lips' slit shows the dark mouth"},
+                          f"by {LOWER_INSET} dm; at rest the incisal edges are at the lips' meeting line (upper row raised {UPPER_REST_LIFT} dm, "
+                          f"lower lowered {LOWER_REST_DROP} dm from the helpers'), behind the closed lips"},
         "tongue": {"fit": tongue_fit, "base_vertices": [TONGUE_FIRST, TONGUE_FIRST + int(len(parts["tongue"])) - 1],
                    "note": "vertex i of the tongue part is base vertex 13380 + i, moved: the helper tongue is "
                            "wider than the space between generated teeth of natural size (379 teeth vertices "

@@ -127,8 +127,9 @@ def build_rig(face, *, grid: bool = True, calibrated: bool = True) -> Rig:
 
 
 def _default_follow() -> dict[tuple[int, int], tuple[float, float]]:
-    """The shipped default rig's lip corner follow ranges (``puppet.runtime.foldlimits``), in FAPU: the
-    inner and outer corner lie a hair's breadth apart on every face."""
+    """The shipped default rig's follow ranges of the inner and outer lip FAPs
+    (``puppet.runtime.foldlimits``), in FAPU: the inner and outer lip points lie a few millimetres apart
+    on every face."""
     default = load_default_rig()
     return dict(default.fap_follow) if default is not None else {}
 

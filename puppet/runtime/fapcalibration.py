@@ -25,6 +25,10 @@ of the FAP. ``calibrate`` learns them from example shapes (``puppet.face.example
   side, mirrored. What the left shapes teach, the right side knows.
 * **Gaze.** The gaze FAPs carry skin motion too (the lids and the skin around the eye follow the
   eyeball): their prior is a share of the eyeball's turn easing out from it (``LID_SHARE``).
+* **Within the face's limits.** Where the rig has fold limits (``puppet.runtime.foldlimits``: each
+  FAP's reach, and follow ranges for the differences of the inner and outer lip FAPs), every fit
+  keeps within them, the follow ranges as linear constraints (``_bounded``), so the values found
+  are those the face shows; the response is the rig's own, without the limits.
 * **Held out.** ``HELD_OUT`` (whole left/right pairs and groups) or ``HELD_OUT_SIDE`` (every right
   shape) never reach a measuring calibration; the report gives their fit separately: a
   calibration that only memorises its examples is no win.
@@ -52,10 +56,10 @@ from scipy.optimize import lsq_linear
 from scipy.spatial import cKDTree
 
 from puppet.face.autorig import build_rig
-from puppet.face.muscles import folded_triangles
 from puppet.face.rig import Rig
 from puppet.fap.table import N_FAPS, clamp_ranges, fap, faps
 from puppet.runtime.fapengine import LID_FAPS
+from puppet.runtime.musclesolver import folded_triangles
 from puppet.runtime.runtime import Runtime
 
 HELD_OUT = ("browOuterUpLeft", "browOuterUpRight", "cheekSquintLeft", "cheekSquintRight",
@@ -178,11 +182,11 @@ def fit_faps(runtime: Runtime, displacement: np.ndarray, *, refine: int = 2, whe
     model = _LinearModel(runtime, skin)
     target = model.rows(displacement)
     values = np.zeros(N_FAPS)
-    rest = runtime.pose(values)
+    rest = model.runtime.deform_faps(values)
     for step in range(refine + 1):
         J = model.response(values) if step else model.J0
-        now = model.rows(runtime.pose(values) - rest)
-        values[model.columns] = _bounded(J, target - now + J @ values[model.columns], model.bounds)
+        now = model.rows(model.runtime.deform_faps(values) - rest)
+        values[model.columns] = _bounded(J, target - now + J @ values[model.columns], model.bounds, model.differences)
     return values
 
 
@@ -213,7 +217,7 @@ def _reach(runtime: Runtime, triangles: np.ndarray, number: int, end: float, ste
     def folds(value: float) -> bool:
         values = np.zeros(N_FAPS)
         values[number - 1] = value
-        return bool(folded_triangles(runtime.rest, runtime.pose(values), triangles).any())
+        return bool(folded_triangles(runtime.rest, runtime.deform_faps(values), triangles).any())
 
     if not folds(end):
         return None
@@ -224,10 +228,21 @@ def _reach(runtime: Runtime, triangles: np.ndarray, number: int, end: float, ste
     return round(good, 1) if not folds(round(good, 1)) else good
 
 
+def _unlimited(runtime: Runtime) -> Runtime:
+    """The runtime itself, or one of the same face on a copy of its rig without ``fap_reach`` and
+    ``fap_follow``: the rig's own response, which the fits linearise (they keep within the
+    limits as bounds and constraints, where the face shows the values as they are)."""
+    if not runtime.rig.fap_reach and not runtime.rig.fap_follow:
+        return runtime
+    rig = copy.copy(runtime.rig)
+    rig.fap_reach, rig.fap_follow = {}, {}
+    return Runtime(runtime.face, rig, dtype=runtime.dtype)
+
+
 def relative_residual(runtime: Runtime, values: np.ndarray, displacement: np.ndarray) -> float:
     """|V(values) - V0 - D| / |D| over the vertices ``displacement`` moves, on the real rig."""
     moved = np.linalg.norm(displacement, axis=1) > 0
-    error = runtime.pose(values) - runtime.pose(np.zeros(N_FAPS)) - displacement
+    error = runtime.deform_faps(values) - runtime.deform_faps(np.zeros(N_FAPS)) - displacement
     return float(np.linalg.norm(error[moved]) / np.linalg.norm(displacement[moved]))
 
 
@@ -247,8 +262,45 @@ def _skin(face, rig: Rig) -> np.ndarray:
     return np.concatenate([r.vertices for r in rig.regions if r.kind == "dffd"]).astype(np.int64)
 
 
-def _bounded(J: np.ndarray, b: np.ndarray, bounds: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
-    return lsq_linear(J, b, bounds=bounds, method="bvls", lsmr_tol="auto").x
+def _bounded(J: np.ndarray, b: np.ndarray, bounds: tuple[np.ndarray, np.ndarray],
+             differences: list[tuple[int, int, float, float]] = ()) -> np.ndarray:
+    """argmin |J x - b| with x within ``bounds`` and, for each (i, j, low, high) of
+    ``differences``, low <= x_i - x_j <= high (the rig's follow pairs: within them the face shows
+    the values as they are, so the fit is what the face does). A pair found outside its range is
+    held at the limit it crossed (x_i = x_j + limit, one unknown fewer) and the rest solved again,
+    until every pair is in range."""
+    held: dict[int, tuple[int, float]] = {}
+    while True:
+        x = _held(J, b, bounds, held)
+        crossed = {i: (j, low if x[i] - x[j] < low else high) for i, j, low, high in differences
+                   if i not in held and not low - DIFFERENCE_TOLERANCE <= x[i] - x[j] <= high + DIFFERENCE_TOLERANCE}
+        if not crossed:
+            return x
+        held |= crossed
+
+
+DIFFERENCE_TOLERANCE = 1e-6
+"""FAPU by which a fitted pair may pass its follow range (``FapEngine.shown`` then moves it back
+by as little)."""
+
+
+def _held(J: np.ndarray, b: np.ndarray, bounds: tuple[np.ndarray, np.ndarray],
+          held: dict[int, tuple[int, float]]) -> np.ndarray:
+    """Bounded least squares with each x_i of ``held`` = x_j + c ({i: (j, c)}): x_i's column
+    joins x_j's, and x_j keeps within both boxes."""
+    low, high = (np.array(bound, dtype=float) for bound in bounds)
+    K, rhs = J.copy(), b.copy()
+    for i, (j, c) in held.items():
+        K[:, j] += J[:, i]
+        rhs -= J[:, i] * c
+        low[j], high[j] = max(low[j], low[i] - c), min(high[j], high[i] - c)
+        high[j] = max(high[j], low[j])
+    free = np.array([k for k in range(J.shape[1]) if k not in held], dtype=np.int64)
+    x = np.zeros(J.shape[1])
+    x[free] = lsq_linear(K[:, free], rhs, bounds=(low[free], high[free]), method="bvls", lsmr_tol="auto").x
+    for i, (j, c) in held.items():
+        x[i] = x[j] + c
+    return x
 
 
 class _LinearModel:
@@ -256,7 +308,7 @@ class _LinearModel:
     columns of the points free to move along it (``free``, module docstring)."""
 
     def __init__(self, runtime: Runtime, skin: np.ndarray, coarse: Runtime | None = None) -> None:
-        self.runtime = runtime
+        self.runtime = _unlimited(runtime)  # the rig's response; its limits are the fits' bounds
         self.skin = skin
         self.columns = np.array([f.number - 1 for f in faps() if f.number > 2 and f.number not in NOT_FITTED])
         self.fapu = np.array([runtime.face.fapu[fap(int(c) + 1).unit] for c in self.columns])
@@ -269,8 +321,13 @@ class _LinearModel:
         self.columns, self.J0, self.fapu = self.columns[live], self.J0[:, live], self.fapu[live]
         self.fitted = tuple(int(c) + 1 for c in self.columns)
         lo, hi = clamp_ranges()
-        reach = runtime.faps.reach[:, self.columns]
+        limits = runtime.faps
+        reach = np.stack([np.maximum(limits.reach[0], limits.skin_reach[0]),
+                          np.minimum(limits.reach[1], limits.skin_reach[1])])[:, self.columns]
         self.bounds = (np.maximum(lo[self.columns], reach[0]), np.minimum(hi[self.columns], reach[1]))
+        index = {number: j for j, number in enumerate(self.fitted)}
+        self.differences = [(index[a], index[b], low, high) for (a, b), (low, high) in sorted(runtime.rig.fap_follow.items())
+                            if a in index and b in index]
 
     @functools.cached_property
     def free(self) -> list[list[int]]:
@@ -295,7 +352,7 @@ class _LinearModel:
             up, down = values.copy(), values.copy()
             up[c] += step
             down[c] -= step
-            J[:, j] = self.rows(runtime.pose(up) - runtime.pose(down)) / (2 * step)
+            J[:, j] = self.rows(runtime.deform_faps(up) - runtime.deform_faps(down)) / (2 * step)
         return J
 
     def _prior(self, coarse: Runtime) -> list[np.ndarray]:
@@ -335,7 +392,7 @@ class _LinearModel:
 
     def fit(self, E: list[np.ndarray], target: np.ndarray) -> np.ndarray:
         """The fitted FAPs' values for one example column under motions E."""
-        return _bounded(self.J(E), target, self.bounds)
+        return _bounded(self.J(E), target, self.bounds, self.differences)
 
     def J(self, E: list[np.ndarray]) -> np.ndarray:
         """The skin's response to the fitted FAPs with motions E."""

@@ -1,61 +1,71 @@
 """How far this face's FAPs can go without folding the skin: the rig's ``fap_follow`` and
 ``fap_reach``, found on the face itself and applied at pose time (``FapEngine.shown``).
 
-A fold is a triangle whose normal turns against its rest normal (``muscles.folded_triangles``).
+A fold is a triangle whose normal turns against its rest normal (``puppet.runtime.musclesolver.folded_triangles``).
 ``fap_coding_params.csv`` gives each FAP a coding range far beyond what a face can do (a brow
 lowered by 900 ENS is 4 cm; a lip raised by 1860 MNS, 3.5 cm), so a FAP at its range end folds
 the skin unless something limits it. Two limits can, both physical, both at pose time: the values
 a file or a device gives are never changed, only what the face shows.
 
-* **Follow** (``follow_ranges``): the inner and outer lip corners (2.4 / 8.3 and 2.5 / 8.4) are one
-  corner of the mouth, 2 mm apart on the default face, each with its own FAPs (6 / 53, 7 / 54
-  stretch them, 12 / 59, 13 / 60 raise them). One moved alone slides through the other within a
-  millimetre (FAP 6 folded at 20 MW). Their difference is kept within the range that folds
-  nothing: the FAP with the larger value leads and moves its own point by exactly value x FAPU;
-  the other follows just enough. The visemes and expressions move both corners together and are
-  not touched. Optional (``fold_safe(follow=True)``): the default rig ships without it, because
-  the ARKit fits (``fit_faps``, linearised at neutral) cannot see one corner FAP pushing the
-  other, and their median residual went from 0.40 to 0.50.
-* **Reach** (``fold_free_reach``, with follow in place if any): each FAP alone is limited to the values it
-  can take without a fold, toward each end of its range, the same on both sides of the face (the
-  tighter of a FAP's and its mirror's) and 2% inside. It caps what no face does (a brow pulled
-  4 cm into the eye, a jaw shifted 5 cm). Then ``widened``: where a fit of the artist's ARKit
-  shapes uses more than the fold-free value (the lip corners, open_jaw to 815 MNS, the mid
-  lips), the reach goes as far as the fit: a limit found one FAP at a time must not cut what an
-  artist's expression needs (with every reach fold-free the ARKit fits' median residual went
-  from 0.33 to 0.50). There a FAP alone at its range end can still fold thin triangles.
+* **Follow** (``follow_ranges``): each inner lip point (2.2-2.9) and the outer lip point beside it
+  (8.1-8.8) are one edge of the lip, 1-3 mm apart, each moved by its own FAP (``LIP_PAIRS``:
+  lower_t_midlip 4 and lower_t_midlip_o 51, ..., raise_r_cornerlip 13 and raise_r_cornerlip_o 60).
+  One moved alone slides through the other within a few millimetres (stretch_l_cornerlip 6 alone
+  folded at 20 MW, raise_b_midlip 5 alone at -480 MNS). Their difference is kept within the range
+  that folds nothing: the FAP with the larger value leads and moves its own point by exactly
+  value x FAPU; the other follows just enough. The visemes and expressions mostly move both
+  together and are not touched.
+* **Reach** (``fold_free_reach``, with follow in place): each FAP alone is limited to the values
+  it can take without a fold, toward each end of its range, the same on both sides of the face
+  (the tighter of a FAP's and its mirror's) and 2% inside. It caps what no face does (a brow
+  pulled 4 cm into the eye, a jaw shifted 5 cm). Except toward the high end of the ``NEEDED``
+  FAPs (open_jaw, the upper lids closing), which go as far as the artist's shapes take them:
+  there a few slivers at the lip and eye corners still fold (``needed_reach``).
 
-Before both, ``fold_safe`` fades the calibrated motions of the lid margin points toward the eye
-corners as their lid's turn fades (``autorig``'s ``attach_weight`` there): the corners stay put,
-and a margin vertex a fraction of a millimetre from one, moved by a brow or cheek FAP's motion,
-folded the skin between them in the sad, fearful and surprised faces.
+Fits see both limits (``puppet.runtime.fapcalibration``: each fit keeps within the reach, and within
+the follow ranges as linear constraints, so the values it finds are what the face shows).
+``fold_safe_calibration`` is the calibration the default rig ships: calibrate, find the limits,
+and fit every example within them. (Calibrating once more with the fits inside the limits, so
+that the motions learn from values the face shows, moved the ARKit fits' median residual only
+from 0.326 to 0.323 and folded joy and fear: not done.)
 
-``fold_safe`` does the fading, follow and fold-free reach for a rigged face, after its
-calibration (``puppet.runtime.fapcalibration`` is left as it is: its output goes through here);
-``tools/build_default_rig.py`` then widens the reach to the ARKit fits and stores the result in
-the default rig. The README's realism section lists what the limits cap on the default face.
+Before the limits, ``fold_safe`` fades the calibrated motions of the lid margin points toward
+the eye corners as their lid's turn fades (``autorig``'s ``attach_weight`` there): the corners
+stay put, and a margin vertex a fraction of a millimetre from one, moved by a brow or cheek
+FAP's motion, folded the skin between them in the sad, fearful and surprised faces.
+
+The README's realism section lists what the limits cap on the default face.
 """
 
 from __future__ import annotations
 
 import copy
+import dataclasses
 
 import numpy as np
 
 from puppet.face.rig import Rig
 from puppet.fap.table import fap
-from puppet.runtime.fapcalibration import fold_free_reach
+from puppet.runtime.fapcalibration import Calibration, calibrate, fit_faps, fold_free_reach
 from puppet.runtime.fapengine import LID_FAPS
 from puppet.runtime.runtime import Runtime
 
 FOLLOW_SHARE = 0.5  # follow keeps a pair within half its fold-free difference: at a large common
-# motion the corner folds sooner than at rest (at the whole difference, FAP 6 folded at 49 MW)
+# motion the lip folds sooner than at rest (at the whole difference, FAP 6 folded at 49 MW)
 REACH_MARGIN = 0.98  # a little inside the fold-free value: float32 and float64 runtimes agree there
 LID_PARTS = frozenset(part for part, _, _ in LID_FAPS.values())
-CORNER_PAIRS = ((6, 53), (7, 54), (12, 59), (13, 60))  # (inner lip corner FAP, outer lip corner FAP)
+NEEDED = (3, 19, 20)
+"""FAPs whose reach goes toward their high end as far as the artist's shapes take them (the
+fits of the examples), though the FAP alone folds a few slivers there: open_jaw (past about 380
+MNS the skin beside the lip corners turns over; jawOpen opens to about 900) and close_t_l/r_eyelid
+(past about 645 IRISD the tiny triangles at the eye corners do; a blink closes at 1024). Capped
+fold-free, the face could neither blink nor open its mouth wide."""
+LIP_PAIRS = tuple((n, n + 47) for n in range(4, 14))
+"""(inner lip FAP, outer lip FAP): the FAPs 4-13 move the inner lip points 2.x, 51-60 the outer
+ones 8.x beside them, along the same axes and in the same units."""
 
 
-def follow_ranges(runtime, pairs=CORNER_PAIRS, share: float = FOLLOW_SHARE) -> dict[tuple[int, int], tuple[float, float]]:
+def follow_ranges(runtime, pairs=LIP_PAIRS, share: float = FOLLOW_SHARE) -> dict[tuple[int, int], tuple[float, float]]:
     """Per pair (a, b), the range (low, high) of value_a - value_b that folds nothing: the tighter
     of each FAP's own fold-free reach (a alone at d, or b alone at -d), found with no follow."""
     free = _with(runtime, fap_follow={}, fap_reach={})
@@ -84,19 +94,6 @@ def _reach(runtime) -> dict[int, tuple[float, float]]:
     return {n: (REACH_MARGIN * low, REACH_MARGIN * high) for n, (low, high) in reach.items()}
 
 
-def widened(reach: dict[int, tuple[float, float]], needed) -> dict[int, tuple[float, float]]:
-    """``reach`` widened to every value the FAP vectors ``needed`` (68 values each: the fits of
-    the example shapes) use, on both sides of the face: a limit must not cut what an artist's
-    expression needs, even where the FAP alone folds a thin triangle there."""
-    values = np.stack(list(needed))
-    low, high = values.min(axis=0), values.max(axis=0)
-    out = {}
-    for number, (r_low, r_high) in reach.items():
-        both = [number] + ([mirror(number)] if mirror(number) else [])
-        out[number] = (min(r_low, *(low[n - 1] for n in both)), max(r_high, *(high[n - 1] for n in both)))
-    return out
-
-
 def mirror(number: int) -> int | None:
     """The FAP of the other side (stretch_l_cornerlip <-> stretch_r_cornerlip), or None."""
     swap = {"l": "r", "r": "l", "lm": "rm", "rm": "lm"}
@@ -123,20 +120,44 @@ def _symmetric(limits: dict, other_side) -> dict:
     return out
 
 
-def fold_safe(runtime, *, follow: bool = False) -> Rig:
+def fold_safe(runtime) -> Rig:
     """A copy of the runtime's (calibrated) rig with its lid margin motions faded toward the eye
-    corners (``lid_faded``) and its ``fap_reach`` (and with ``follow``, its ``fap_follow``) found
-    anew on that. The default rig ships without follow: it makes the lip corners' FAPs push each
-    other, which the ARKit fits' linearisation (``fit_faps``) cannot see, and their median
-    residual went from 0.40 to 0.50."""
+    corners (``lid_faded``) and its ``fap_follow`` and ``fap_reach`` found anew on that."""
     faded = _with(runtime, fap_motions=lid_faded(runtime.rig))
     rig = copy.copy(faded.rig)
-    if follow:
-        rig.fap_follow, rig.fap_reach = fold_limits(faded)
-    else:
-        rig.fap_follow = {}
-        rig.fap_reach = _reach(_with(faded, fap_follow={}, fap_reach={}))
+    rig.fap_follow, rig.fap_reach = fold_limits(faded)
     return rig
+
+
+def fold_safe_calibration(face, examples, *, rig: Rig | None = None, held_out: tuple[str, ...] = ()) -> Calibration:
+    """``calibrate`` (``puppet.runtime.fapcalibration``) made fold-safe (``within_limits``)."""
+    return within_limits(face, calibrate(face, examples, rig=rig, held_out=held_out), examples)
+
+
+def within_limits(face, calibration: Calibration, examples) -> Calibration:
+    """The calibration's rig made ``fold_safe``, the reach of the ``NEEDED`` FAPs opened to what
+    the examples use, and every example fitted on it within its limits (``weights``: what the
+    face shows for it)."""
+    safe = fold_safe(Runtime(face, calibration.rig))
+    safe.fap_reach = needed_reach(face, safe, examples)
+    runtime = Runtime(face, safe, dtype=np.float64)
+    weights = {name: fit_faps(runtime, D) for name, D in examples.items() if np.any(D)}
+    return dataclasses.replace(calibration, rig=safe, weights=weights)
+
+
+def needed_reach(face, rig: Rig, examples) -> dict[int, tuple[float, float]]:
+    """The rig's ``fap_reach`` with each ``NEEDED`` FAP's high end raised to the largest value a
+    fit of the examples gives it (or its mirror) when that FAP is not limited."""
+    free = copy.copy(rig)
+    free.fap_reach = {n: r for n, r in rig.fap_reach.items() if n not in NEEDED}
+    runtime = Runtime(face, free, dtype=np.float64)
+    used = np.max([fit_faps(runtime, D) for D in examples.values() if np.any(D)], axis=0)
+    reach = dict(rig.fap_reach)
+    for number in NEEDED:
+        low, high = reach.get(number, (-np.inf, np.inf))
+        both = [number] + ([mirror(number)] if mirror(number) else [])
+        reach[number] = (low, max(high, *(float(used[n - 1]) for n in both)))
+    return reach
 
 
 def lid_faded(rig: Rig) -> dict[int, dict[str, np.ndarray]]:

@@ -5,9 +5,11 @@ feature points 2.2-2.9, deformed and projected) should show mostly a dark cavity
 teeth in it, not a lit, skin-coloured surface. ``mouth_pixels`` renders the face posed with
 an ``open_jaw`` value twice, with and without the teeth, and classifies the pixels of that
 area: *teeth* where the teeth are the surface seen (the two renders differ) and bright,
-*dark* where the image is dark (low luminance) and no tooth is seen. A closed mouth has an
-almost empty area and shows neither. ``python -m puppet.view.mouthcheck`` prints the figures for
-the default face.
+*dark* where the image is dark (low luminance) and no tooth is seen. Both renders are drawn
+without antialiasing (``EXACT``): each pixel shows the surface at its centre, so a lip pixel
+beside a tooth is not counted as one (FXAA blends neighbours, and on a closed mouth's slit of
+one or two pixels it turned lip edges into "teeth"). A closed mouth has an almost empty area and
+shows neither. ``python -m puppet.view.mouthcheck`` prints the figures for the default face.
 """
 
 from __future__ import annotations
@@ -26,6 +28,9 @@ TOOTH_LUMA = 0.35
 """sRGB luminance (0-1) a visible tooth pixel needs to count as a tooth seen (not lost in shadow)."""
 
 TEETH_PARTS = ("teeth_upper", "teeth_lower")
+
+EXACT = {"samples": 0, "antialias": "none"}
+"""Renderer options: one sample per pixel, no post pass (module docstring)."""
 
 
 @dataclass(frozen=True)
@@ -51,18 +56,18 @@ def mouth_pixels(face, runtime, open_jaw: float = 400.0, *, view: str = "front",
     FAP open_jaw = ``open_jaw`` (MNS units), rendered at ``size`` x ``size`` from ``view``
     (framed on the rest face, as ``puppet.view.renderer.render_face`` does)."""
     fap = {"open_jaw": open_jaw}
-    vertices = runtime.pose(fap)
+    vertices = runtime.deform_faps(fap)
     normals = runtime.normals(vertices, runtime.fap_controls(fap)[1])
     teeth = np.zeros(len(face.vertices), dtype=bool)
     for part in TEETH_PARTS:
         teeth[face.parts.get(part, [])] = True
     without = face.triangles[~teeth[face.triangles].all(axis=1)]
-    with Renderer.for_face(face, width=size, height=size) as r:
-        r.frame(face.vertices, view=view)
+    with Renderer.for_face(face, width=size, height=size, **EXACT) as r:
+        r.aim(face.vertices, view=view)
         image = r.render(vertices, normals)
         polygon = r.project(vertices[face.contours["mouth_opening"]])
-    with Renderer(without, len(face.vertices), face.colors, width=size, height=size) as r:
-        r.frame(face.vertices, view=view)
+    with Renderer(without, len(face.vertices), face.colors, width=size, height=size, **EXACT) as r:
+        r.aim(face.vertices, view=view)
         bare = r.render(vertices, normals)
     inside = polygon_mask(polygon, size, size)
     luma = luminance(image)
