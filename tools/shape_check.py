@@ -55,7 +55,7 @@ class HeldOut:
         self.surface = cKDTree(points)
         self.renderer = Renderer(face.triangles, len(face.vertices), None if flat else face.colors,
                                  width=SIZE, height=SIZE)
-        self.camera = self.renderer.frame(face.vertices[area], view="front", margin=MARGIN)
+        self.camera = self.renderer.aim(face.vertices[area], view="front", margin=MARGIN)
         self.photo = self.renderer.render(face.vertices)
         self.focal = SIZE / 2 / np.tan(np.radians(self.camera.fov) / 2)
 

@@ -474,8 +474,10 @@ def fit_photo(face: Face, landmarks: Landmarks, size: tuple[int, int], *, focal:
     shapes = _shape_model(face) if shape else None
     if shapes is not None:
         expression = targets - relaxed
+        # a landmark the expression moved is known, once it is taken out, only as well as that move
+        noise = landmark_noise + np.linalg.norm(expression, axis=1) / width
         for _ in range(SHAPE_ROUNDS):  # the shape, then the landmarks lifted again at its depth
-            weights = fit_shape(shapes, face.vertices, points, relaxed, depth_weight=trust, noise=landmark_noise)
+            weights = fit_shape(shapes, face.vertices, points, relaxed, depth_weight=trust, noise=noise)
             similarity, targets = _lift(camera, pixels, depth, trust,
                                         points.on(face.vertices + shapes.offsets(weights)) + expression, flat.scale)
             relaxed = targets - expression

@@ -75,29 +75,30 @@ def load_shape_model() -> ShapeModel:
     return ShapeModel(basis, skin, count, face_hash)
 
 
-def fit_shape(model: ShapeModel, rest: np.ndarray, points, targets: np.ndarray, *, depth_weight: float,
-              noise: float = LANDMARK_NOISE, misfit: float = MISFIT) -> np.ndarray:
+def fit_shape(model: ShapeModel, rest: np.ndarray, points, targets: np.ndarray, *,
+              depth_weight: float | np.ndarray, noise: float | np.ndarray = LANDMARK_NOISE,
+              misfit: float = MISFIT) -> np.ndarray:
     """The weights (K,) whose face best explains landmarks at ``points``
     (``puppet.photo.build.MeshPoints``) on a face at ``rest`` (N, 3), seen at ``targets`` (M, 3,
-    face frame, up to a similarity). Depth residuals count ``depth_weight`` times as much as x
-    and y (0: the landmarks' depth is not known); the landmarks may sit ``noise`` (their own
-    error) and ``misfit`` (the model's) face widths off the model, against the prior's unit
-    normal. Each round solves for the weights together with a small similarity, then applies
-    the similarity exactly."""
+    face frame, up to a similarity): the most probable under the prior's unit normal. Each
+    landmark's depth residual counts ``depth_weight`` (scalar or (M,)) times as much as its x and
+    y (0: its depth is not known); a landmark may sit ``noise`` (its own error, scalar or (M,))
+    and ``misfit`` (the model's) face widths off the model. Each round solves for the weights
+    together with a small similarity, then applies the similarity exactly."""
     sites = points.on(rest)
     rows = np.stack([points.on(b) for b in model.basis])  # (K, M, 3)
     width = float(np.ptp(sites[:, 0]))
-    axes = np.sqrt([1.0, 1.0, depth_weight])
-    prior = (misfit ** 2 + noise ** 2) * width ** 2 * np.eye(len(model))
+    spread = (misfit ** 2 + np.broadcast_to(np.asarray(noise, float) ** 2, len(sites))) * width ** 2
+    scale = np.sqrt(np.c_[np.ones((len(sites), 2)), np.broadcast_to(depth_weight, len(sites))] / spread[:, None])
     weights, frame = np.zeros(len(model)), targets
     for _ in range(ROUNDS):
         shaped = sites + np.tensordot(weights, rows, axes=1)
         frame = similarity_3d(shaped, frame).inverse(frame)
         moves = _similarity_moves(shaped)  # (7, M, 3)
-        a = (np.concatenate([rows, moves]) * axes).reshape(len(model) + 7, -1).T
+        a = (np.concatenate([rows, moves]) * scale).reshape(len(model) + 7, -1).T
         normal = a.T @ a
-        normal[:len(model), :len(model)] += prior
-        solved = np.linalg.lstsq(normal, a.T @ ((frame - sites) * axes).ravel(), rcond=None)[0]
+        normal[:len(model), :len(model)] += np.eye(len(model))
+        solved = np.linalg.lstsq(normal, a.T @ ((frame - sites) * scale).ravel(), rcond=None)[0]
         weights = solved[:len(model)]
     return weights
 
