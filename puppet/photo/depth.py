@@ -45,10 +45,14 @@ DEPTH_TRUST = 0.05
 """How far the landmarks' depth goes from the face's own toward a detector's. MediaPipe's
 depth is poor on faces it was not trained on: on renders of held-out MakeHuman faces it errs
 3.9% of the face width RMS against their true depth, whose differences from the default face's
-are about 1% (``tools/shape_check.py``), and on the rendered ICT face 4.3% against the default
-face's own 2.9% (``tools/photo_check.py``). Trusted 0.3, it turned the fitted head (a depth
-error is a turn of the head) and made the face worse than the generic one; 0.05 does a little
-better than none on the held-out faces."""
+are about 1% (``tools/shape_check.py``), and on the rendered ICT face 4.15% against the default
+face's own 3.07% (``tools/photo_check.py``). Trusted 0.3, it turned the fitted head (a depth
+error is a turn of the head) and made the held-out faces worse than the generic one; 0.05 does
+a little better than none on them. ICT's face, further from the default, gains from it (its
+face area 0.90x the generic face's trusted fully, 1.00x at 0.05), but a photo cannot tell which
+kind of face it shows: MediaPipe's depth disagrees with the default face's by 3.8% of the width
+on the ICT render, no more than its own error on the MakeHuman faces; nor does it help through
+the shape model (fitted to the detector's depth, the ICT face's eye sockets deepen)."""
 LANDMARK_NOISE = 0.02
 """A detector's error on a landmark's place, in face widths: MediaPipe on renders of held-out
 MakeHuman faces is off the point it marks on the default face by 0.7% to 1.6% (median to the
