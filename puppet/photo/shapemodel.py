@@ -10,9 +10,9 @@ zero weights are the default face.
 
 ``fit_shape`` finds the weights whose face best explains landmarks given in the face frame: x
 and y firmly, depth by ``depth_weight`` (a detector's depth is a weak cue), each landmark
-allowed ``LANDMARK_NOISE`` of the face width of error, the weights pulled toward zero by the
-prior; a regularised linear least squares, alternating with the similarity that places the
-face on the landmarks. ``ShapeModel.warp`` carries the skin's offsets to points off the skin
+allowed its own error (a detector's ``LANDMARK_NOISE`` of the face width; more where the
+photo's expression moved it), the weights pulled toward zero by the prior; a regularised linear
+least squares, alternating with the similarity that places the face on the landmarks. ``ShapeModel.warp`` carries the skin's offsets to points off the skin
 (the eyes' and the mouth's parts, the pivots), smoothly.
 """
 
