@@ -58,6 +58,7 @@ from puppet.face.model import Face
 from puppet.fap.table import N_FAPS, fap
 from puppet.photo.depth import (
     DEPTH_TRUST,
+    LANDMARK_NOISE,
     DISTANCE,
     PhotoCamera,
     Similarity3,
@@ -67,6 +68,7 @@ from puppet.photo.depth import (
     similarity_3d,
 )
 from puppet.photo.neutral import neutralise
+from puppet.photo.shapemodel import SHAPE_ROUNDS, ShapeModel, fit_shape, load_shape_model
 from puppet.photo.texture import texture_face
 
 FDP11 = ("3.12", "3.8", "3.11", "3.7", "9.3", "9.15", "8.4", "8.3", "2.1", "2.14", "2.13")
@@ -420,11 +422,14 @@ def check_frontal(target: np.ndarray, model: np.ndarray, roles: dict[str, int]) 
 @dataclass
 class PhotoFit:
     """The default face fitted to a photo's landmarks: the camera, the head's pose in it, the
-    warps onto the landmarks as the photo shows them and with its expression removed."""
+    face's own shape (the shape model's weights and the face they make), and the warps of that
+    face onto the landmarks as the photo shows them and with its expression removed."""
 
     camera: PhotoCamera
     similarity: Similarity3  # face frame -> photo frame: the head's scale, turn and place
-    posed: Warp3  # the default face onto the landmarks as photographed
+    shape: np.ndarray  # (K,) the shape model's weights (``puppet.photo.shapemodel``); empty without a model
+    shaped: Face  # the default face as the model shapes it
+    posed: Warp3  # the shaped face onto the landmarks as photographed
     neutral: Warp3  # the same with the expression measured in ``faps`` taken out
     faps: np.ndarray  # (68,) the photo's expression, FAPU, as the default face's rig shows it
     report: dict
@@ -433,14 +438,22 @@ class PhotoFit:
         """Where face-frame points (M, 3) show in the photo (M, 2)."""
         return self.camera.project(self.similarity.apply(points))
 
+    def face(self, *, posed: bool = False) -> Face:
+        """The new face, its expression taken out; or as photographed (``posed``)."""
+        return warp_face(self.shaped, self.posed if posed else self.neutral)
+
 
 def fit_photo(face: Face, landmarks: Landmarks, size: tuple[int, int], *, focal: float | None = None,
-              neutral: bool = True, depth_trust: float = DEPTH_TRUST) -> PhotoFit:
+              neutral: bool = True, depth_trust: float = DEPTH_TRUST, landmark_noise: float = LANDMARK_NOISE,
+              shape: bool = True) -> PhotoFit:
     """Fit ``face`` (the default face) to ``landmarks`` in an image of ``size`` (width, height)
-    seen by a camera of ``focal`` pixels (``puppet.photo.depth``: else a portrait distance), trusting
-    the landmarks' depth where they have one by ``depth_trust`` (``puppet.photo.depth.fit_warp``); with
-    ``neutral`` the photo's expression is measured and taken out (``puppet.photo.neutral``). Bad
-    landmarks are a ``PhotoFaceError``."""
+    seen by a camera of ``focal`` pixels (``puppet.photo.depth``: else a portrait distance). The
+    landmarks' depth, where they have one, counts ``depth_trust`` against the face's own (0: not
+    at all, 1: as exact); their places are taken to err by ``landmark_noise`` face widths. With
+    ``neutral`` the photo's expression is measured and taken out (``puppet.photo.neutral``); with
+    ``shape`` the face's own shape comes from the shape model (``puppet.photo.shapemodel``; the
+    default face's topology only) before a smooth warp takes what the model leaves. Bad landmarks
+    are a ``PhotoFaceError``."""
     check_inside(landmarks, size)
     pixels, points, roles, rows = model_points(face, landmarks)
     model = points.on(face.vertices)
@@ -448,7 +461,8 @@ def fit_photo(face: Face, landmarks: Landmarks, size: tuple[int, int], *, focal:
     width = float(np.ptp(face.vertices[face.contours["face_oval"], 0]))
     camera = PhotoCamera(focal or DISTANCE * width * flat.scale, np.asarray(size, float) / 2)
     depth = None if landmarks.depth is None else -landmarks.depth[rows]
-    similarity, targets = _lift(camera, pixels, depth, model, flat.scale)
+    trust = 0.0 if depth is None else depth_trust
+    similarity, targets = _lift(camera, pixels, depth, trust, model, flat.scale)
     faps, relaxed = np.zeros(N_FAPS), targets
     if neutral:
         faps, relaxed = neutralise(face, points, targets, roles)
@@ -456,15 +470,39 @@ def fit_photo(face: Face, landmarks: Landmarks, size: tuple[int, int], *, focal:
         correction = similarity_3d(model, relaxed)
         similarity = similarity.after(correction)
         targets, relaxed = correction.inverse(targets), correction.inverse(relaxed)
+    weights, shaped = np.zeros(0), face
+    shapes = _shape_model(face) if shape else None
+    if shapes is not None:
+        expression = targets - relaxed
+        # a landmark the expression moved is known, once it is taken out, only as well as that move
+        noise = landmark_noise + np.linalg.norm(expression, axis=1) / width
+        for _ in range(SHAPE_ROUNDS):  # the shape, then the landmarks lifted again at its depth
+            weights = fit_shape(shapes, face.vertices, points, relaxed, depth_weight=trust, noise=noise)
+            similarity, targets = _lift(camera, pixels, depth, trust,
+                                        points.on(face.vertices + shapes.offsets(weights)) + expression, flat.scale)
+            relaxed = targets - expression
+        shaped = warp_face(face, shapes.warp(face.vertices, weights),
+                           skin=(face.vertices + shapes.offsets(weights))[face.parts["skin"]])
     report = {"layout": landmarks.layout, "landmarks": len(pixels), "pixels_per_unit": similarity.scale,
               "focal_pixels": camera.focal, "focal_given": focal is not None,
               "depth_from_landmarks": depth is not None, "head_degrees": similarity.angles(),
               "similarity_residual": residual, "frontal": frontal,
+              "shape_weights": np.round(weights, 3).tolist(),
               "expression_faps": {fap(n).name: round(float(faps[n - 1]), 1) for n in range(1, N_FAPS + 1)
                                   if abs(faps[n - 1]) >= 0.05}}
-    trust = 0.0 if depth is None else depth_trust
-    return PhotoFit(camera, similarity, fit_warp(face, model, targets, trust), fit_warp(face, model, relaxed, trust),
-                    faps, report)
+    sites = points.on(shaped.vertices)
+    # the face as photographed goes through the landmarks, so that the photo's lips and eyes land on
+    # its own; the new face's shape is smoothed as much as the landmarks' error calls for
+    return PhotoFit(camera, similarity, weights, shaped, fit_warp(shaped, sites, targets, 0.0),
+                    fit_warp(shaped, sites, relaxed, landmark_noise), faps, report)
+
+
+def _shape_model(face: Face) -> ShapeModel | None:
+    """The shape model if ``face`` has the default face's topology (the model's), else None."""
+    shapes = load_shape_model()
+    if shapes.vertex_count != len(face.vertices) or shapes.face_hash != _topology_hash(face):
+        return None
+    return shapes
 
 
 def _checked(layout: str, pixels: np.ndarray, model: np.ndarray,
@@ -486,29 +524,34 @@ def _checked(layout: str, pixels: np.ndarray, model: np.ndarray,
     return flat, residual, frontal
 
 
-def _lift(camera: PhotoCamera, pixels: np.ndarray, depth: np.ndarray | None, model: np.ndarray,
+def _lift(camera: PhotoCamera, pixels: np.ndarray, depth: np.ndarray | None, trust: float, points: np.ndarray,
           scale: float) -> tuple[Similarity3, np.ndarray]:
-    """The head's pose and the landmarks in the face frame (M, 3): lifted by the camera at their
-    depth (the detector's, its unknown zero at their mean; or the default face's in the fitted
-    pose, which is then refined once)."""
-    guess = depth - depth.mean() if depth is not None else scale * (model[:, 2] - model[:, 2].mean())
-    for _ in range(1 if depth is not None else 2):
+    """The head's pose and the landmarks in the face frame (M, 3), lifted by the camera at the
+    depth of the face's own landmark ``points`` (M, 3, face frame; ``scale`` pixels per unit at
+    first, then in the pose fitted to them), moved ``trust`` of the way toward the landmarks' own
+    ``depth`` where they have one (its unknown zero at the mean). The pose is fitted twice."""
+    own = scale * (points[:, 2] - points[:, 2].mean())
+    for _ in range(2):
+        guess = own if depth is None else own + trust * (depth - depth.mean() - (own - own.mean()))
         lifted = camera.lift(pixels, guess)
-        similarity = similarity_3d(model, lifted)
-        guess = similarity.apply(model)[:, 2]
+        similarity = similarity_3d(points, lifted)
+        own = similarity.apply(points)[:, 2]
     return similarity, similarity.inverse(lifted)
 
 
 # -- the new face --------------------------------------------------------------------------------
 
-def warp_face(face: Face, warp: Warp3) -> Face:
-    """``face`` moved by ``warp``: skin by the warp, eyeballs, teeth and tongue rigidly (each
+def warp_face(face: Face, warp: Warp3, skin: np.ndarray | None = None) -> Face:
+    """``face`` moved by ``warp``: skin by the warp (or to ``skin``, its new positions where they
+    are known, as the shape model knows them), eyeballs, teeth and tongue rigidly (each
     eyeball round, set behind its lid opening as on the default face and scaled with the
     opening's width, so a depth the lids and the eye's centre disagree on never pushes it
     through the lids; teeth and tongue together by the warp's local linear map at their
     centroid); feature points and pivots follow. Vertex order, triangles, parts and contours
     are kept."""
     v = warp(face.vertices)
+    if skin is not None:
+        v[face.parts["skin"]] = skin
     points = {k: warp(p[None])[0] for k, p in face.feature_points.items()}
     pivots = {k: (p if k == "jaw_axis" else warp(p[None])[0]) for k, p in face.pivots.items()}
     for eye, pupil, lids in (("eye_l", "3.5", "left_lid_opening"), ("eye_r", "3.6", "right_lid_opening")):
@@ -538,8 +581,8 @@ def face_from_photo(photo: np.ndarray, landmarks: Landmarks, name: str = "photo"
     (``puppet.photo.texture``); and the report of the fit and texture."""
     base = load_face()
     fit = fit_photo(base, landmarks, (photo.shape[1], photo.shape[0]), focal=focal, neutral=neutral)
-    shown = fit.similarity.apply(warp_face(base, fit.posed).vertices)
-    face, report = texture_face(warp_face(base, fit.neutral), shown, fit.camera, photo, name)
+    shown = fit.similarity.apply(fit.face(posed=True).vertices)
+    face, report = texture_face(fit.face(), shown, fit.camera, photo, name)
     return face, fit.report | report
 
 

@@ -55,7 +55,9 @@ SKIN_LIKENESS = 0.2  # the likeness at which a pixel counts as skin
 FEATURE_GROW = 0.03  # eyes, brows, lips and nostrils are kept this far around, fraction of the width
 EDGE_BLUR = 0.02  # the photo's colour a vertex's colour takes is blurred by this fraction of the width
 TONE_RADIUS = 0.08  # the face's broad colour is its colour averaged over this fraction of its width
-MOUTH_GROW = 0.02  # the mouth opening painted over is grown by this fraction of the width
+MOUTH_GROW = 0.03  # the mouth opening painted over is grown by this fraction of the width (a line of it round
+# the edge): the face as photographed runs through the landmarks, but between them its opening may sit
+# a pixel or two off the photo's
 PAINT_BLUR = 0.015  # the edge between kept photo and painted skin is softened over this fraction
 
 
