@@ -159,6 +159,7 @@ class Device(ABC):
         self._ready = threading.Condition()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
+        self.wake: threading.Event | None = None  # set with every Sample queued: one event can wake a loop reading many devices
 
     # -- what an adapter implements ------------------------------------------------------
 
@@ -284,6 +285,8 @@ class Device(ABC):
             self._queue.append(sample)
             self.counters.samples += 1
             self._ready.notify_all()
+        if self.wake is not None:
+            self.wake.set()
 
     def _lost(self, exc: BaseException) -> None:
         if self.state == State.OPEN:

@@ -15,16 +15,23 @@ What is read:
   units and unit exponents are read past.
 - Local items: Usage, Usage Minimum/Maximum (a 4-byte usage carries its own page in the high 16
   bits; a shorter one takes the Usage Page in force at its main item, as Linux pages them: a
-  Usage Page item between the usages and their Input re-pages them). Designators, strings and
-  delimiters are read past.
+  Usage Page item between the usages and their Input re-pages them). A Minimum/Maximum range
+  runs over the values as written and is paged by the Maximum's size, as Linux does (a 1-byte
+  Minimum 0 with a 4-byte Maximum 0x0000FFFF gives page 0 usages; hid-tools gives none); a
+  Maximum with no Minimum starts from 0. Designators, strings and delimiters are read past.
 - Long items (prefix 0xFE) are skipped whole.
 - Unknown main items and items of the reserved type are skipped with a warning, as the Linux
   kernel does: some real pads' descriptors end in a stray 0x00 byte (Xbox One S on its Linux
   firmware, Xbox Elite 2, 8BitDo SN30 Pro).
 
-Bounds (the kernel's, hid-core.c), so that no descriptor can make the parser allocate without
-limit: Report Size at most 256 bits, Report Count and the usages of one main item at most
-``MAX_USAGES`` (12,288), and a report at most ``MAX_REPORT_BYTES`` (16,384). Past them the
+Bounds (the kernel's, hid-core.c), so that no descriptor can make the parser allocate or work
+without limit: a descriptor at most ``MAX_DESCRIPTOR_BYTES`` (4,096), Push nested at most
+``MAX_PUSH`` (4) deep, Report Size at most 256 bits, Report Count and the usages of one main item
+at most ``MAX_USAGES`` (12,288), and a report at most ``MAX_REPORT_BYTES`` (16,384). The kernel lets a
+descriptor repeat those in many reports and fields; we also bound the whole descriptor's input
+values (``MAX_INPUT_VALUES``, 16,384, each a channel) and the usages its input fields keep
+(``MAX_KEPT_USAGES``, 49,152; a variable field keeps one per value), about three times the most of
+135 real descriptors, so a few hundred bytes cannot ask for millions of channels. Past a bound the
 descriptor is refused with the byte offset, but for a Usage Minimum/Maximum range, which is cut
 to the bound with a warning (vendor pages often declare 0-0xFFFF). Inputs outside any numbered
 report in a descriptor that numbers its reports are kept as report 0 with a warning: no such
@@ -51,7 +58,7 @@ Scaling (``ReportLayout``, unless ``raw=True``):
 from __future__ import annotations
 
 import warnings
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -155,6 +162,10 @@ _SIZES = (0, 1, 2, 4)
 MAX_REPORT_SIZE = 256
 MAX_USAGES = 12288
 MAX_REPORT_BYTES = 16384
+MAX_DESCRIPTOR_BYTES = 4096  # Linux's HID_MAX_DESCRIPTOR_SIZE; hidapi reads no more either
+MAX_PUSH = 4  # Linux's HID_GLOBAL_STACK_SIZE
+MAX_INPUT_VALUES = 16384  # all reports together; the most of 135 real descriptors is 5,122 (an N-trig screen)
+MAX_KEPT_USAGES = 4 * MAX_USAGES  # all input fields together; the most of the 135 is 13,129 (an ITE keyboard)
 
 # item tags: main (type 0), global (type 1), local (type 2)
 _INPUT, _OUTPUT, _COLLECTION, _FEATURE, _END_COLLECTION = 0x8, 0x9, 0xA, 0xB, 0xC
@@ -185,14 +196,24 @@ def _signed(value: int, size: int) -> int:
 def parse_descriptor(descriptor: bytes | Sequence[int]) -> list[ReportField]:
     """The input fields a report descriptor declares, in declaration order (padding left out)."""
     data = bytes(descriptor)
-    fields: list[ReportField] = []
-    g = _Globals()
-    stack: list[_Globals] = []
-    usages: list[tuple[int, int, bool]] = []  # (page, usage, short: paged at its main item)
-    usage_min: tuple[int, int, bool] | None = None
-    depth = 0
-    offsets: dict[int, int] = {}  # report id -> next input bit offset
-    uses_ids = False
+    _at_most(len(data), MAX_DESCRIPTOR_BYTES, "a descriptor of", 0, " bytes")
+    reader = _Reader()
+    for at, prefix, kind, tag, size, value in _items(data):
+        if kind == 0:
+            reader.main(at, prefix, tag, value)
+        elif kind == 1:
+            reader.global_item(at, tag, size, value)
+        elif kind == 2:
+            reader.local_item(at, tag, size, value)
+        else:
+            warnings.warn(f"report descriptor byte {at}: item 0x{prefix:02x} of the reserved type skipped "
+                          "(as Linux skips it)", stacklevel=2)
+    return reader.fields
+
+
+def _items(data: bytes) -> Iterator[tuple[int, int, int, int, int, int]]:
+    """(byte offset, prefix, kind, tag, data size, data value) of each short item; long items
+    (0xFE) are stepped over."""
     i = 0
     while i < len(data):
         prefix = data[i]
@@ -202,112 +223,158 @@ def parse_descriptor(descriptor: bytes | Sequence[int]) -> list[ReportField]:
             i += 3 + data[i + 1]
             continue
         size = _SIZES[prefix & 3]
-        kind = (prefix >> 2) & 3
-        tag = prefix >> 4
         if i + 1 + size > len(data):
             raise DescriptorError(f"report descriptor byte {i}: item 0x{prefix:02x} needs {size} data "
                                   f"bytes, {len(data) - i - 1} left")
-        value = int.from_bytes(data[i + 1:i + 1 + size], "little")
-        at = i
+        yield i, prefix, (prefix >> 2) & 3, prefix >> 4, size, int.from_bytes(data[i + 1:i + 1 + size], "little")
         i += 1 + size
-        if kind == 0:  # main
-            if tag == _INPUT:
-                if g.report_id == 0 and uses_ids:
-                    warnings.warn(f"report descriptor byte {at}: an input without a Report ID in a descriptor "
-                                  "that numbers its reports (no such report arrives)", stacklevel=2)
-                logical_max = g.logical_max
-                if g.logical_min >= 0 > logical_max:  # 0x25 0xFF meaning 255, a common slip
-                    logical_max &= (1 << (8 * g.logical_max_size)) - 1
-                start = offsets.get(g.report_id, 0)
-                offsets[g.report_id] = start + g.report_size * g.report_count
-                if offsets[g.report_id] > 8 * MAX_REPORT_BYTES:
-                    raise DescriptorError(f"report descriptor byte {at}: report {g.report_id} grows to "
-                                          f"{offsets[g.report_id] // 8:,} bytes, expected at most "
-                                          f"{MAX_REPORT_BYTES:,}")
-                constant = bool(value & 0x01)
-                if not constant and g.report_size > 0 and g.report_count > 0:
-                    fields.append(ReportField(
-                        report_id=g.report_id, bit_offset=start, bit_size=g.report_size,
-                        count=g.report_count, logical_min=g.logical_min, logical_max=logical_max,
-                        usages=_paged(usages, g.usage_page), variable=bool(value & 0x02), flags=value))
-            elif tag == _COLLECTION:
-                depth += 1
-            elif tag == _END_COLLECTION:
-                if depth == 0:
-                    raise DescriptorError(f"report descriptor byte {at}: End Collection without Collection")
-                depth -= 1
-            elif tag not in (_OUTPUT, _FEATURE):
-                warnings.warn(f"report descriptor byte {at}: unknown main item 0x{prefix:02x} skipped "
-                              "(as Linux skips it)", stacklevel=2)
-            usages, usage_min = [], None  # local items end with every main item
-        elif kind == 1:  # global
-            if tag == _USAGE_PAGE:
-                g.usage_page = value
-            elif tag == _LOGICAL_MIN:
-                g.logical_min = _signed(value, size)
-            elif tag == _LOGICAL_MAX:
-                g.logical_max = _signed(value, size)
-                g.logical_max_size = size
-            elif tag == _REPORT_SIZE:
-                _at_most(value, MAX_REPORT_SIZE, "Report Size", at)
-                g.report_size = value
-            elif tag == _REPORT_ID:
-                if not 1 <= value <= 255:
-                    raise DescriptorError(f"report descriptor byte {at}: Report ID {value} (must be 1..255)")
-                if not uses_ids and offsets:
-                    warnings.warn(f"report descriptor byte {at}: a Report ID after unnumbered inputs "
-                                  "(no report without an ID arrives)", stacklevel=2)
-                uses_ids = True
-                g.report_id = value
-            elif tag == _REPORT_COUNT:
-                _at_most(value, MAX_USAGES, "Report Count", at)
-                g.report_count = value
-            elif tag == _PUSH:
-                stack.append(g.copy())
-            elif tag == _POP:
-                if not stack:
-                    raise DescriptorError(f"report descriptor byte {at}: Pop without Push")
-                g = stack.pop()
-            # physical extents, unit exponent, unit: not used
-        elif kind == 2:  # local
-            full = (value >> 16, value & 0xFFFF, False) if size == 4 else (g.usage_page, value, True)
-            if tag == _USAGE:
-                _at_most(len(usages) + 1, MAX_USAGES, "usages before a main item", at)
-                usages.append(full)
-            elif tag == _USAGE_MIN:
-                usage_min = full
-            elif tag == _USAGE_MAX:
-                if usage_min is None:
-                    raise DescriptorError(f"report descriptor byte {at}: Usage Maximum without Usage Minimum")
-                last = min(full[1], usage_min[1] + MAX_USAGES - len(usages) - 1)
-                if last < full[1]:
-                    warnings.warn(f"report descriptor byte {at}: Usage Maximum 0x{full[1]:x} cut to 0x{last:x}, "
-                                  f"{MAX_USAGES:,} usages at the most (as Linux cuts it)", stacklevel=2)
-                usages.extend((usage_min[0], u, full[2]) for u in range(usage_min[1], last + 1))
-                usage_min = None
-            # designators, strings, delimiters: not used
-        else:
-            warnings.warn(f"report descriptor byte {at}: item 0x{prefix:02x} of the reserved type skipped "
-                          "(as Linux skips it)", stacklevel=2)
-    return fields
 
 
-def _paged(usages: list[tuple[int, int, bool]], page: int) -> tuple[tuple[int, int], ...]:
-    """(page, usage) pairs, the short usages read since the last one on ``page`` (the Usage Page
-    in force at their main item) moved onto it, as Linux's hid_concatenate_last_usage_page does."""
-    paged = [(p, u) for p, u, _ in usages]
-    for i in range(len(usages) - 1, -1, -1):
-        p, u, short = usages[i]
-        if short and p == page:
-            break
-        if short:
-            paged[i] = (page, u)
-    return tuple(paged)
+class _Reader:
+    """The state of a descriptor read item by item: globals (and their Push stack), the local
+    usages since the last main item, the collections open, each report's next bit offset, and
+    the fields and usages kept so far (all bounded, see the MAX_ limits)."""
+
+    def __init__(self) -> None:
+        self.fields: list[ReportField] = []
+        self.g = _Globals()
+        self.stack: list[_Globals] = []
+        self.usages = _Usages()
+        self.usage_min = 0  # as written (Linux pages a range by its Usage Maximum's size), 0 until one is given
+        self.depth = 0
+        self.offsets: dict[int, int] = {}  # report id -> next input bit offset
+        self.values = self.kept = 0  # input values and usages kept, all fields together
+        self.uses_ids = False
+
+    def main(self, at: int, prefix: int, tag: int, value: int) -> None:
+        if tag == _INPUT:
+            self.input(at, value)
+        elif tag == _COLLECTION:
+            self.depth += 1
+        elif tag == _END_COLLECTION:
+            if self.depth == 0:
+                raise DescriptorError(f"report descriptor byte {at}: End Collection without Collection")
+            self.depth -= 1
+        elif tag not in (_OUTPUT, _FEATURE):
+            warnings.warn(f"report descriptor byte {at}: unknown main item 0x{prefix:02x} skipped "
+                          "(as Linux skips it)", stacklevel=3)
+        self.usages, self.usage_min = _Usages(), 0  # local items end with every main item
+
+    def input(self, at: int, value: int) -> None:
+        g = self.g
+        if g.report_id == 0 and self.uses_ids:
+            warnings.warn(f"report descriptor byte {at}: an input without a Report ID in a descriptor "
+                          "that numbers its reports (no such report arrives)", stacklevel=4)
+        logical_max = g.logical_max
+        if g.logical_min >= 0 > logical_max:  # 0x25 0xFF meaning 255, a common slip
+            logical_max &= (1 << (8 * g.logical_max_size)) - 1
+        start = self.offsets.get(g.report_id, 0)
+        self.offsets[g.report_id] = start + g.report_size * g.report_count
+        if self.offsets[g.report_id] > 8 * MAX_REPORT_BYTES:
+            raise DescriptorError(f"report descriptor byte {at}: report {g.report_id} grows to "
+                                  f"{self.offsets[g.report_id] // 8:,} bytes, expected at most "
+                                  f"{MAX_REPORT_BYTES:,}")
+        constant, variable = bool(value & 0x01), bool(value & 0x02)
+        if constant or g.report_size == 0 or g.report_count == 0:
+            return
+        paged = self.usages.paged(g.usage_page, g.report_count if variable else MAX_USAGES)
+        self.values += g.report_count
+        self.kept += len(paged)
+        _at_most(self.values, MAX_INPUT_VALUES, "input values in all", at)
+        _at_most(self.kept, MAX_KEPT_USAGES, "input usages in all", at)
+        self.fields.append(ReportField(
+            report_id=g.report_id, bit_offset=start, bit_size=g.report_size,
+            count=g.report_count, logical_min=g.logical_min, logical_max=logical_max,
+            usages=paged, variable=variable, flags=value))
+
+    def global_item(self, at: int, tag: int, size: int, value: int) -> None:
+        """Usage page, logical range, report size / ID / count, Push and Pop (physical extents,
+        unit exponent and unit are not used)."""
+        g = self.g
+        if tag == _USAGE_PAGE:
+            g.usage_page = value
+        elif tag == _LOGICAL_MIN:
+            g.logical_min = _signed(value, size)
+        elif tag == _LOGICAL_MAX:
+            g.logical_max = _signed(value, size)
+            g.logical_max_size = size
+        elif tag == _REPORT_SIZE:
+            _at_most(value, MAX_REPORT_SIZE, "Report Size", at)
+            g.report_size = value
+        elif tag == _REPORT_ID:
+            if not 1 <= value <= 255:
+                raise DescriptorError(f"report descriptor byte {at}: Report ID {value} (must be 1..255)")
+            if not self.uses_ids and self.offsets:
+                warnings.warn(f"report descriptor byte {at}: a Report ID after unnumbered inputs "
+                              "(no report without an ID arrives)", stacklevel=3)
+            self.uses_ids = True
+            g.report_id = value
+        elif tag == _REPORT_COUNT:
+            _at_most(value, MAX_USAGES, "Report Count", at)
+            g.report_count = value
+        elif tag == _PUSH:
+            _at_most(len(self.stack) + 1, MAX_PUSH, "Push nested", at, " deep")
+            self.stack.append(g.copy())
+        elif tag == _POP:
+            if not self.stack:
+                raise DescriptorError(f"report descriptor byte {at}: Pop without Push")
+            self.g = self.stack.pop()
+
+    def local_item(self, at: int, tag: int, size: int, value: int) -> None:
+        """Usages and usage ranges (designators, strings and delimiters are not used)."""
+        if tag == _USAGE:
+            _at_most(self.usages.count + 1, MAX_USAGES, "usages before a main item", at)
+            self.usages.add(value, value, size, self.g.usage_page)
+        elif tag == _USAGE_MIN:
+            self.usage_min = value
+        elif tag == _USAGE_MAX:
+            last = min(value, self.usage_min + MAX_USAGES - self.usages.count - 1)
+            if last < value:
+                warnings.warn(f"report descriptor byte {at}: Usage Maximum 0x{value:x} cut to 0x{last:x}, "
+                              f"{MAX_USAGES:,} usages at the most (as Linux cuts it)", stacklevel=3)
+            self.usages.add(self.usage_min, last, size, self.g.usage_page)
 
 
-def _at_most(value: int, limit: int, what: str, at: int) -> None:
+class _Usages:
+    """The usages read since the last main item, as runs (first, last, page) of values as written:
+    ``page`` None for 4-byte usages, which carry their own page in the high 16 bits; a shorter
+    one's page is the Usage Page in force when it was read, and again at its main item. Runs are
+    expanded only for an Input, and only as far as it uses them, so an Output or Feature item
+    with a usage range of 12,288 costs nothing."""
+
+    def __init__(self) -> None:
+        self.runs: list[tuple[int, int, int | None]] = []
+        self.count = 0
+
+    def add(self, first: int, last: int, size: int, page: int) -> None:
+        if last >= first:
+            self.runs.append((first, last, None if size == 4 else page))
+            self.count += last - first + 1
+
+    def paged(self, page: int, limit: int) -> tuple[tuple[int, int], ...]:
+        """The first ``limit`` (page, usage) pairs, the short usages read since the last one on
+        ``page`` (the Usage Page in force at their main item) moved onto it, as Linux's
+        hid_concatenate_last_usage_page does."""
+        runs = list(self.runs)
+        for i in range(len(runs) - 1, -1, -1):
+            first, last, own = runs[i]
+            if own is not None and own == page:
+                break
+            if own is not None:
+                runs[i] = (first, last, page)
+        out: list[tuple[int, int]] = []
+        for first, last, own in runs:
+            stop = min(last + 1, first + limit - len(out))
+            out.extend((u >> 16, u & 0xFFFF) if own is None else (own, u) for u in range(first, stop))
+            if len(out) >= limit:
+                break
+        return tuple(out)
+
+
+def _at_most(value: int, limit: int, what: str, at: int, unit: str = "") -> None:
     if value > limit:
-        raise DescriptorError(f"report descriptor byte {at}: {what} {value:,}, expected at most {limit:,}")
+        raise DescriptorError(f"report descriptor byte {at}: {what} {value:,}{unit}, expected at most "
+                              f"{limit:,}{unit}")
 
 
 # -- channels and extraction ---------------------------------------------------------------------

@@ -23,16 +23,6 @@ from typing import Self
 
 from devices.base import Device, DeviceError, Sample, State
 
-TWINS: dict[str, str] = {
-    "can": "devices.simulated_can:CanTwin",
-    "hid": "devices.simulated_hid:HidTwin",
-    "midi": "devices.midi_device:MidiTwin",
-    "osc": "devices.osc_device:OscTwin",
-    "serial": "devices.simulated_serial:SerialTwin",
-    "sim": "devices.simulated_serial:SimTwin",
-}
-"""URL scheme -> "module:Class" of its twin (the schemes of ``devices.BACKENDS`` that have a wire)."""
-
 OPEN_TIMEOUT = 5.0  # seconds the adapter may take to open its simulated transport
 POLL = 0.001        # seconds between looks at the adapter's queue
 

@@ -3,6 +3,7 @@ the user's."""
 
 import warnings
 
+import moderngl
 import numpy as np
 import pytest
 from window_keys import WindowKeys
@@ -31,19 +32,33 @@ def runtime(face, _private_coefficient_cache):
     return Runtime(face, dtype=np.float64)
 
 
+@pytest.fixture(scope="session")
+def egl() -> None:
+    """Skip, with the reason, where no headless EGL context can be made (no Mesa EGL here): the
+    one reason a test that draws may skip. Once a context can be made, any renderer error fails."""
+    try:
+        moderngl.create_context(standalone=True, backend="egl").release()
+    except Exception as exc:  # noqa: BLE001 -- whatever stops a context, its reason is the skip message
+        pytest.skip(f"headless EGL OpenGL context unavailable: {exc}")
+
+
 @pytest.fixture
-def headless_window():
+def egl_context(egl):
+    """A fresh standalone EGL context, released after the test."""
+    ctx = moderngl.create_context(standalone=True, backend="egl")
+    yield ctx
+    ctx.release()
+
+
+@pytest.fixture
+def headless_window(egl):
     """Make a moderngl-window offscreen (EGL) window answering to a key table (``WindowKeys`` by
-    default); skip where no EGL."""
+    default)."""
     def make(size: tuple[int, int], keys: type = WindowKeys):
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", PendingDeprecationWarning)
-                import moderngl_window
-            cls = moderngl_window.get_local_window_cls("headless")
-            window = cls(size=size, gl_version=(3, 3), backend="egl")
-        except Exception as exc:  # noqa: BLE001 -- no EGL: the reason is the skip message
-            pytest.skip(f"headless rendering unavailable: {exc}")
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", PendingDeprecationWarning)
+            import moderngl_window
+        window = moderngl_window.get_local_window_cls("headless")(size=size, gl_version=(3, 3), backend="egl")
         window.keys = keys
         return window
 

@@ -75,8 +75,8 @@ def test_a_scaled_rotated_copy_moves_the_same_scaled_and_rotated(default, tmp_pa
     moves = []
     for face, rig in ((a, rig_a), (b, rig_b)):
         runtime = Runtime(face, rig, cache=False, dtype=np.float64, prune=0)
-        d = runtime.pose(fap, expression=(1, 40, 0, 0)) - face.vertices
-        moves.append(d @ face.frame[:, :3])  # back into the file's own axes
+        d = runtime.deform_faps(fap, expression=(1, 40, 0, 0)) - face.vertices
+        moves.append(d @ face.placement[:, :3])  # back into the file's own axes
     assert np.abs(moves[0]).max() > 0.01
     np.testing.assert_allclose(moves[1], 1.7 * moves[0] @ R.T, atol=1e-6 * np.abs(moves[0]).max())
 
@@ -132,5 +132,5 @@ def test_68_ibug_points_rig_the_default_face(default, tmp_path):
     size = np.linalg.norm(default.feature_points["3.5"] - default.feature_points["3.6"])
     for fid in ("3.1", "3.3", "8.7", "5.1", "2.13", "11.1", "9.7"):
         assert np.linalg.norm(face.feature_points[fid] - default.feature_points[fid]) < 0.35 * size, fid
-    moved = Runtime(face, rig, cache=False).pose(expression=(1, 63, 0, 0)) - face.vertices
+    moved = Runtime(face, rig, cache=False).deform_faps(expression=(1, 63, 0, 0)) - face.vertices
     assert np.isfinite(moved).all() and np.abs(moved).max() > 0.01 * size

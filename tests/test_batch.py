@@ -58,7 +58,8 @@ def test_a_corrupt_take_is_reported_by_name_and_the_others_are_rendered(serial) 
             assert result.sha256 == batch.sha256_file(result.video)
 
 
-def test_dask_batch_writes_the_serial_render_byte_for_byte(takes, serial, tmp_path) -> None:
+@pytest.mark.slow
+def test_dask_batch_writes_the_serial_render_byte_for_byte(takes, serial, tmp_path, egl) -> None:
     serial_out, expected = serial
     seen = []
     results = batch.render_batch(takes, str(tmp_path), SETTINGS, workers=2, on_result=seen.append)
@@ -78,7 +79,8 @@ def test_two_takes_that_would_overwrite_one_video_are_refused(tmp_path) -> None:
         batch.render_serial(["a/take.fap", "b/take.fap"], str(tmp_path), SETTINGS)
 
 
-def test_puppet_render_many_takes_into_a_folder(takes, serial, tmp_path, capsys) -> None:
+@pytest.mark.slow
+def test_puppet_render_many_takes_into_a_folder(takes, serial, tmp_path, capsys, egl) -> None:
     from puppet import cli
 
     _, expected = serial

@@ -10,6 +10,7 @@ from puppet.bench.run import run_bench
 from puppet.face.load import load_face
 
 
+@pytest.mark.slow
 def test_bench_face_reports_every_figure():
     row = bench_face(load_face(), frames=3)
     for key in ("rig_s", "precompute_s", "load_s", "deform_ms", "deform_normals_ms", "realtime_ms", "dense_ms", "ratio"):
@@ -25,6 +26,7 @@ def test_the_benchmark_take_is_smooth():
     assert 0 <= angles.min() and angles.max() <= np.radians(15) + 1e-12
 
 
+@pytest.mark.slow
 def test_run_bench_prints_json(capsys, monkeypatch):
     monkeypatch.setattr("puppet.bench.run.bench_faces", lambda ict, subdivided=True: [(load_face(), None, "default")])
     monkeypatch.setattr("puppet.bench.run.bench_inputs", lambda seconds: [{"adapter": "x", "samples_s": 1.0}])
@@ -37,6 +39,7 @@ def test_run_bench_prints_json(capsys, monkeypatch):
     assert 0 < frame["deform_share"] < 1
 
 
+@pytest.mark.slow
 def test_every_adapter_carries_samples_through_its_mapping():
     from puppet.bench.inputs import bench_inputs
 

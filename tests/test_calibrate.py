@@ -198,6 +198,7 @@ def test_a_shipped_mapping_is_not_calibrated_in_place(capsys):
     assert "puppet mappings --copy gamepad_hid" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_puppet_calibrate_succeeds_against_the_simulated_joystick(tmp_path, monkeypatch, capsys):
     """No hardware: sim://joystick?motion=calibrate rests (off mid-scale, with ADC noise), then
     sweeps; the user's two Enters come from stdin."""

@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from PIL import Image
 
 from puppet import cli
 from puppet.live.arkit import import_csv
@@ -32,13 +33,14 @@ def place(tmp_path_factory) -> dict[str, str]:
     (root / "binary.fap").write_bytes(bytes(range(256)) * 4)
     (root / "bad.yaml").write_text("devices: {box: 'sim://joystick'}\nchannels: [[[\n")
     (root / "photo.png").write_bytes(b"not a png")
+    Image.new("RGB", (64, 48), (200, 160, 140)).save(root / "face.png")  # a photo that opens
     (root / "mesh.obj").write_text("v 0 0 0\nf 1 2 3\n")
     (root / "folder").mkdir()
     (root / "header_only.csv").write_text("Timecode,BlendShapeCount,JawOpen\n")
     return {"take": str(take), "listed": str(listed), "tmp": str(root), "csv": str(csv),
             "binary": str(root / "binary.fap"), "bad_yaml": str(root / "bad.yaml"),
-            "photo": str(root / "photo.png"), "mesh": str(root / "mesh.obj"), "folder": str(root / "folder"),
-            "header_only": str(root / "header_only.csv")}
+            "photo": str(root / "photo.png"), "real_photo": str(root / "face.png"), "mesh": str(root / "mesh.obj"),
+            "folder": str(root / "folder"), "header_only": str(root / "header_only.csv")}
 
 
 BAD = [
@@ -63,7 +65,7 @@ BAD = [
     "import-arkit {csv} --mapping {bad_yaml} --takes {tmp}/t",
     "calibrate --mapping /nonexistent.yaml", "calibrate --mapping {bad_yaml}",
     "calibrate --mapping {mapping} --rest -1", "calibrate --mapping {mapping} --sweep 1e300",
-    "pick-landmarks {photo} -o {tmp}/p.json --port 99999 --no-browser",
+    "pick-landmarks {real_photo} -o {tmp}/p.json --port 99999 --no-browser",
     "pick-landmarks {photo} -o {tmp}/p.json --no-browser",
     "pick-landmarks {photo} -o /nonexistent/p.json --no-browser",
     "rig {mesh} --landmarks /nonexistent.json -o {tmp}/r.rig", "rig /nonexistent.obj --landmarks x -o {tmp}/r.rig",
@@ -134,8 +136,39 @@ def test_with_a_display_bad_input_is_refused_before_the_window_opens(line, place
     assert not opened
 
 
+ON_XVFB = """
+import contextlib, io, json, sys
+from puppet import cli
+for argv in json.loads(sys.argv[1]):
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        try:
+            code = cli.main(argv)
+        except SystemExit as exit_:
+            code = exit_.code
+    print(json.dumps([argv, code, err.getvalue()]), flush=True)
+"""
+
+
+def test_on_a_real_display_bad_input_is_refused_before_a_window_opens(place):
+    """The same invocations under Xvfb with the real window code: one that got past its checks
+    would open a window and wait there (the timeout)."""
+    import json
+    import shutil
+
+    if shutil.which("xvfb-run") is None:
+        pytest.skip("no xvfb-run here (tools/setup.sh installs xvfb where it can)")
+    argvs = [_argv(line, place) for line in WITH_A_DISPLAY]
+    run = subprocess.run(["xvfb-run", "-a", sys.executable, "-c", ON_XVFB, json.dumps(argvs)], capture_output=True,
+                         text=True, env={**os.environ, "PYTHONPATH": str(ROOT)}, cwd=place["tmp"], timeout=300)
+    results = [json.loads(line) for line in run.stdout.splitlines() if line.startswith("[")]
+    assert len(results) == len(argvs), run.stdout + run.stderr
+    for _, code, err in results:
+        _one_clear_line(code, err)
+
+
 @pytest.mark.parametrize("line", ["render {take} -o /nonexistent/dir/x.mp4", "replay {listed} -o {tmp}/r.fap",
-                                  "pick-landmarks {photo} -o {tmp}/p.json --port 99999",
+                                  "pick-landmarks {real_photo} -o {tmp}/p.json --port 99999",
                                   "import-arkit {csv} --name 'bad name!' --takes {tmp}/t"])
 def test_a_real_process_prints_one_line(line, place):
     run = subprocess.run([sys.executable, "-m", "puppet.cli", *_argv(line, place)], capture_output=True,

@@ -40,11 +40,11 @@ def test_the_folder_holds_mesh_feature_points_and_rig_and_loads_with_its_own_rig
     assert set(face.feature_points) == set(load_face().feature_points)
     runtime = Runtime(face)
     assert runtime.rig.face_hash == face.content_hash  # the saved rig, not a new one
-    moved = runtime.pose({"open_jaw": 300}) - face.vertices
+    moved = runtime.deform_faps({"open_jaw": 300}) - face.vertices
     assert np.abs(moved).max() > 0
 
 
-def test_render_and_export_take_the_folder(rigged, capsys):
+def test_render_and_export_take_the_folder(rigged, capsys, egl):
     assert main(["render", str(rigged / "take.fap"), "-o", str(rigged / "take.mp4"), "--size", "160x120",
                  "--face", str(rigged / "head")]) == 0
     assert (rigged / "take.mp4").stat().st_size > 0

@@ -15,11 +15,11 @@ from scipy.spatial import cKDTree
 import puppet
 from puppet.face.autorig import build_rig
 from puppet.face.examples import ExampleError, load_examples, read_target
-from puppet.face.muscles import folded_triangles
 from puppet.face.rig import load_rig, save_rig
 from puppet.face.subdivide import subdivide
 from puppet.fap.table import clamp_ranges, fap
 from puppet.runtime.fapcalibration import calibrate, capacity, fit_faps, fold_free_reach, mirror_fap, relative_residual
+from puppet.runtime.musclesolver import folded_triangles
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT.parent / "shared" / "assets" / "makehuman" / "faceunits_arkit"
@@ -64,10 +64,10 @@ def test_targets_land_on_the_face_vertices_through_their_source_index(tmp_path, 
 
 def test_a_fap_still_moves_its_own_feature_point_by_value_times_fapu_exactly(runtime, face):
     assert runtime.rig.fap_motions, "the default rig ships calibrated"
-    rest = runtime.pose({})
+    rest = runtime.deform_faps({})
     for name, value in (("raise_l_cornerlip_o", 80), ("raise_r_i_eyebrow", 60), ("lower_t_midlip", 100)):
         f = fap(name)
-        moved = runtime.pose({name: value}) - rest
+        moved = runtime.deform_faps({name: value}) - rest
         point = face.feature_vertices[f.feature_points[0]]
         assert moved[point] @ f.axis == pytest.approx(value * face.fapu[f.unit], rel=1e-6)
 
@@ -77,10 +77,11 @@ def test_the_encoder_reads_back_a_calibrated_pose(runtime):
     values = np.zeros(68)
     for number in (4, 5, 12, 13, 31, 33, 41, 59, 60):
         values[number - 1] = rng.uniform(-60, 60)
-    encoded = runtime.faps.encode(runtime.pose(values))
+    encoded = runtime.faps.encode(runtime.deform_faps(values))
     assert np.abs(encoded - runtime.faps.shown(values)).max() < 1e-6  # the inner corners follow the outer (foldlimits)
 
 
+@pytest.mark.slow
 @needs_examples
 def test_the_calibrated_face_reproduces_artist_shapes_better_than_the_coarse_rig(face, runtime, examples):
     """Better by a quarter, except where the fit keeps within the lips' fold-free reach: the
@@ -95,10 +96,11 @@ def test_the_calibrated_face_reproduces_artist_shapes_better_than_the_coarse_rig
     assert capacity(runtime, examples["noseSneerLeft"]) < capacity(coarse, examples["noseSneerLeft"])
 
 
+@pytest.mark.slow
 @needs_examples
 def test_a_smile_fit_raises_and_widens_the_lip_corner(face, runtime, examples):
     values = fit_faps(runtime, examples["mouthSmileLeft"])
-    moved = runtime.pose(values) - runtime.pose({})
+    moved = runtime.deform_faps(values) - runtime.deform_faps({})
     corner = moved[face.feature_vertices["8.3"]]
     assert corner[1] > 0 and corner[0] > 0  # up and out, toward the face's own left
 
@@ -114,10 +116,10 @@ def test_the_fold_free_reach_of_a_fap_folds_nothing_and_its_range_end_does(runti
         for value, end in ((lo, low[number - 1]), (hi, high[number - 1])):
             values = np.zeros(68)
             values[number - 1] = value
-            assert not folded_triangles(face.vertices, runtime.pose(values), triangles).any()
+            assert not folded_triangles(face.vertices, runtime.deform_faps(values), triangles).any()
             if np.isfinite(value):
                 values[number - 1] = 2 * end
-                assert folded_triangles(face.vertices, runtime.pose(values), triangles).any()
+                assert folded_triangles(face.vertices, runtime.deform_faps(values), triangles).any()
 
 
 def test_a_value_beyond_the_reach_is_limited_at_pose_time_only(face, runtime):
@@ -126,10 +128,10 @@ def test_a_value_beyond_the_reach_is_limited_at_pose_time_only(face, runtime):
     limited = puppet.Runtime(face, rig)
     values = np.zeros(68)
     values[11] = 50.0
-    at_reach = limited.pose(values)
+    at_reach = limited.deform_faps(values)
     values[11] = 400.0
     beyond = values.copy()
-    assert np.array_equal(limited.pose(values), at_reach)
+    assert np.array_equal(limited.deform_faps(values), at_reach)
     assert np.array_equal(values, beyond)  # the caller's (the file's) values are untouched
 
 
@@ -145,6 +147,7 @@ def test_a_rig_file_keeps_its_motions_and_reach(tmp_path, runtime):
     assert np.allclose(again.fap_motions[number][some], rig.fap_motions[number][some], atol=1e-5)
 
 
+@pytest.mark.slow
 def test_the_calibration_carries_over_to_a_face_rigged_anew(face, runtime):
     finer = subdivide(face, 1)
     rig = build_rig(finer)
@@ -153,12 +156,13 @@ def test_the_calibration_carries_over_to_a_face_rigged_anew(face, runtime):
     coarse = puppet.Runtime(finer, build_rig(finer, calibrated=False), dtype=np.float64)
     values = {"raise_l_cornerlip_o": 100, "stretch_l_cornerlip_o": 40}
     skin = face.parts["skin"]
-    want = (runtime.pose(values) - runtime.pose({}))[skin]
-    got = (fine.pose(values) - fine.pose({}))[skin]
-    without = (coarse.pose(values) - coarse.pose({}))[skin]
+    want = (runtime.deform_faps(values) - runtime.deform_faps({}))[skin]
+    got = (fine.deform_faps(values) - fine.deform_faps({}))[skin]
+    without = (coarse.deform_faps(values) - coarse.deform_faps({}))[skin]
     assert np.linalg.norm(got - want) < 0.5 * np.linalg.norm(without - want)
 
 
+@pytest.mark.slow
 @needs_examples
 def test_a_calibration_fits_its_examples_better_and_keeps_its_held_out_ones_apart(face, examples):
     few = {n: examples[n] for n in ("mouthSmileLeft", "jawOpen", "browInnerUp")}
@@ -184,17 +188,18 @@ def test_the_shipped_calibration_moves_the_right_side_as_the_left_mirrored(face,
     flip = np.array([-1.0, 1.0, 1.0])
     skin = face.parts["skin"]
     twin = cKDTree(face.vertices).query(face.vertices * flip)[1]
-    rest = runtime.pose({})
+    rest = runtime.deform_faps({})
     # the grid around the mouth has a few points off the mirror (the uncalibrated rig: 0.15 apart
     # there; the rig calibrated without the tie: 0.19 at the lip corner, 0.005 at the brow)
     for left, value, apart in (("raise_l_cornerlip_o", 100, 0.08), ("raise_l_o_eyebrow", 80, 1e-3),
                                ("lift_l_cheek", 200, 1e-3)):
-        moved_left = runtime.pose({left: value}) - rest
-        moved_right = runtime.pose({mirror_fap(left): value}) - rest
+        moved_left = runtime.deform_faps({left: value}) - rest
+        moved_right = runtime.deform_faps({mirror_fap(left): value}) - rest
         mirrored = (moved_left * flip)[twin]
         assert np.linalg.norm(mirrored[skin] - moved_right[skin]) < apart * np.linalg.norm(moved_right[skin]), left
 
 
+@pytest.mark.slow
 @needs_examples
 def test_a_shape_held_out_on_one_side_is_learned_from_its_mirror_twin(face, examples):
     few = {n: examples[n] for n in ("mouthSmileLeft", "mouthSmileRight", "jawOpen")}
@@ -223,6 +228,7 @@ def test_the_arkit_mappings_are_written_from_the_solved_vectors(tmp_path):
     assert mapping is not None and vectors["jawOpen"]["open_jaw"] > 0
 
 
+@pytest.mark.slow
 def test_a_fit_keeps_within_the_fold_limits_so_the_face_shows_its_values(runtime, examples):
     """The shipped rig's fold limits (puppet.runtime.foldlimits) bound every fit: each FAP within its
     reach and each inner / outer lip pair within its follow range, so what the face shows for a

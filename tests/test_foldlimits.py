@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 
 from puppet.face.autorig import _lid_share
-from puppet.face.muscles import folded_triangles
 from puppet.face.rig import load_rig, save_rig
 from puppet.fap.highlevel import high_level_faps
 from puppet.fap.table import clamp_ranges, fap
 from puppet.io.fapfile import read_fap, write_fap
 from puppet.runtime.foldlimits import LIP_PAIRS
+from puppet.runtime.musclesolver import folded_triangles
 
 
 def _folds(face, vertices) -> int:
@@ -43,7 +43,7 @@ def test_no_fap_folds_the_face_at_either_end_of_its_range(runtime, face, number,
     eyeball."""
     values = np.zeros(68)
     values[number - 1] = end
-    assert _folds(face, runtime.pose(values)) == 0
+    assert _folds(face, runtime.deform_faps(values)) == 0
 
 
 WIDE_OPEN = pytest.mark.xfail(strict=True, reason="viseme 10 (A, wide open) opens the jaw to 520 MNS, past "
@@ -56,7 +56,7 @@ WIDE_OPEN = pytest.mark.xfail(strict=True, reason="viseme 10 (A, wide open) open
                                           for n in range(1, top + 1)])
 def test_expressions_and_visemes_at_full_intensity_fold_nothing(runtime, face, kind, number):
     pose = {"expression": (number, 63, 0, 0)} if kind == "expressions" else {"viseme": (number, 0, 63)}
-    assert _folds(face, runtime.pose(**pose)) == 0
+    assert _folds(face, runtime.deform_faps(**pose)) == 0
 
 
 def test_the_limits_leave_most_of_every_expression_and_viseme(runtime):
@@ -86,8 +86,8 @@ def test_a_value_beyond_the_reach_stays_in_the_file_and_is_capped_on_the_face(ru
     assert read[number - 1] == -900  # files are sacred
     at_reach = np.zeros(68)
     at_reach[number - 1] = low
-    np.testing.assert_array_equal(runtime.pose(read), runtime.pose(at_reach))
-    assert runtime.faps.encode(runtime.pose(read))[number - 1] == pytest.approx(low, abs=1e-6)
+    np.testing.assert_array_equal(runtime.deform_faps(read), runtime.deform_faps(at_reach))
+    assert runtime.faps.encode(runtime.deform_faps(read))[number - 1] == pytest.approx(low, abs=1e-6)
 
 
 @pytest.mark.parametrize("inner, outer", LIP_PAIRS)
@@ -102,14 +102,14 @@ def test_the_leading_lip_fap_moves_its_point_exactly_and_the_other_follows(runti
                                   (b, a, max(2 * low, 0.9 * reach[0, outer - 1]))):
         values = np.zeros(68)
         values[lead.number - 1] = value
-        moved = runtime.pose(values) - face.vertices
+        moved = runtime.deform_faps(values) - face.vertices
         own = moved[face.feature_vertices[lead.feature_points[0]]] @ lead.axis
         assert own == pytest.approx(value * face.fapu[lead.unit], abs=1e-9)
         shown = runtime.faps.shown(values)
         gap = shown[inner - 1] - shown[outer - 1]
         assert low - 1e-9 <= gap <= high + 1e-9
         assert shown[follower.number - 1] != 0  # the other point went along
-        np.testing.assert_allclose(runtime.faps.encode(runtime.pose(values)), shown, atol=1e-6)
+        np.testing.assert_allclose(runtime.faps.encode(runtime.deform_faps(values)), shown, atol=1e-6)
 
 
 def test_lid_margins_turn_less_toward_the_still_eye_corners(runtime):

@@ -3,7 +3,8 @@ files, mappings, serial byte streams, OSC datagrams, and take folders with a par
 descriptors: tests/test_hid_descriptors.py). Only documented errors may come out (``PuppetError`` and its
 subclasses; ``MappingError`` and ``DeviceError`` for a take's mapping and devices), each input in
 bounded time (hypothesis's deadline) and bounded memory (tracemalloc's peak). Set
-PUPPET_FUZZ_SCALE (default 1) to multiply the examples, for a longer run; ``-s`` prints the tally."""
+PUPPET_FUZZ_SCALE (default 1) to multiply the examples; ``-s`` prints the tally. ``tools/fuzz.py``
+runs these same properties for as long as it is given and prints the counts."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ import json
 import os
 import shutil
 import tempfile
+import time
 import tracemalloc
 import warnings
 from collections import Counter
@@ -23,13 +25,20 @@ from hypothesis import strategies as st
 
 from devices.base import DeviceError
 from devices.osc_packet import parse_datagram
-from devices.serial_wire import MAX_FRAME, MAX_LINE, encode_cobs_frame, encode_slip_frame, make_parser
+from devices.serial_wire import (
+    MAX_FRAME,
+    MAX_LINE,
+    encode_ascii_line,
+    encode_cobs_frame,
+    encode_slip_frame,
+    make_parser,
+)
 from puppet.errors import PuppetError
 from puppet.io.fapfile import read_fap, write_fap
 from puppet.io.shipped import shipped_mappings
 from puppet.io.takes import open_take
 from puppet.live.arkit import import_csv
-from puppet.live.mappingfile import MappingError, parse_mapping
+from puppet.live.mappingfile import MappingError, load_mapping, parse_mapping
 from puppet.live.retake import retake
 from puppet.view.rendertake import FapPlayback
 
@@ -37,18 +46,21 @@ DOCUMENTED = (PuppetError, MappingError, DeviceError)
 MEMORY_BOUND = 32_000_000
 SCALE = int(os.environ.get("PUPPET_FUZZ_SCALE", "1"))
 TALLY: Counter = Counter()
+SLOWEST_MS: dict[str, float] = {}
 
 
 @pytest.fixture(scope="module", autouse=True)
 def report():
     yield
     print("\nfuzz tally:", dict(sorted(TALLY.items())))
+    print("fuzz slowest ms:", {kind: round(ms, 1) for kind, ms in sorted(SLOWEST_MS.items())})
 
 
 def _bounded(kind: str, action) -> object:
-    """Run ``action``; count what came out; fail on anything undocumented or a memory peak past
-    the bound."""
+    """Run ``action``; count what came out (read, documented error, or anything else, which fails);
+    fail on a memory peak past ``MEMORY_BOUND`` too."""
     tracemalloc.start()
+    start = time.perf_counter()
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -57,9 +69,15 @@ def _bounded(kind: str, action) -> object:
     except DOCUMENTED:
         TALLY[f"{kind}: documented error"] += 1
         result = None
+    except Exception:
+        TALLY[f"{kind}: other"] += 1
+        raise
     finally:
         peak = tracemalloc.get_traced_memory()[1]
         tracemalloc.stop()
+        SLOWEST_MS[kind] = max(SLOWEST_MS.get(kind, 0.0), 1000 * (time.perf_counter() - start))
+    if peak >= MEMORY_BOUND:
+        TALLY[f"{kind}: over the memory bound"] += 1
     assert peak < MEMORY_BOUND, f"{kind}: {peak:,} bytes at the peak"
     return result
 
@@ -139,10 +157,25 @@ MAPPING_NASTY = ["1e400", "1e308", "-1e308", "1e-320", ".nan", ".inf", "1_000", 
                  "!!python/object:os.system", "{", "[", "'", "\t", "~", "[]", "{}", "yes", "0x1F", "9" * 5000]
 
 
+def _seed_mappings() -> list[list[str]]:
+    """The shipped mappings' lines, an ARKit mapping's targets (1,234 of one shape) cut to their
+    first 20 and last 10: every key, kind and comment it has at a 40th of the parse, and a
+    spoiled line lands in its devices and channels as often as in its targets."""
+    seeds = []
+    for path in sorted(shipped_mappings().values()):
+        lines = path.read_text("utf-8").split("\n")
+        start = lines.index("targets:") + 1
+        seeds.append(lines[:start + 20] + lines[-10:] if len(lines) - start > 40 else lines)
+    return seeds
+
+
+MAPPING_SEEDS = _seed_mappings()
+
+
 @st.composite
 def near_valid_mapping(draw) -> str:
     """A shipped mapping with a few lines spoiled, cut, repeated or given nasty values."""
-    lines = draw(st.sampled_from(sorted(shipped_mappings().values()))).read_text("utf-8").split("\n")
+    lines = list(draw(st.sampled_from(MAPPING_SEEDS)))
     for _ in range(draw(st.integers(1, 4))):
         at = draw(st.integers(0, len(lines) - 1))
         how = draw(st.sampled_from(["value", "drop", "double", "indent", "insert"]))
@@ -160,9 +193,17 @@ def near_valid_mapping(draw) -> str:
 
 
 @settings(max_examples=150 * SCALE, deadline=5000, suppress_health_check=[HealthCheck.too_slow])
-@given(text=st.one_of(st.text(max_size=400), near_valid_mapping()))
+@given(text=st.one_of(st.text(max_size=400), near_valid_mapping(), st.binary(max_size=400)))
 def test_mapping_text(text):
-    _bounded("mapping", lambda: parse_mapping(text, "fuzz.yaml"))
+    """Text through ``parse_mapping``; bytes (not UTF-8, as often as not) through a file and
+    ``load_mapping``."""
+    if isinstance(text, str):
+        _bounded("mapping", lambda: parse_mapping(text, "fuzz.yaml"))
+        return
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "fuzz.yaml"
+        path.write_bytes(text)
+        _bounded("mapping", lambda: load_mapping(path))
 
 
 # -- serial byte streams ------------------------------------------------------------------------------
@@ -170,12 +211,13 @@ def test_mapping_text(text):
 @st.composite
 def serial_stream(draw) -> tuple[str, list[bytes]]:
     """A protocol and the chunks a port hands over: valid frames and lines, garbage, cuts, floods."""
-    protocol = draw(st.sampled_from(["ascii", "cobs", "slip"]))
+    protocol = draw(st.sampled_from(["ascii", "ascii nmea", "cobs", "slip"]))
     parts = []
     for _ in range(draw(st.integers(1, 12))):
         how = draw(st.sampled_from(["good", "garbage", "flood", "flip"]))
         values = draw(st.lists(st.floats(-1000, 1000), min_size=1, max_size=8))
-        good = (b",".join(b"%g" % v for v in values) + b"\n" if protocol == "ascii"
+        good = (encode_ascii_line(values, checksum="nmea" if protocol == "ascii nmea" else "none")
+                if protocol.startswith("ascii")
                 else encode_cobs_frame(values) if protocol == "cobs" else encode_slip_frame(values))
         if how == "good":
             parts.append(good)
@@ -197,13 +239,14 @@ def serial_stream(draw) -> tuple[str, list[bytes]]:
 def test_serial_framing(case):
     """Every chunk read or counted as bad; readings hold finite numbers only."""
     protocol, chunks = case
-    parser = make_parser(protocol)
+    parser = make_parser(protocol.split()[0], checksum="nmea" if protocol == "ascii nmea" else "none")
 
     def feed() -> list:
         return [reading for chunk in chunks for reading in parser.feed(chunk)]
 
     for reading in _bounded(f"serial {protocol}", feed) or []:
         assert all(np.isfinite(v) for v in reading.values())
+    TALLY[f"serial {protocol}: bad frames skipped"] += parser.bad
 
 
 # -- OSC datagrams -------------------------------------------------------------------------------------
@@ -239,11 +282,12 @@ def test_osc_datagrams(datagram):
 
 @pytest.fixture(scope="module")
 def good_take(tmp_path_factory) -> Path:
+    """A small imported take (20 frames, two channels): what the garbling starts from."""
     root = tmp_path_factory.mktemp("fuzz")
     csv = root / "face.csv"
     csv.write_text("Timecode,BlendShapeCount,JawOpen,MouthSmileLeft\n"
                    + "".join(f"00:00:00:{i:02d}.000,2,{i / 20:.2f},{(i % 5) / 5:.2f}\n" for i in range(20)))
-    mapping = root / "small.yaml"  # the shipped ARKit mapping takes a second to parse: keep examples quick
+    mapping = root / "small.yaml"  # two targets: the examples stay quick
     mapping.write_text("devices:\n  csv: {url: 'replay:///dev/null'}\nchannels:\n  csv.JawOpen: {smoothing: {type: one_euro, min_cutoff: 1.0, beta: 0.5}}\n"
                        "  csv.MouthSmileLeft: {dead_zone: 0.05}\ntargets:\n"
                        "  - {fap: open_jaw, source: csv.JawOpen, range: [0, 700]}\n"
@@ -313,6 +357,8 @@ def _spoil(folder: Path, part: str, how: str, arg) -> None:
                                                                    HealthCheck.function_scoped_fixture])
 @given(spoilt=st.lists(damage(), min_size=1, max_size=2))
 def test_garbled_take_folders(good_take, shared, spoilt):
+    """Replay (``retake``) and play (``FapPlayback``, which render and export read a take through
+    as well) a copy of a good take with one or two of its parts garbled."""
     face, runtime = shared
     with tempfile.TemporaryDirectory() as scratch:
         folder = Path(scratch) / "take_001"

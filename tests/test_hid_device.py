@@ -95,7 +95,6 @@ def test_descriptor_items_long_extended_usages_push_pop_arrays_and_the_unsigned_
     (bytes([0x05]), "needs 1 data bytes"),
     (bytes([0xC0]), "End Collection without Collection"),
     (bytes([0xB4]), "Pop without Push"),
-    (bytes([0x29, 0x05]), "Usage Maximum without Usage Minimum"),
     (bytes([0x85, 0x00]), "Report ID 0"),
 ])
 def test_broken_descriptors_name_the_byte(bad, message):

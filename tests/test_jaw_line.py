@@ -8,7 +8,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 import puppet
-from puppet.face.muscles import folded_triangles
+from puppet.runtime.musclesolver import folded_triangles
 
 JAW_POSES = [{"open_jaw": 250}, {"open_jaw": 500}, {"open_jaw": 824},
              {"shift_jaw": 104}, {"shift_jaw": -104}, {"thrust_jaw": 300}, {"thrust_jaw": 600},
@@ -55,7 +55,7 @@ def _triangles_in(face, mask):
 @pytest.mark.parametrize("pose", JAW_POSES, ids=lambda p: ",".join(f"{k}={v}" for k, v in p.items()))
 def test_no_fold_under_the_jaw(face, runtime, under_jaw, pose):
     tri = _triangles_in(face, under_jaw)
-    folded = folded_triangles(runtime.pose({}), runtime.pose(pose), tri)
+    folded = folded_triangles(runtime.deform_faps({}), runtime.deform_faps(pose), tri)
     assert not folded.any(), f"{int(folded.sum())} triangles fold under the jaw line"
 
 
@@ -64,7 +64,7 @@ def test_neck_below_the_throat_stays(face, runtime, pose):
     fp = face.feature_points
     chin = fp["2.1"][1]
     neck = np.asarray(face.vertices)[:, 1] < chin - 0.5 * (fp["9.15"][1] - chin)
-    moved = np.linalg.norm(runtime.pose(pose) - runtime.pose({}), axis=1)
+    moved = np.linalg.norm(runtime.deform_faps(pose) - runtime.deform_faps({}), axis=1)
     assert moved[neck].max() < 1e-9
 
 
@@ -75,7 +75,7 @@ def test_skin_under_the_chin_stretches_evenly(face, runtime, under_jaw, pose):
     length: the jaw's pull spreads over the band instead of piling up on one row of edges."""
     tri = _triangles_in(face, under_jaw)
     e = np.unique(np.sort(np.vstack([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]]), axis=1), axis=0)
-    rest, posed = runtime.pose({}), runtime.pose(pose)
+    rest, posed = runtime.deform_faps({}), runtime.deform_faps(pose)
     ratio = (np.linalg.norm(posed[e[:, 0]] - posed[e[:, 1]], axis=1)
              / np.linalg.norm(rest[e[:, 0]] - rest[e[:, 1]], axis=1))
     assert 0.5 < ratio.min() and ratio.max() < 2.0, (ratio.min(), ratio.max())
@@ -90,6 +90,6 @@ def test_displacement_eases_down_the_throat(face, runtime):
     line = np.flatnonzero((np.abs(v[:, 0]) < 1e-3) & (v[:, 1] < chin[1] + 0.03) & (v[:, 2] > 0.2) & (v[:, 2] <= chin[2]))
     line = np.intersect1d(line, face.parts["skin"])
     line = line[np.argsort(-(v[line, 1] + v[line, 2]))]  # from the chin back under it, then down the throat
-    d = runtime.pose({"open_jaw": 824}) - runtime.pose({})
+    d = runtime.deform_faps({"open_jaw": 824}) - runtime.deform_faps({})
     bend = np.linalg.norm(d[line[1:-1]] - (d[line[:-2]] + d[line[2:]]) / 2, axis=1)
     assert bend.max() < 0.15 * np.linalg.norm(d[face.feature_vertices["2.1"]])

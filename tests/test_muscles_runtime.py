@@ -12,13 +12,14 @@ import pytest
 from devices import State, open_device
 from puppet import MappingError, load_mapping
 from puppet.face.autorig import build_rig
-from puppet.face.muscles import MUSCLE_NAMES, folded_triangles
+from puppet.face.muscles import MUSCLE_NAMES
 from puppet.face.rig import rig_from_dict, rig_to_dict
 from puppet.fap.table import fap
 from puppet.io.fapfile import read_fap
 from puppet.io.takes import open_take
 from puppet.live.retake import retake
 from puppet.live.session import LiveSession
+from puppet.runtime.musclesolver import EdgeConstraints, control_point_displacements, folded_triangles
 from puppet.runtime.runtime import MUSCLE_MODES, Runtime
 
 JOYSTICK = "sim://joystick?protocol=ascii&rate=200&channels=6"
@@ -43,7 +44,7 @@ def _skin_triangles(face) -> np.ndarray:
 def _moved(runtime, point: str, **pose) -> np.ndarray:
     """How far a feature point's vertex moves from rest in a pose."""
     v = runtime.face.feature_vertices[point]
-    return runtime.pose(**pose)[v] - runtime.rest[v]
+    return runtime.deform_faps(**pose)[v] - runtime.rest[v]
 
 
 # -- the rig carries the muscles ------------------------------------------------------------------
@@ -69,9 +70,9 @@ def test_a_rig_without_muscles_refuses_a_contraction_by_name(face):
     rig.muscles = []
     bare = Runtime(face, rig)
     assert bare.muscle_names == ()
-    np.testing.assert_array_equal(bare.pose(muscles={"zygomatic_major_l": 0.0}), bare.rest)
+    np.testing.assert_array_equal(bare.deform_faps(muscles={"zygomatic_major_l": 0.0}), bare.rest)
     with pytest.raises(ValueError, match="unknown muscle 'zygomatic_major_l'"):
-        bare.pose(muscles={"zygomatic_major_l": 0.5})
+        bare.deform_faps(muscles={"zygomatic_major_l": 0.5})
 
 
 # -- poses -----------------------------------------------------------------------------------------
@@ -94,8 +95,8 @@ def test_the_pair_is_mirror_symmetric(runtime, mode):
 def test_muscles_and_faps_combine_in_one_pose(runtime, mode):
     faps = {"raise_l_i_eyebrow": 150, "raise_r_cornerlip": 100}
     muscles = {"zygomatic_major_l": 0.8, "frontalis_major_r": 0.6}
-    both = runtime.pose(faps, muscles=muscles, mode=mode) - runtime.rest
-    apart = (runtime.pose(faps) - runtime.rest) + (runtime.pose(muscles=muscles, mode=mode) - runtime.rest)
+    both = runtime.deform_faps(faps, muscles=muscles, mode=mode) - runtime.rest
+    apart = (runtime.deform_faps(faps) - runtime.rest) + (runtime.deform_faps(muscles=muscles, mode=mode) - runtime.rest)
     np.testing.assert_allclose(both, apart, atol=1e-9)  # no jaw: both drivers add up exactly
     opened = _moved(runtime, "8.3", fap={"open_jaw": 300}, muscles=muscles, mode=mode)
     assert opened[1] > _moved(runtime, "8.3", fap={"open_jaw": 300})[1] + 0.005
@@ -104,28 +105,28 @@ def test_muscles_and_faps_combine_in_one_pose(runtime, mode):
 def test_no_muscle_contracting_is_the_fap_frame_exactly(runtime):
     faps = {"open_jaw": 250, "raise_l_cornerlip": 80}
     rest = dict.fromkeys(runtime.muscle_names, 0.0)
-    np.testing.assert_array_equal(runtime.pose(faps, muscles=rest), runtime.pose(faps))
+    np.testing.assert_array_equal(runtime.deform_faps(faps, muscles=rest), runtime.deform_faps(faps))
 
 
 def test_an_unknown_muscle_or_mode_is_named(runtime):
     with pytest.raises(ValueError, match="did you mean 'zygomatic_major_l'"):
-        runtime.pose(muscles={"zygomatic_majr_l": 0.5})
+        runtime.deform_faps(muscles={"zygomatic_majr_l": 0.5})
     with pytest.raises(ValueError, match="muscle mode 'vertex'"):
-        runtime.pose(muscles={"zygomatic_major_l": 0.5}, mode="vertex")
+        runtime.deform_faps(muscles={"zygomatic_major_l": 0.5}, mode="vertex")
 
 
 @pytest.mark.parametrize("mode, folds", [("control", False), ("improved", False), ("classic", True)])
 def test_contraction_10_folds_only_the_classic_skin(runtime, face, mode, folds):
     triangles = _skin_triangles(face)
     for name in ("zygomatic_major_l", "zygomatic_major_r"):
-        folded = folded_triangles(face.vertices, runtime.pose(muscles={name: 10.0}, mode=mode), triangles)
+        folded = folded_triangles(face.vertices, runtime.deform_faps(muscles={name: 10.0}, mode=mode), triangles)
         assert folded.any() == folds, (name, int(folded.sum()))
 
 
 @pytest.mark.parametrize("mode", ["control", "improved"])
 @pytest.mark.parametrize("name", MUSCLE_NAMES)
 def test_no_muscle_folds_the_skin_at_contraction_10(runtime, face, name, mode):
-    folded = folded_triangles(face.vertices, runtime.pose(muscles={name: 10.0}, mode=mode), _skin_triangles(face))
+    folded = folded_triangles(face.vertices, runtime.deform_faps(muscles={name: 10.0}, mode=mode), _skin_triangles(face))
     assert not folded.any(), int(folded.sum())
 
 
@@ -135,13 +136,39 @@ def test_no_muscle_folds_the_skin_at_contraction_10(runtime, face, name, mode):
 def test_normal_contractions_fold_nothing(runtime, face, pose):
     """On the skin grid a few muscles squeeze a triangle at contraction 0.5-1 (the lids' and the
     inner frontalis'); the fold guard takes those back, so the face shows no fold."""
-    assert not folded_triangles(face.vertices, runtime.pose(muscles=pose), _skin_triangles(face)).any()
+    assert not folded_triangles(face.vertices, runtime.deform_faps(muscles=pose), _skin_triangles(face)).any()
 
 
 def test_the_fold_guard_costs_nothing_at_ordinary_contraction(runtime, face):
-    calm = runtime.pose(muscles={"zygomatic_major_l": 1.0})
-    assert not runtime._fold_guard.squeezed(calm)  # so the guard left this frame as DFFD made it
+    calm = runtime.deform_faps(muscles={"zygomatic_major_l": 1.0})
+    assert not runtime._fold_guard.squeezed(calm[runtime._guard_vertices])  # so the guard left this frame as DFFD made it
     assert not folded_triangles(face.vertices, calm, _skin_triangles(face)).any()
+
+
+
+@pytest.mark.parametrize("contraction", [0.5, 1.0, 3.0, 10.0])
+def test_the_guarded_muscles_are_the_fold_guard_of_their_share_on_the_whole_skin(runtime, face, contraction):
+    """The runtime spreads the FAPs' and the muscles' shares in one product and runs the fold guard
+    on the guard's own vertices: that is, within float32 rounding, the definition -- the FAP frame
+    plus the muscles' share spread by B's columns and fixed by edge constraints over every
+    triangle the share reaches, on the whole mesh."""
+    faps = {"raise_l_cornerlip": 120, "raise_b_midlip": -60}  # no rigid part moves: nothing is carried
+    muscles = dict.fromkeys(runtime.muscle_names, contraction)
+    k = len(runtime.control_points)
+    active = np.array([runtime.rig.point(n).position for n in runtime.control_points])
+    share = control_point_displacements(runtime.rig.muscles, muscles, active)
+    spread = runtime.B[:, :k].astype(float).tocsr()
+    reached = np.diff(spread[:, np.flatnonzero(np.any(share != 0, axis=1))].tocsr().indptr) > 0
+    movable = np.zeros(len(face.vertices), bool)
+    for region in runtime.rig.regions:
+        if region.kind == "dffd":
+            movable[region.vertices] = True
+    moved = spread @ share
+    EdgeConstraints(face.vertices, face.triangles, movable, reached).relax(moved)
+    expected = runtime.deform_faps(faps) + moved
+    got = runtime.deform_faps(faps, muscles=muscles)
+    height = np.ptp(face.vertices[:, 1])
+    assert np.abs(got - expected).max() < 1e-5 * height
 
 
 # -- mappings ------------------------------------------------------------------------------------------
@@ -193,7 +220,7 @@ def test_the_live_face_shows_the_muscles(smile_take):
     _, shown, runtime = smile_take
     muscles, vertices = max(shown, key=lambda s: s[0]["zygomatic_major_l"])
     assert muscles["zygomatic_major_l"] > 0.05
-    np.testing.assert_allclose(vertices, runtime.pose(muscles=muscles), atol=1e-6)
+    np.testing.assert_allclose(vertices, runtime.deform_faps(muscles=muscles), atol=1e-6)
 
 
 def test_a_muscle_take_is_written_as_faps_of_the_moved_feature_points(smile_take):

@@ -101,6 +101,7 @@ def _cockpit_parts(pixels: np.ndarray) -> set[str]:
 EVERYTHING = {"device open", "device lost", "REC", "text and graphs", "channel bars"}
 
 
+@pytest.mark.slow
 def test_a_screenshot_of_the_real_window_under_xvfb_shows_everything_and_so_does_the_one_in_docs(tmp_path):
     """tools/live_screenshot.py under Xvfb (the real pyglet window): the status with a device open
     and one LOST with its reason, REC, the graphs and keys, the channel monitor's bars; and the
@@ -120,6 +121,7 @@ def test_a_screenshot_of_the_real_window_under_xvfb_shows_everything_and_so_does
     assert face.std() > 20  # the face under it
 
 
+@pytest.mark.slow
 def test_calibration_from_the_window_guides_rest_then_sweep_and_writes_the_mapping(tmp_path, headless_window):
     """K, against the simulated box's calibration motion (hands off for its first 6 s, then
     sweeping). The phases are moved on here by what the box does rather than by the clock (rest:

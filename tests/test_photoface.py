@@ -25,17 +25,13 @@ SIZE = 512
 
 
 @pytest.fixture(scope="module")
-def shot():
+def shot(egl):
     """(photo, projector): the default face rendered frontally, and its camera's projection."""
     from puppet.view.renderer import Renderer
 
     face = load_face()
-    try:
-        renderer = Renderer(face.triangles, len(face.vertices), face.colors, width=SIZE, height=SIZE)
-    except Exception as exc:  # noqa: BLE001 -- no EGL here: the reason is the skip message
-        pytest.skip(f"headless EGL OpenGL context unavailable: {exc}")
-    with renderer:
-        renderer.frame(face.vertices, view="front", fov=8.0)
+    with Renderer(face.triangles, len(face.vertices), face.colors, width=SIZE, height=SIZE) as renderer:
+        renderer.aim(face.vertices, view="front", fov=8.0)
         yield renderer.render(face.vertices), renderer.project
 
 
@@ -107,7 +103,7 @@ def test_the_command_writes_a_folder_that_loads_rigs_and_animates(shot, fdp11, t
     assert len(face.vertices) == len(load_face().vertices)
     runtime = Runtime(face, load_folder_rig(tmp_path / "me"))
     chin = face.feature_vertices["2.1"]
-    moved = runtime.pose({"open_jaw": 500})
+    moved = runtime.deform_faps({"open_jaw": 500})
     assert moved[chin, 1] < face.vertices[chin, 1] - 0.01 * _face_width(face)
     plain = Face(face.name, face.vertices, face.triangles, face.parts, colors=face.colors)
     textured, untextured = render_face(face, width=200, height=200), render_face(plain, width=200, height=200)
@@ -195,20 +191,16 @@ def test_the_picker_saves_what_is_posted(shot, fdp11, tmp_path):
 # -- a smiling photo, the texture, a turned head ------------------------------------------------
 
 @pytest.fixture(scope="module")
-def smiling():
+def smiling(egl):
     """(photo, landmarks, posed vertices, projector): the default face smiling with the jaw open
     (FAP 2 joy, open_jaw 250: parted lips, teeth showing), rendered frontally; its MediaPipe
     landmarks projected with their exact depth (pixel scale, smaller is nearer)."""
     from puppet.view.renderer import Renderer
 
     face = load_face()
-    posed = Runtime(face).pose({"open_jaw": 250}, expression=(1, 63, 0, 0))
-    try:
-        renderer = Renderer.for_face(face, width=SIZE, height=SIZE)
-    except Exception as exc:  # noqa: BLE001 -- no EGL here: the reason is the skip message
-        pytest.skip(f"headless EGL OpenGL context unavailable: {exc}")
-    with renderer:
-        camera = renderer.frame(face.vertices, view="front", fov=8.0)
+    posed = Runtime(face).deform_faps({"open_jaw": 250}, expression=(1, 63, 0, 0))
+    with Renderer.for_face(face, width=SIZE, height=SIZE) as renderer:
+        camera = renderer.aim(face.vertices, view="front", fov=8.0)
         points = pf.mediapipe_points(face).on(posed)
         distance = (points - camera.eye) @ -camera.basis()[2]
         focal = SIZE / 2 / np.tan(np.radians(camera.fov) / 2)
@@ -286,18 +278,14 @@ def test_the_photo_meets_the_skin_colour_round_the_head_without_a_seam(shot, fdp
     assert seam(built) < 0.08
 
 
-def test_a_turned_head_photo_is_refused():
+def test_a_turned_head_photo_is_refused(egl):
     """MediaPipe still finds a face turned 60 degrees (its landmarks are projected here): it is
     refused as not frontal, naming the measure."""
     from puppet.view.renderer import Renderer
 
     face = load_face()
-    try:
-        renderer = Renderer.for_face(face, width=SIZE, height=SIZE)
-    except Exception as exc:  # noqa: BLE001
-        pytest.skip(f"headless EGL OpenGL context unavailable: {exc}")
-    with renderer:
-        front = renderer.frame(face.vertices, view="front")
+    with Renderer.for_face(face, width=SIZE, height=SIZE) as renderer:
+        front = renderer.aim(face.vertices, view="front")
         turn = np.radians(60)
         distance = np.linalg.norm(front.eye - front.target)
         renderer.look_at(front.target + distance * np.array([np.sin(turn), 0.0, np.cos(turn)]), front.target)

@@ -67,19 +67,15 @@ def test_with_no_photo_environment_it_says_how_to_get_one(monkeypatch, tmp_path)
 
 
 @pytest.fixture(scope="module")
-def default_face_views(tmp_path_factory):
+def default_face_views(tmp_path_factory, egl):
     """Renders of the default face: {yaw degrees: png path}, and the front camera's projector."""
     from puppet.view.renderer import Renderer, save_png
 
     face = load_face()
     folder = tmp_path_factory.mktemp("views")
-    try:
-        renderer = Renderer.for_face(face, width=512, height=512)
-    except Exception as exc:  # noqa: BLE001 -- no EGL here: the reason is the skip message
-        pytest.skip(f"headless EGL OpenGL context unavailable: {exc}")
     paths = {}
-    with renderer:
-        front = renderer.frame(face.vertices[face.parts["skin"]], view="front", margin=1.3)
+    with Renderer.for_face(face, width=512, height=512) as renderer:
+        front = renderer.aim(face.vertices[face.parts["skin"]], view="front", margin=1.3)
         projected = renderer.project(np.asarray(face.vertices))
         distance = np.linalg.norm(front.eye - front.target)
         for yaw in (0, 60, 90):

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import imageio.v2 as imageio
-import moderngl
 import numpy as np
 import pytest
 from PIL import Image
@@ -49,15 +48,6 @@ def test_a_take_plays_frame_by_frame_and_opens_the_mouth_where_it_says(tmp_path)
     assert len(frames) == 6 and playback.fps == 30
     assert np.allclose(frames[0], playback.face.vertices, atol=1e-6)
     assert frames[4][chin, 1] < playback.face.vertices[chin, 1] - 0.05
-
-
-@pytest.fixture(scope="module")
-def egl():
-    """Skip (with the reason) where no headless OpenGL context can be made."""
-    try:
-        moderngl.create_context(standalone=True, backend="egl").release()
-    except Exception as exc:
-        pytest.skip(f"headless EGL OpenGL context unavailable: {exc}")
 
 
 def test_render_take_writes_a_video_at_the_takes_fps(tmp_path, egl):

@@ -63,9 +63,9 @@ def test_fold_report_lists_only_folding_faps_and_adds_them_up(face, shipped):
 def test_fitted_smile_raises_its_own_lip_corner(face, shipped, examples):
     smiles = {name: examples[name] for name in ("mouthSmileLeft", "mouthSmileRight")}
     values = fits(shipped, smiles, "skin")
-    rest = shipped.pose()
+    rest = shipped.deform_faps()
     for name, corner, other in (("mouthSmileLeft", "8.3", "8.4"), ("mouthSmileRight", "8.4", "8.3")):
-        moved = shipped.pose(values[name]) - rest
+        moved = shipped.deform_faps(values[name]) - rest
         up = moved[face.feature_vertices[corner], 1]
         assert up > 0.1 * smiles[name][face.feature_vertices[corner], 1]
         assert up > moved[face.feature_vertices[other], 1] + 0.02  # a one-sided smile

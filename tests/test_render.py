@@ -5,7 +5,6 @@ from __future__ import annotations
 from types import SimpleNamespace
 
 import imageio.v2 as imageio
-import moderngl
 import numpy as np
 import pytest
 import trimesh
@@ -18,13 +17,6 @@ WIDTH, HEIGHT = 192, 160
 CENTRE = np.array([0.0, 7.2, 1.0])
 
 
-def _egl_context() -> moderngl.Context:
-    try:
-        return moderngl.create_context(standalone=True, backend="egl")
-    except Exception as exc:  # any failure means no usable headless GL here
-        pytest.skip(f"headless EGL OpenGL context unavailable: {exc}")
-
-
 @pytest.fixture(scope="module")
 def sphere() -> trimesh.Trimesh:
     mesh = trimesh.creation.icosphere(subdivisions=3)
@@ -32,15 +24,9 @@ def sphere() -> trimesh.Trimesh:
 
 
 @pytest.fixture(scope="module")
-def egl() -> None:
-    """Skip the test unless a headless EGL context can be created."""
-    _egl_context().release()
-
-
-@pytest.fixture(scope="module")
 def renderer(egl: None, sphere: trimesh.Trimesh):
     with Renderer(sphere.faces, len(sphere.vertices), width=WIDTH, height=HEIGHT) as r:
-        r.frame(sphere.vertices)
+        r.aim(sphere.vertices)
         yield r
 
 
@@ -94,10 +80,10 @@ def test_same_input_renders_identically(renderer: Renderer, sphere: trimesh.Trim
 
 @pytest.mark.usefixtures("egl")
 @pytest.mark.parametrize("view", sorted(VIEW_DIRECTIONS))
-def test_views_frame_the_object(view: str, sphere: trimesh.Trimesh) -> None:
+def test_views_aim_at_the_object(view: str, sphere: trimesh.Trimesh, egl) -> None:
     mesh = trimesh.Trimesh(sphere.vertices * [0.8, 1.0, 0.9], sphere.faces, process=False)
     with Renderer(mesh.faces, len(mesh.vertices), width=WIDTH, height=HEIGHT) as r:
-        r.frame(mesh.vertices, view=view)
+        r.aim(mesh.vertices, view=view)
         image = r.render(mesh.vertices)
         projected = r.project(mesh.vertices)
     assert not _is_grey(image[HEIGHT // 2, WIDTH // 2])
@@ -110,20 +96,17 @@ def test_look_at_from_behind(renderer: Renderer, sphere: trimesh.Trimesh) -> Non
     try:
         image = renderer.render(sphere.vertices)
     finally:
-        renderer.frame(sphere.vertices)
+        renderer.aim(sphere.vertices)
     assert not _is_grey(image[HEIGHT // 2, WIDTH // 2])
     assert _is_grey(image[0, 0])
 
 
-def test_existing_context_is_used_and_kept(sphere: trimesh.Trimesh) -> None:
-    ctx = _egl_context()
-    try:
-        with Renderer(sphere.faces, len(sphere.vertices), width=64, height=64, ctx=ctx) as r:
-            assert r.ctx is ctx
-            assert r.render(sphere.vertices).shape == (64, 64, 3)
-        ctx.buffer(reserve=16).release()  # still alive after the renderer is released
-    finally:
-        ctx.release()
+def test_existing_context_is_used_and_kept(sphere: trimesh.Trimesh, egl_context) -> None:
+    ctx = egl_context
+    with Renderer(sphere.faces, len(sphere.vertices), width=64, height=64, ctx=ctx) as r:
+        assert r.ctx is ctx
+        assert r.render(sphere.vertices).shape == (64, 64, 3)
+    ctx.buffer(reserve=16).release()  # still alive after the renderer is released
 
 
 def test_wrong_vertex_count_is_rejected(renderer: Renderer, sphere: trimesh.Trimesh) -> None:
@@ -132,7 +115,7 @@ def test_wrong_vertex_count_is_rejected(renderer: Renderer, sphere: trimesh.Trim
 
 
 @pytest.mark.usefixtures("egl")
-def test_render_face_one_shot(sphere: trimesh.Trimesh) -> None:
+def test_render_face_one_shot(sphere: trimesh.Trimesh, egl) -> None:
     face = SimpleNamespace(vertices=sphere.vertices, triangles=sphere.faces, colors=None)
     image = render_face(face, view="three_quarter", width=64, height=48)
     assert image.shape == (48, 64, 3)

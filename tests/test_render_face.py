@@ -8,20 +8,16 @@ import pytest
 from puppet.face import rigid
 from puppet.face.load import load_face
 from puppet.runtime.runtime import Runtime
-
-render = pytest.importorskip("puppet.view.renderer")
+from puppet.view import renderer as render
 
 
 @pytest.fixture(scope="module")
-def scene():
+def scene(egl):
     face = load_face()
     runtime = Runtime(face)
-    try:
-        renderer = render.Renderer(face.triangles, len(face.vertices), face.colors, width=400, height=400)
-    except Exception as exc:  # no EGL here: the reason is the skip message
-        pytest.skip(f"headless EGL OpenGL context unavailable: {exc}")
+    renderer = render.Renderer(face.triangles, len(face.vertices), face.colors, width=400, height=400)
     skin = face.vertices[face.parts["skin"]]
-    renderer.frame(skin[skin[:, 1] > face.feature_points["2.1"][1] - 0.3], view="front")
+    renderer.aim(skin[skin[:, 1] > face.feature_points["2.1"][1] - 0.3], view="front")
     yield face, runtime, renderer
     renderer.release()
 

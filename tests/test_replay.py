@@ -188,7 +188,7 @@ def test_puppet_replay_writes_and_checks_a_new_fap(live_take, tmp_path, capsys):
     assert cli.main(["replay", str(live_take.folder), "--through-devices", "-o", str(out), "--no-window"]) == 0
     assert capsys.readouterr().out.strip() == f"{out}: {live_take.meta['frames']} frames, identical to the recorded take.fap"
     assert cli.main(["replay", str(tmp_path / "nope"), "-o", str(out), "--no-window"]) == 2
-    assert "nope: not a take (no take.json)" in capsys.readouterr().err
+    assert "nope: no such take folder" in capsys.readouterr().err
 
 
 def test_an_imported_arkit_take_can_be_re_mapped(tmp_path):

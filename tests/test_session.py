@@ -97,12 +97,10 @@ def test_a_slow_loop_still_writes_every_tick(session):
     assert len(open_take(folder).stream()) == 11
 
 
-def test_measure_latency_offscreen_counts_every_sample(session, face):
-    render = pytest.importorskip("puppet.view.renderer")
-    try:
-        renderer = render.Renderer(face.triangles, len(face.vertices), face.colors, width=320, height=240)
-    except Exception as exc:  # no EGL here: the reason is the skip message
-        pytest.skip(f"headless EGL OpenGL context unavailable: {exc}")
+def test_measure_latency_offscreen_counts_every_sample(session, face, egl):
+    from puppet.view.renderer import Renderer
+
+    renderer = Renderer(face.triangles, len(face.vertices), face.colors, width=320, height=240)
     try:
         _run_until(session, lambda f: f.states["box"] is State.OPEN and f.n_samples > 0)
         fed = session.samples_fed
@@ -198,3 +196,17 @@ def test_a_take_whose_write_fails_is_never_marked_complete_and_the_face_goes_on(
     session.close()
     meta = open_take(folder).meta
     assert meta["complete"] is False and "ValueError" in meta["error"]
+
+
+def test_a_loop_waiting_for_input_wakes_with_a_sample_and_not_without(session):
+    """``wait_for_input`` returns as soon as a Sample is queued (the loop then shows it at once),
+    and waits its time out while the box sends nothing."""
+    box = session.devices["box"]
+    assert box.wait_state(State.OPEN, 5.0)
+    assert session.wait_for_input(5.0)
+    assert session.frame().n_samples > 0
+    box.joystick.unplug()
+    assert box.wait_state(State.LOST, 5.0)
+    session.frame()                                # drains what came before the plug was pulled
+    assert not session.wait_for_input(0.05)
+    assert session.frame().n_samples == 0

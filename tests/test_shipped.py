@@ -45,7 +45,8 @@ def test_a_copy_is_editable_and_never_overwrites(tmp_path):
         copy_mapping("gamepad_hid", tmp_path)
 
 
-def test_the_wheel_carries_the_mappings_and_data_and_finds_them_from_another_folder(tmp_path):
+@pytest.mark.slow
+def test_the_wheel_carries_the_mappings_and_data_and_finds_them_from_another_folder(tmp_path, egl):
     wheels = tmp_path / "wheels"
     subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q",
                     "-w", str(wheels), str(ROOT)], check=True, capture_output=True)

@@ -108,7 +108,36 @@ def test_render_and_export_check_the_folder_not_only_its_fap(damaged, tmp_path, 
     assert {p.name: p.read_bytes() for p in folder.iterdir()} == before
 
 
-def test_a_take_fap_without_take_json_still_renders_with_a_warning(good, tmp_path, capsys):
+class _WindowOpened(Exception):
+    """Raised by a stand-in for the window: the take passed every check."""
+
+
+def _open_window(*args, **kwargs):
+    raise _WindowOpened
+
+
+def test_play_checks_the_folder_before_its_window_opens(damaged, capsys, monkeypatch):
+    from puppet.view import window
+
+    folder, needle, before = damaged
+    monkeypatch.setenv("DISPLAY", ":99")
+    monkeypatch.setattr(window, "open_window", _open_window)
+    capsys.readouterr()
+    if needle.startswith(("no samples", "samples.jsonl", "mapping_state")):
+        with pytest.raises(_WindowOpened):  # playing needs the .fap, not the log or its state
+            cli.main(["play", str(folder)])
+    else:
+        try:
+            code = cli.main(["play", str(folder)])
+        except SystemExit as exit_:
+            code = exit_.code
+        err = capsys.readouterr().err
+        assert code == 2 and len(err.strip().splitlines()) == 1 and needle in err, err
+        assert err.startswith("puppet play: ") and "Traceback" not in err
+    assert {p.name: p.read_bytes() for p in folder.iterdir()} == before
+
+
+def test_a_take_fap_without_take_json_still_renders_with_a_warning(good, tmp_path, capsys, egl):
     folder = tmp_path / "bare_001"
     shutil.copytree(good, folder)
     (folder / "take.json").unlink()
@@ -204,7 +233,7 @@ def test_the_window_table_holds_extreme_takes_without_overflow(tmp_path, face):
         warnings.simplefilter("error")
         table = HeldTable(fap, Runtime(face))
         assert table.ensure(3)
-        vertices, normals = table.pose(2)
+        vertices, normals = table.mesh(2)
     assert np.isfinite(vertices).all() and np.isfinite(normals).all()
     assert read_fap(fap).values[0, 2] == 1e300
 

@@ -70,5 +70,7 @@ os.kill(os.getpid(), signal.SIGKILL)
 def test_a_folder_that_is_not_a_take_says_so(tmp_path):
     with pytest.raises(TakeError, match="not a take"):
         open_take(tmp_path)
+    with pytest.raises(TakeError, match="no such take folder"):
+        open_take(tmp_path / "take_009")
     with pytest.raises(TakeError, match="fps 24"):
         TakeRecorder(tmp_path, "x", 24)

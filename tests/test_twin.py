@@ -229,6 +229,7 @@ RECORDER = MidiDevice("rec", "box", cc14=[1, 7])
 """What the controller's readings were logged by (its 14-bit MSBs in step with the twin's adapter)."""
 
 
+@pytest.mark.slow
 @EXAMPLES
 @given(st.lists(MESSAGES, min_size=1, max_size=6))
 def test_midi_readings_of_a_real_message_stream_come_back_exactly(twins, stream):

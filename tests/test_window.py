@@ -152,12 +152,12 @@ def test_any_frame_deforms_as_streaming_playback_does(tmp_path, runtime):
     streamed = [v.copy() for v, _ in FapPlayback(path, runtime.face, runtime)]
     table = HeldTable(path, runtime, declared_frames=12)
     for k in (7, 2, 11, 0, 5, 4, 11, 6):  # out of order, backwards included
-        vertices, normals = table.pose(k)
+        vertices, normals = table.mesh(k)
         assert np.allclose(vertices, streamed[k], atol=1e-5), k
         assert np.allclose(np.linalg.norm(normals, axis=1), 1.0, atol=1e-3)
     assert not np.allclose(streamed[4], streamed[5], atol=1e-4)  # the frames do differ
     with pytest.raises(IndexError):
-        table.pose(12)
+        table.mesh(12)
 
 
 def test_the_table_reads_lazily_and_holds_68_float32_per_frame(tmp_path, runtime):

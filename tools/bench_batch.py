@@ -4,6 +4,11 @@ single-threaded worker process per core, in turns (the first round's workers sta
 import puppet and load the face). Prints wall times, the speed-ups, the machine's load, and
 checks the videos are byte-identical.
 
+It also prints how many cores the serial loop keeps busy (its CPU time, llvmpipe's threads and
+the encoder's process included, over its wall time): the serial loop is already parallel, so on
+C cores a batch can be at most C / that faster. On an idle machine that is the bound to compare
+the speed-up with; on a busy one both are a share of what is left.
+
     python tools/bench_batch.py [--takes 8] [--seconds 2.5] [--size 320x240] [--workers N]
 """
 
@@ -12,6 +17,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import os
+import resource
 import statistics
 import sys
 import tempfile
@@ -36,6 +42,12 @@ def cut(stream, start: int, frames: int):
 
 def load() -> str:
     return " ".join(open("/proc/loadavg").read().split()[:3])
+
+
+def cpu_seconds() -> float:
+    """CPU time of this process (all its threads) and its finished children (the encoders)."""
+    own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
 
 
 def main() -> None:
@@ -66,22 +78,26 @@ def main() -> None:
         cluster = LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True,
                                dashboard_address=None, env=batch.WORKER_ENV)
         print(f"cluster start: {time.perf_counter() - start:.2f} s")
-        serial_s, dask_s, same = [], [], True
+        serial_s, dask_s, busy, same = [], [], [], True
         with cluster, Client(cluster):
             for round_ in range(args.repeats):
-                start = time.perf_counter()
+                start, cpu = time.perf_counter(), cpu_seconds()
                 serial = batch.render_serial(takes, str(Path(root) / "serial"), settings)
                 serial_s.append(time.perf_counter() - start)
+                busy.append((cpu_seconds() - cpu) / serial_s[-1])
                 start = time.perf_counter()
                 results = batch.render_batch(takes, str(Path(root) / "dask"), settings,
                                              scheduler=cluster.scheduler_address)
                 dask_s.append(time.perf_counter() - start)
                 same &= all(a.ok and a.sha256 == b.sha256 for a, b in zip(serial, results))
-                print(f"round {round_ + 1}{' (workers cold)' if round_ == 0 else ''}: serial {serial_s[-1]:.2f} s, "
-                      f"dask {dask_s[-1]:.2f} s, speed-up {serial_s[-1] / dask_s[-1]:.2f}x  (load {load()})")
+                print(f"round {round_ + 1}{' (workers cold)' if round_ == 0 else ''}: serial {serial_s[-1]:.2f} s "
+                      f"({busy[-1]:.2f} cores busy), dask {dask_s[-1]:.2f} s, speed-up {serial_s[-1] / dask_s[-1]:.2f}x  "
+                      f"(load {load()})")
         warm = slice(1, None) if args.repeats > 1 else slice(None)
         ratio = statistics.median(serial_s[warm]) / statistics.median(dask_s[warm])
-        print(f"speed-up, median of warm rounds: {ratio:.2f}x; "
+        cores = statistics.median(busy[warm])
+        print(f"speed-up, median of warm rounds: {ratio:.2f}x; the serial loop kept {cores:.2f} cores busy, so "
+              f"{args.workers} workers can be at most {args.workers / cores:.2f}x faster; "
               f"videos byte-identical to the serial loop's: {same}")
 
 if __name__ == "__main__":

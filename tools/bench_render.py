@@ -1,10 +1,13 @@
 """Median milliseconds per rendered frame (draw + RGB read-back) of the default face, for the
-renderer as it was (``--old-rev``'s puppet/view/renderer.py, loaded from git: the studio shader, 4x MSAA
-by default), the renderer now (no AA, the default for this GL, 4x MSAA) and a minimal Lambert
-draw of the same triangles without MSAA (the floor). Configurations take turns, a few frames
-each, so a load that comes and goes on a shared machine hits them alike.
+renderer as it was (``--old-rev``'s renderer module, loaded from git: the studio shader, 4x MSAA
+by default), as it was at ``--base-rev`` (its default for this GL), the renderer now (no AA, the
+default for this GL, the default drawing both sides, 4x MSAA) and a minimal Lambert draw of the
+same triangles without MSAA (the floor). Configurations take turns, a few frames each, so a load
+that comes and goes on a shared machine hits them alike. The CPU column is the process's CPU
+time a frame, the software rasteriser's threads included: on a busy machine it moves less than
+the wall time, and on an idle one, wall >= CPU / cores.
 
-    python tools/bench_render.py [--size 640x480] [--rounds 15] [--old-rev e3b5562]
+    python tools/bench_render.py [--size 640x480] [--rounds 15] [--old-rev e3b5562] [--base-rev main]
 """
 
 from __future__ import annotations
@@ -27,7 +30,7 @@ sys.path.insert(0, str(ROOT))
 from puppet.face.load import load_face
 from puppet.runtime.runtime import Runtime
 from puppet.view import renderer as render
-from puppet.view.rendertake import frame_head
+from puppet.view.rendertake import aim_at_head
 
 _LAMBERT_VS = """
 #version 330
@@ -81,15 +84,20 @@ class Lambert:
         self.ctx.release()
 
 
-def old_render_module(rev: str):
-    """puppet/view/renderer.py as it was at ``rev``, imported under another name."""
-    source = subprocess.run(["git", "-C", str(ROOT), "show", f"{rev}:puppet/view/renderer.py"],
-                            check=True, capture_output=True, text=True).stdout
-    path = Path(tempfile.mkdtemp()) / "old_render.py"
+def old_render_module(rev: str, name: str = "old_render"):
+    """The renderer as it was at ``rev`` (puppet/view/renderer.py, or puppet/render.py before the
+    package was layered), imported under another name."""
+    for where in ("puppet/view/renderer.py", "puppet/render.py"):
+        shown = subprocess.run(["git", "-C", str(ROOT), "show", f"{rev}:{where}"], capture_output=True, text=True)
+        if shown.returncode == 0:
+            break
+    shown.check_returncode()
+    source = shown.stdout
+    path = Path(tempfile.mkdtemp()) / f"{name}.py"
     path.write_text(source)
-    spec = importlib.util.spec_from_file_location("old_render", path)
+    spec = importlib.util.spec_from_file_location(name, path)
     module = importlib.util.module_from_spec(spec)
-    sys.modules["old_render"] = module
+    sys.modules[name] = module
     spec.loader.exec_module(module)
     return module
 
@@ -100,6 +108,7 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=15)
     parser.add_argument("--frames", type=int, default=4, help="frames per configuration per round")
     parser.add_argument("--old-rev", default="e3b5562", help="the commit whose render.py is 'old'")
+    parser.add_argument("--base-rev", default="main", help="a commit whose default renderer to compare with")
     args = parser.parse_args()
     size = tuple(int(x) for x in args.size.split("x"))
     face = load_face()
@@ -107,40 +116,45 @@ def main() -> None:
     frames = [runtime.deform_with_normals(*runtime.fap_controls(expression=(1, 63, 0, 0)))
               for _ in range(1)] + [runtime.deform_with_normals(*runtime.fap_controls())]
     old = old_render_module(args.old_rev)
+    base = old_render_module(args.base_rev, "base_render")
     options = {"width": size[0], "height": size[1]}
     renderers = {
         "old default (studio shader, 4x MSAA)": old.Renderer.for_face(face, samples=4, **options),
         "old, no MSAA": old.Renderer.for_face(face, samples=0, **options),
+        f"{args.base_rev}'s default": base.Renderer.for_face(face, **options),
         "new, 4x MSAA (a GPU's default)": render.Renderer.for_face(face, samples=4, **options),
         "new, no antialiasing": render.Renderer.for_face(face, samples=0, antialias="none", **options),
+        "new default, both sides drawn": render.Renderer.for_face(face, cull=False, **options),
     }
     new_default = render.Renderer.for_face(face, **options)
     renderers[f"new default ({new_default.samples}x MSAA, {new_default.antialias})"] = new_default
     for r in renderers.values():
-        frame_head(r, face, "front")
+        aim_at_head(r, face, "front")
     view_projection = new_default._view_projection()
     lambert = Lambert(face, size, view_projection)
     runs = {name: r.render for name, r in renderers.items()}
     runs["minimal Lambert, no MSAA (floor)"] = lambert.render
     times: dict[str, list[float]] = {name: [] for name in runs}
+    cpu: dict[str, list[float]] = {name: [] for name in runs}
     for name, run in runs.items():  # warm up: shader compilation, first uploads
         run(*frames[0])
     for _ in range(args.rounds):
         for name, run in runs.items():
             for k in range(args.frames):
                 vertices, normals = frames[k % len(frames)]
-                start = time.perf_counter()
+                start, start_cpu = time.perf_counter(), time.process_time()
                 run(vertices, normals)
                 times[name].append((time.perf_counter() - start) * 1e3)
+                cpu[name].append((time.process_time() - start_cpu) * 1e3)
     gl = new_default.ctx.info["GL_RENDERER"]
     floor = statistics.median(times["minimal Lambert, no MSAA (floor)"])
     print(f"{gl}, {size[0]}x{size[1]}, {len(face.triangles)} triangles, "
           f"{args.rounds * args.frames} frames each, load average {' '.join(open('/proc/loadavg').read().split()[:3])}")
-    print(f"{'configuration':<40} {'median ms':>10} {'p90 ms':>8} {'x floor':>8}")
+    print(f"{'configuration':<40} {'median ms':>10} {'p90 ms':>8} {'x floor':>8} {'CPU ms':>8}")
     for name, values in times.items():
         median = statistics.median(values)
         p90 = float(np.percentile(values, 90))
-        print(f"{name:<40} {median:>10.2f} {p90:>8.2f} {median / floor:>8.2f}")
+        print(f"{name:<40} {median:>10.2f} {p90:>8.2f} {median / floor:>8.2f} {statistics.median(cpu[name]):>8.2f}")
     for r in renderers.values():
         r.release()
     lambert.release()

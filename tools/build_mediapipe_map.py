@@ -106,7 +106,7 @@ def detected_on_surface(renderer: Renderer, vertices: np.ndarray, tris: np.ndarr
     normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
     used = np.unique(tris)
-    front = renderer.frame(framed, view="front", margin=margin)
+    front = renderer.aim(framed, view="front", margin=margin)
     toward = front.eye - vertices[used]
     facing = (VertexNormals(tris, len(vertices))(vertices)[used] * toward).sum(axis=1) / np.linalg.norm(toward, axis=1)
     rim = used[facing > -0.2]  # facing the front camera or side-on: the silhouette is among them
@@ -136,7 +136,7 @@ def detected_on_surface(renderer: Renderer, vertices: np.ndarray, tris: np.ndarr
                 w[m] = 1.0
         total += w[:, None] * hits
         weight += w
-    renderer.frame(framed, view="front", margin=margin)
+    renderer.aim(framed, view="front", margin=margin)
     return total / np.maximum(weight, 1e-12)[:, None], weight, (front_pixels, projected)
 
 

@@ -37,7 +37,7 @@ def main(frames: int = 50) -> None:
         errors = []
         for _ in range(frames):
             x = random_frame(rng, effects)
-            errors.append(runtime.faps.encode(runtime.pose(x)) - x)
+            errors.append(runtime.faps.encode(runtime.deform_faps(x)) - x)
         errors = np.abs(np.array(errors))
         translations, others = errors[:, moving], errors[:, ~moving]
         print(f"{np.dtype(dtype).name}: translational FAPs |error| median {np.median(translations):.2e}, "

@@ -18,8 +18,8 @@ from pathlib import Path
 import numpy as np
 
 import puppet
-from puppet.face.muscles import folded_triangles
 from puppet.face.rig import load_rig
+from puppet.runtime.musclesolver import folded_triangles
 from puppet.view.renderer import Renderer
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -38,7 +38,7 @@ RED = np.array([230, 20, 20], dtype=np.uint8)
 
 def render(renderer: Renderer, face, runtime, pose: dict) -> tuple[np.ndarray, int]:
     """The pose rendered, folded triangles' vertices painted red, and how many folded."""
-    vertices = runtime.pose(**pose)
+    vertices = runtime.deform_faps(**pose)
     normals = runtime.normals(vertices, runtime.fap_controls(**pose)[1])
     triangles = np.asarray(face.triangles)
     folded = folded_triangles(face.vertices, vertices, triangles)

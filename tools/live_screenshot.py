@@ -41,6 +41,13 @@ def mapping_with_a_missing_pedal(folder: Path) -> Path:
     return path
 
 
+def _ready(session, elapsed: float, seconds: float) -> bool:
+    """After ``seconds`` (the graphs fill), once every channel of the box has read something (its
+    bars show), however slow the machine; a minute at the most."""
+    box = [c for c in session.mapping.channels() if c.name.startswith("box.")]
+    return elapsed >= 60 or (elapsed >= seconds and all(c.raw is not None for c in box))
+
+
 def main(out: str, size: tuple[int, int] = (960, 720), seconds: float = 3.0) -> None:
     with tempfile.TemporaryDirectory() as folder:
         window = open_window("arduino_sliders", size)
@@ -48,10 +55,10 @@ def main(out: str, size: tuple[int, int] = (960, 720), seconds: float = 3.0) -> 
         live = LiveView(session, window)
         try:
             live.cockpit.monitor = True
-            end = time.monotonic() + seconds
-            while time.monotonic() < end:
-                if live.take is None and time.monotonic() > end - seconds / 2:
-                    live._on_key(window.keys.R, window.keys.ACTION_PRESS, None)  # REC for the second half
+            start = time.monotonic()
+            while not _ready(session, time.monotonic() - start, seconds):
+                if live.take is None and time.monotonic() > start + seconds / 2:
+                    live._on_key(window.keys.R, window.keys.ACTION_PRESS, None)  # REC from half way
                 live.step()
             frame = session.frame()  # drawn once more, read before the swap
             live.renderer.draw(frame.vertices, frame.normals, framebuffer=window.fbo)

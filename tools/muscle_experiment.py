@@ -9,7 +9,7 @@ Two meshes, one muscle each, contraction coefficients 0, 3, 5 and 10 (1 is the n
   piecewise-linear interpolation on their Delaunay triangulation (``scipy LinearNDInterpolator``):
   a stand-in for DFFD on a flat sheet, where 3D Sibson coordinates are degenerate.
 * **face**: the default face's left zygomatic major, every mode as the runtime draws it
-  (``Runtime.pose(muscles=..., mode=...)``): "control-point" is the runtime's control-point mode
+  (``Runtime.deform_faps(muscles=..., mode=...)``): "control-point" is the runtime's control-point mode
   (the rig's active control points moved by ``control_point_displacements``, spread by DFFD, then
   the fold guard: the improved mode's edge constraints over the triangles those points reach);
   "control-point, no guard" is the same without the guard (DFFD alone), to show what it removes.
@@ -33,7 +33,7 @@ the first table's overshoot column and the figure show: where it scales back (th
 major at 10 squeezes the skin where the dragged lip corner meets the nose's and cheek's fixed
 borders), the lip corner ends nearer rest than at 5.
 
-A third table has the median per-frame cost (``Runtime.pose``, 50 frames, float32 runtime as in
+A third table has the median per-frame cost (``Runtime.deform_faps``, 50 frames, float32 runtime as in
 the bench) of the FAP path alone and of each muscle mode: every muscle at 0.5 and the zygomatic
 pair at 1 (normal contractions: the guard only checks), the pair at 3 and the left one at 10
 (beyond: the guard acts where the skin is squeezed).
@@ -54,14 +54,8 @@ from PIL import Image, ImageDraw
 from scipy.interpolate import LinearNDInterpolator
 
 from puppet.face.load import load_face
-from puppet.face.muscles import (
-    EdgeConstraints,
-    LinearMuscle,
-    MuscleModel,
-    control_point_displacements,
-    flat_grid,
-    folded_triangles,
-)
+from puppet.face.muscles import LinearMuscle, flat_grid
+from puppet.runtime.musclesolver import EdgeConstraints, MuscleModel, control_point_displacements, folded_triangles
 from puppet.runtime.runtime import Runtime
 
 CONTRACTIONS = (0, 3, 5, 10)
@@ -102,7 +96,7 @@ def face_cases(runtime: Runtime, muscle: str = FACE_MUSCLE,
     out: dict[str, dict[int, np.ndarray]] = {m: {} for m in MODES}
     for c in contractions:
         for mode, runtime_mode in RUNTIME_MODES.items():
-            out[mode][c] = runtime.pose(muscles={muscle: c}, mode=runtime_mode)
+            out[mode][c] = runtime.deform_faps(muscles={muscle: c}, mode=runtime_mode)
         unguarded = control_point_displacements(runtime.rig.muscles, {muscle: c}, points)
         out["control-point, no guard"][c] = runtime.deform(unguarded)
     return out
@@ -157,15 +151,15 @@ def markdown_table(rows: list[tuple]) -> str:
 # -- per-frame cost ------------------------------------------------------------------------------
 
 def timings(runtime: Runtime, runs: int = 50) -> list[tuple[str, str, float]]:
-    """Median per-frame milliseconds of ``Runtime.pose`` on the default face for each mode and
+    """Median per-frame milliseconds of ``Runtime.deform_faps`` on the default face for each mode and
     pose (module docstring), and no muscle as the baseline."""
     pair = ("zygomatic_major_l", "zygomatic_major_r")
     poses = {"every muscle at 0.5": dict.fromkeys(runtime.muscle_names, 0.5),
              "zygomatic major l+r at 1": dict.fromkeys(pair, 1.0),
              "zygomatic major l+r at 3": dict.fromkeys(pair, 3.0),
              "zygomatic_major_l at 10": {FACE_MUSCLE: 10.0}}
-    frames = {"none (FAP path)": lambda pose: runtime.pose()}
-    frames |= {mode: lambda pose, m=m: runtime.pose(muscles=pose, mode=m) for mode, m in RUNTIME_MODES.items()}
+    frames = {"none (FAP path)": lambda pose: runtime.deform_faps()}
+    frames |= {mode: lambda pose, m=m: runtime.deform_faps(muscles=pose, mode=m) for mode, m in RUNTIME_MODES.items()}
     out = []
     for pose_name, pose in poses.items():
         for mode, frame in frames.items():
@@ -274,7 +268,7 @@ def _report(table: str, every: str, time_table: str) -> str:
     doc = __doc__.split("\n\n", 1)[1].rsplit("\n\nWrites", 1)[0]
     return (f"# Muscle experiment (tools/muscle_experiment.py)\n\n{doc}\n\n![deformed grids and face crops]"
             f"(muscle_experiment.png)\n\n{table}\n\n## Every default muscle alone: folded skin triangles\n\n"
-            f"{every}\n\n## Per-frame cost on the default face (Runtime.pose, median of 50)\n\n{time_table}\n")
+            f"{every}\n\n## Per-frame cost on the default face (Runtime.deform_faps, median of 50)\n\n{time_table}\n")
 
 
 if __name__ == "__main__":

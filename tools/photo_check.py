@@ -72,7 +72,7 @@ class Ict:
         self.width = float(np.linalg.norm(self.landmarks[0] - self.landmarks[16]))
         self.surface = surface_tree(self.face)
         self.renderer = Renderer(self.face.triangles, len(self.face.vertices), None, width=SIZE, height=SIZE)
-        self.camera = self.renderer.frame(self.face.vertices[:FACE_AREA], view="front", margin=MARGIN)
+        self.camera = self.renderer.aim(self.face.vertices[:FACE_AREA], view="front", margin=MARGIN)
         self.photo = self.renderer.render(self.face.vertices)
         self.focal = SIZE / 2 / np.tan(np.radians(self.camera.fov) / 2)
 
@@ -170,9 +170,9 @@ def neutralised(base: Face) -> str:
     and built; the expression measured; the built skin's mean distance to the default's."""
     from puppet.runtime.runtime import Runtime
 
-    posed = Runtime(base).pose({"open_jaw": 250}, expression=(1, 63, 0, 0))
+    posed = Runtime(base).deform_faps({"open_jaw": 250}, expression=(1, 63, 0, 0))
     with Renderer.for_face(base, width=512, height=512) as renderer:
-        camera = renderer.frame(base.vertices, view="front", fov=8.0)
+        camera = renderer.aim(base.vertices, view="front", fov=8.0)
         points = pf.mediapipe_points(base).on(posed)
         distance = (points - camera.eye) @ -camera.basis()[2]
         focal = 256 / np.tan(np.radians(camera.fov) / 2)

@@ -44,10 +44,10 @@ def sheet(photo: Path, work: Path) -> np.ndarray:
     rows = []
     with Renderer.for_face(face, width=TILE, height=TILE) as renderer:
         for k, pose in enumerate(POSES.values()):
-            vertices = runtime.pose(**pose)
+            vertices = runtime.deform_faps(**pose)
             cells = [tile if k == 0 else np.full_like(tile, 255)]
             for view in VIEWS:
-                renderer.frame(face.vertices, view=view)
+                renderer.aim(face.vertices, view=view)
                 cells.append(renderer.render(vertices))
             rows.append(np.concatenate(cells, axis=1))
     return np.concatenate(rows, axis=0)

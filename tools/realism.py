@@ -42,10 +42,10 @@ import puppet
 from puppet.bench.assets import shared_assets
 from puppet.face.autorig import build_rig
 from puppet.face.examples import load_examples
-from puppet.face.muscles import folded_triangles
 from puppet.fap.table import clamp_ranges, fap
 from puppet.runtime.fapcalibration import HELD_OUT, HELD_OUT_SIDE, calibrate, capacity, fit_faps, relative_residual
 from puppet.runtime.foldlimits import within_limits
+from puppet.runtime.musclesolver import folded_triangles
 from puppet.view.mouthcheck import mouth_pixels
 from puppet.view.renderer import Renderer
 
@@ -121,13 +121,13 @@ def folds(face, runtime, fitted: dict[str, np.ndarray] | None = None) -> dict:
     for number, value in fap_ends():
         values = np.zeros(68)
         values[number - 1] = value
-        by_end[f"{number} {fap(number).name} {value:+g}"] = fold_count(face, runtime.pose(values))
-    by_fit = {name: fold_count(face, runtime.pose(values)) for name, values in (fitted or {}).items()}
+        by_end[f"{number} {fap(number).name} {value:+g}"] = fold_count(face, runtime.deform_faps(values))
+    by_fit = {name: fold_count(face, runtime.deform_faps(values)) for name, values in (fitted or {}).items()}
     return {"faps": {"total": sum(by_end.values()), "tested_ends": len(by_end),
                      "folding": len({k.split()[0] for k, n in by_end.items() if n}), "by_end": worst_first(by_end)},
-            "expressions": {EXPRESSIONS[e - 1]: fold_count(face, runtime.pose(expression=(e, 63, 0, 0)))
+            "expressions": {EXPRESSIONS[e - 1]: fold_count(face, runtime.deform_faps(expression=(e, 63, 0, 0)))
                             for e in range(1, 7)},
-            "visemes": {str(v): fold_count(face, runtime.pose(viseme=(v, 0, 63))) for v in VISEMES},
+            "visemes": {str(v): fold_count(face, runtime.deform_faps(viseme=(v, 0, 63))) for v in VISEMES},
             "fits": worst_first(by_fit)}
 
 
@@ -235,12 +235,12 @@ def sheet(tiles: list[Image.Image], columns: int) -> Image.Image:
 
 
 def frame(renderer: Renderer, face, view: str) -> None:
-    renderer.frame(face.vertices[face.contours["face_oval"]], view=view, margin=MARGIN)
+    renderer.aim(face.vertices[face.contours["face_oval"]], view=view, margin=MARGIN)
 
 
 def rig_render(renderer: Renderer, runtime, **pose) -> np.ndarray:
-    """The shipped rig posed (``Runtime.pose`` arguments), with the rig's own normals."""
-    vertices = runtime.pose(**pose)
+    """The shipped rig posed (``Runtime.deform_faps`` arguments), with the rig's own normals."""
+    vertices = runtime.deform_faps(**pose)
     normals = runtime.normals(vertices, runtime.fap_controls(**pose)[1])
     return renderer.render(vertices, normals)
 

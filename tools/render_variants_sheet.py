@@ -22,7 +22,7 @@ from puppet.view.renderer import Renderer, save_png
 def main(out: str = "docs/render_variants.png", size: tuple[int, int] = (640, 480)) -> None:
     face = load_face()
     runtime = Runtime(face)
-    poses = {name: runtime.pose(**kwargs) for name, kwargs in POSES.items()}
+    poses = {name: runtime.deform_faps(**kwargs) for name, kwargs in POSES.items()}
     old = _images(studio_4x(face, width=size[0], height=size[1]), face, poses)
     new = _images(Renderer.for_face(face, width=size[0], height=size[1]), face, poses)
     rows = []

@@ -129,10 +129,10 @@ def expression_row(face: Face, size: int) -> np.ndarray:
     """Neutral and the six expressions side by side, framed on the face's deforming regions."""
     runtime = Runtime(face, build_rig(face), cache=False)
     front = np.concatenate([r.vertices for r in runtime.rig.regions if r.kind == "dffd"])
-    poses = [runtime.pose()] + [runtime.pose(expression=(k, 63, 0, 0)) for k in range(1, 7)]
+    poses = [runtime.deform_faps()] + [runtime.deform_faps(expression=(k, 63, 0, 0)) for k in range(1, 7)]
     with Renderer(drawn_triangles(face), len(face.vertices), vertex_colors(face), width=size, height=size,
                   **texture_kwargs(face)) as renderer:
-        renderer.frame(face.vertices[front])
+        renderer.aim(face.vertices[front])
         return np.hstack([renderer.render(np.asarray(p, dtype=np.float32)) for p in poses])
 
 

@@ -1,10 +1,13 @@
 #!/usr/bin/env bash
 # Set up facepuppet on a fresh machine: a virtualenv in .venv with the project and its test
 # tools, and the system libraries headless rendering needs (Mesa EGL). Safe to run again.
+# PYTHON and VENV pick another interpreter and folder, to test on each Python the project claims:
+#   PYTHON=python3.13 VENV=.venv-py3.13 FACEPUPPET_NO_PHOTO=1 bash tools/test.sh
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
 PYTHON=${PYTHON:-python3}
+VENV=${VENV:-.venv}
 "$PYTHON" -c 'import sys; sys.exit(sys.version_info < (3, 11))' || {
   echo "facepuppet needs Python >= 3.11; $PYTHON is $("$PYTHON" --version 2>&1)" >&2; exit 1; }
 
@@ -26,12 +29,24 @@ if ! command -v xvfb-run >/dev/null && [ "$(id -u)" = 0 ] && command -v apt-get 
   apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq xvfb xauth >/dev/null
 fi
 
-if [ ! -x .venv/bin/python ]; then
-  echo "setup: creating .venv"
-  "$PYTHON" -m venv .venv
+# python-rtmidi (the midi extra) has no wheel for the newest Pythons; building it needs ALSA's headers.
+if "$PYTHON" -c 'import sys; sys.exit(sys.version_info < (3, 13))' && ! pkg-config --exists alsa 2>/dev/null; then
+  if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
+    echo "setup: installing libasound2-dev so python-rtmidi can be built for $("$PYTHON" --version 2>&1)"
+    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libasound2-dev pkg-config >/dev/null
+  else
+    echo "setup: python-rtmidi must be built for this Python; install ALSA's headers (sudo apt-get install libasound2-dev)" >&2
+    exit 1
+  fi
 fi
-.venv/bin/python -m pip install -q --upgrade pip
-.venv/bin/python -m pip install -q --force-reinstall --no-deps . && .venv/bin/python -m pip install -q '.[test,midi,osc,docs,batch]'
+
+if [ ! -x "$VENV/bin/python" ]; then
+  echo "setup: creating $VENV"
+  "$PYTHON" -m venv "$VENV"
+fi
+"$VENV/bin/python" -m pip install -q --upgrade pip
+"$VENV/bin/python" -m pip install -q --force-reinstall --no-deps . \
+  && "$VENV/bin/python" -m pip install -q '.[test,midi,osc,docs,batch]'
 
 # The photo environment: MediaPipe's face landmarks for `puppet face-from-photo` (its model ships
 # in the wheel; it pins numpy < 2, so it lives apart from .venv). FACEPUPPET_NO_PHOTO=1 skips it.
@@ -42,4 +57,4 @@ if [ "${FACEPUPPET_NO_PHOTO:-0}" != 1 ]; then
   fi
   .venv-photo/bin/python -m pip install -q 'mediapipe==0.10.21'
 fi
-echo "setup: ready (.venv/bin/puppet)"
+echo "setup: ready ($VENV/bin/puppet)"

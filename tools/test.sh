@@ -3,4 +3,4 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash tools/setup.sh
-.venv/bin/python -m pytest -q "$@"
+"${VENV:-.venv}/bin/python" -m pytest -q "$@"

@@ -26,10 +26,12 @@ normals -> draw -> read-back of a 640x480 offscreen image, with the frames per s
 share of the frame spent deforming (controls + DFFD + normals). A third table
 (``puppet.bench.inputs``) pushes samples through each device adapter and its shipped mapping.
 
-A muscle table (``bench_muscles``, default face): median ms of one frame (``Runtime.pose``:
+A muscle table (``bench_muscles``, default face): median ms of one frame (``Runtime.deform_faps``:
 FAPs + muscles, positions) for the same contractions in each muscle mode -- ``control``
 (control points + DFFD + fold guard), ``classic`` and ``improved`` (vertex modes) -- with the same
-FAP frame without muscles as the baseline, in the same run.
+FAP frame without muscles as the baseline, in the same run. A held pose repeats one frame; a
+moving one swings every muscle over its range (2 s a swing at 60 frames/s), so the fold guard
+meets a new field every frame, as in a performance.
 
 The DFFD path is single-threaded scipy; the baseline's BLAS may use threads, so for one-core
 figures run it pinned: ``OPENBLAS_NUM_THREADS=1 taskset -c 1 puppet bench``.
@@ -38,7 +40,6 @@ figures run it pinned: ``OPENBLAS_NUM_THREADS=1 taskset -c 1 puppet bench``.
 from __future__ import annotations
 
 import contextlib
-import functools
 import os
 import statistics
 import tempfile
@@ -55,8 +56,9 @@ from puppet.face.model import Face
 from puppet.face.subdivide import subdivide
 from puppet.runtime.runtime import MUSCLE_MODES, Runtime
 
-MUSCLE_POSES = {  # name -> contractions (None: every muscle) at that value
+MUSCLE_POSES = {  # name -> contractions (None: every muscle) at that value, or swinging over (low, high)
     "every muscle at 0.5": (None, 0.5),
+    "every muscle 0.4-0.6, moving": (None, (0.4, 0.6)),
     "zygomatic major l+r at 3": (("zygomatic_major_l", "zygomatic_major_r"), 3.0),
 }
 
@@ -166,7 +168,7 @@ def bench_frame_split(face: Face, frames: int, rig=None, size: tuple[int, int] =
     steps = {"controls": [], "dffd": [], "normals": [], "draw": [], "read": []}
     out, normals = np.empty_like(runtime.rest), np.empty_like(runtime.rest)
     with Renderer.for_face(face, width=size[0], height=size[1]) as renderer:
-        renderer.frame(face.vertices)
+        renderer.aim(face.vertices)
         for i in range(frames + 1):
             t = [time.perf_counter()]
             d, motions = inputs(i)
@@ -200,14 +202,25 @@ def bench_muscles(face: Face, frames: int, rig=None) -> list[dict]:
     repeat = max(1, min(frames, 60))
     rows = []
     for pose_name, (names, value) in MUSCLE_POSES.items():
-        muscles = {n: value for n in (runtime.muscle_names if names is None else names)}
+        poses = _muscle_frames(runtime.muscle_names if names is None else names, value)
         row = {"face": face.name, "pose": pose_name,
-               "fap_only_ms": 1e3 * median_time(lambda: runtime.pose(fap, out=out), repeat)}
+               "fap_only_ms": 1e3 * median_time(lambda: runtime.deform_faps(fap, out=out), repeat)}
         for mode in MUSCLE_MODES:
-            frame = functools.partial(runtime.pose, fap, muscles=muscles, mode=mode, out=out)
-            row[f"{mode}_ms"] = 1e3 * median_time(frame, repeat)
+            frame = iter(range(10**9))
+            row[f"{mode}_ms"] = 1e3 * median_time(
+                lambda mode=mode, frame=frame: runtime.deform_faps(fap, muscles=poses[next(frame) % len(poses)], mode=mode, out=out),
+                repeat)
         rows.append(row)
     return rows
+
+
+def _muscle_frames(names, value) -> list[dict[str, float]]:
+    """The contractions of each frame: one held value, or a swing over (low, high) in 120 frames."""
+    if not isinstance(value, tuple):
+        return [dict.fromkeys(names, value)]
+    low, high = value
+    swing = low + (high - low) * 0.5 * (1 - np.cos(2 * np.pi * np.arange(120) / 120))
+    return [dict.fromkeys(names, float(c)) for c in swing]
 
 
 def _frame_inputs(runtime: Runtime, frames: int):

@@ -25,7 +25,8 @@ import numpy as np
 from devices import open_device
 from devices.base import Device, State
 from puppet.io.shipped import mappings_folder
-from puppet.live.mappingfile import Mapping, load_mapping
+from puppet.live.channels import Mapping
+from puppet.live.mappingfile import load_mapping
 
 MAPPINGS = mappings_folder()
 

@@ -59,11 +59,11 @@ def _session(runtime: Runtime, url: str, root: str) -> LiveSession:
 def _renderer(runtime: Runtime, size: tuple[int, int]) -> Renderer:
     """An offscreen renderer with the live window's settings (``render.choose_antialias``'s
     default for this GL, as ``puppet live`` uses), so the latency measured is what it draws."""
-    from puppet.view.rendertake import frame_head
+    from puppet.view.rendertake import aim_at_head
 
     face = runtime.face
     renderer = Renderer.for_face(face, width=size[0], height=size[1])
-    frame_head(renderer, face, "front")
+    aim_at_head(renderer, face, "front")
     return renderer
 
 

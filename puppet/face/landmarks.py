@@ -6,7 +6,7 @@ indices (``{"2.1": 152, ...}``) or a JSON list of 68 vertex indices in the iBUG 
 
 * **Face frame.** The given feature points are fitted to the default face's (Procrustes), and the
   mesh is turned into the MPEG-4 face frame (+x the face's left, +y up, +z forward) with its
-  mid-line at x = 0; units stay as in the file. ``Face.frame`` keeps the [R | t] that did it.
+  mid-line at x = 0; units stay as in the file. ``Face.placement`` keeps the [R | t] that did it.
   Coordinates are then rounded to a power-of-two grid 1e-9 of the face's size, so a point that
   sits exactly on the mid-line (or level with a feature point) stays there whatever rotation
   the file had: the rig of a rotated, scaled copy is the same rig.
@@ -23,7 +23,7 @@ indices (``{"2.1": 152, ...}``) or a JSON list of 68 vertex indices in the iBUG 
   halfway vertex of the geodesic path between their two iBUG neighbours. Every other FDP
   (cheeks, jaw angles, nose bone, hairline, ears, ...) is placed the adaptive way (Zhou & Liu):
   written in the frame of its three nearest given feature points on the default face
-  (``muscles.frame_coefficients``), placed by the same coefficients on the new face, and snapped
+  (``muscles.place_coefficients``), placed by the same coefficients on the new face, and snapped
   to the nearest skin vertex inside its block: the face's feature-point box is cut into an
   ``GRID`` x ``GRID`` grid and the search keeps to the block around the point and its neighbours,
   and to vertices within a geodesic reach of the nearest given point (so a point never snaps
@@ -46,7 +46,7 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 
 from puppet.errors import PuppetError
 from puppet.face.default import default_face
-from puppet.face.muscles import frame_coefficients, place
+from puppet.face.muscles import place, place_coefficients
 
 __all__ = ["LandmarkError", "read_landmarks", "ibug_to_fdp", "apply_landmarks"]
 
@@ -169,14 +169,14 @@ def apply_landmarks(face, landmarks) -> object:
         given = dict(landmarks)
         waypoints = {name: [given[f] for f in loop] for name, loop in FDP_CONTOURS.items()}
     reference = default_face()
-    frame = _face_frame(face.vertices, given, reference.feature_points)
-    vertices = _snapped(face.vertices @ frame[:, :3].T + frame[:, 3], face.vertices, given)
+    placement = _placement(face.vertices, given, reference.feature_points)
+    vertices = _snapped(face.vertices @ placement[:, :3].T + placement[:, 3], face.vertices, given)
     skin = _skin_graph(vertices, face.triangles, skin.mask)
     parts = _parts(vertices, face.triangles, skin.mask, {f: vertices[i] for f, i in given.items()})
     contours = {name: _geodesic_path(skin, ways, closed=True) for name, ways in waypoints.items()}
     feature_points, feature_vertices = _feature_points(vertices, parts, skin, given, reference)
     return replace(face, vertices=vertices, parts=parts, feature_points=feature_points,
-                   feature_vertices=feature_vertices, contours=contours, frame=frame,
+                   feature_vertices=feature_vertices, contours=contours, placement=placement,
                    pivots=_pivots(vertices, parts, feature_points, reference))
 
 
@@ -228,7 +228,7 @@ def _geodesic_path(skin: Skin, waypoints: list[int], closed: bool) -> np.ndarray
     return np.array(path, dtype=np.int32)
 
 
-def _face_frame(vertices: np.ndarray, given: dict[str, int], reference: dict[str, np.ndarray]) -> np.ndarray:
+def _placement(vertices: np.ndarray, given: dict[str, int], reference: dict[str, np.ndarray]) -> np.ndarray:
     """[R | t]: the rotation that best fits the given points to the default face's (Procrustes),
     then a shift along x that puts the fitted mid-line at x = 0."""
     ids = sorted(given)
@@ -305,7 +305,7 @@ def _placed(fp: dict[str, np.ndarray], point: np.ndarray, reference: dict[str, n
             ids: list[str]) -> np.ndarray:
     """``point`` of the default face carried to this face through the frame of ``ids``; a point
     on the default face's mid-line stays on the mid-line."""
-    target = place(fp, ids, frame_coefficients(point, reference, ids))
+    target = place(fp, ids, place_coefficients(point, reference, ids))
     if abs(point[0]) < 1e-9:
         target[0] = 0.0
     return target

@@ -49,7 +49,7 @@ class Face:
     uv: np.ndarray | None = None  # (T, 2) float32
     triangle_uv: np.ndarray | None = None  # (F, 3) int32 rows of uv per triangle corner
     source_index: np.ndarray | None = None  # (N,) int32 vertex index in the source mesh, -1 generated
-    frame: np.ndarray | None = None  # 3x4 [R | t] that took the file's coordinates into the face frame
+    placement: np.ndarray | None = None  # 3x4 [R | t] that took the file's coordinates into the face frame
 
     @property
     def fapu(self) -> dict[str, float]:

@@ -1,4 +1,4 @@
-"""Waters muscles: the classic vector muscle, Zhou & Liu's improved one, and muscles on control points.
+"""Waters muscles as data: linear muscles and sphincters, where they sit on a face, and the default set.
 
 Two kinds of muscle, both plain data (``muscles_to_json`` / ``muscles_from_json`` for the rig file):
 
@@ -23,52 +23,8 @@ Two kinds of muscle, both plain data (``muscles_to_json`` / ``muscles_from_json`
   moves in the frontal (x, y) plane toward the centre by ``c * squeeze * F(q) * (centre - P)_xy``,
   F(q) = cos^2(pi/2 q) for q < 1: ``squeeze`` is the fraction of the way to the centre at c = 1.
 
-Three ways to apply them:
-
-* **Classic** (``MuscleModel(..., mode="classic")``): the formulas above on every vertex, summed
-  over muscles; one sparse product per frame.
-* **Improved** (``mode="improved"``, after Zhou & Liu; their equations are not reproduced here, so
-  these are our forms). (1) A *repulsive spring* at the attractor (the fixed end, or the
-  sphincter's centre). Along its ray a vertex at rest distance D is pulled by the muscle with
-  unit stiffness toward its classic place (travel u); once it comes within D/2 of the bone, a
-  spring pushes it back with force ``F(rho) = (D/2 - rho)^2 / rho`` (rho: its distance to the bone
-  now), whose stiffness ``-dF/drho = (D/2)^2 / rho^2 - 1`` rises as 1/rho^2 toward the bone. The
-  balance ``u - (D - rho) = F(rho)`` solves in closed form::
-
-      rho = D - u          for u <= D/2   (exactly the classic motion)
-      rho = D^2 / (4 u)    for u >  D/2   (C1 at u = D/2; rho > 0 for any u)
-
-  so ordinary contractions are untouched (at c = 1 no point goes half way to its bone) and no
-  vertex reaches the fixed end: the spike is gone. Along a ray, rho(D) stays increasing for any
-  contraction wherever the classic travel is concave in D (inside r_e, where Waters' sine
-  fall-off is) or decreasing (beyond r_e), so the rays cannot fold either (a triangle spanning
-  several rays still can, where the zone is squeezed hard near the bone).
-  (2) *Edge constraints* (:class:`EdgeConstraints`): for every triangle corner, a spring from the
-  vertex to the opposite edge keeps the corner's height above that edge (measured in the plane
-  normal to the triangle's rest normal) at least ``EDGE_MIN_HEIGHT`` of its rest height. It is
-  compression-only, so ordinary motion is untouched (nothing is done unless a corner is below
-  that floor). Where two muscles' fields, or the surface's curvature, squeeze a triangle, a few
-  vectorised Jacobi sweeps (position-based: each violated constraint moves the vertex and the two
-  edge ends along the edge's in-plane normal by inverse-mass-weighted shares, averaged per vertex)
-  on the squeezed triangles and ``EDGE_RINGS`` rings around them push it back; if that is not
-  enough (far beyond the normal contraction the zone is squeezed against the bone harder than any
-  arrangement of the springs there allows), the displacement is scaled back toward rest around the
-  squeezed triangles (by ``EDGE_DAMP`` there, less in the rings around, repeated) until no corner
-  is below its floor. The rest mesh satisfies every constraint, so this always ends, and a triangle folds
-  exactly when a corner crosses its opposite edge: the improved mode folds no skin triangle at
-  any contraction.
-* **Control points** (``control_point_displacements``, Zhang & Chen): the muscles move the rig's
-  active control points inside their zones, and DFFD spreads that over the skin. The points move
-  by the improved law (1): a control point that crossed its muscle's fixed end would turn the
-  whole region it controls inside out, and there is no mesh between control points to hold it.
-  That alone does not keep the skin from folding at large contraction (tools/muscle_experiment.py:
-  the zone squeezed toward the bone flips spread triangles on a grid at c = 5 and 10, and on the
-  default face DFFD folds the rig's region borders next to the moving lip corner from c = 3);
-  ``EdgeConstraints`` run on the spread displacement removes those folds. The default muscles are
-  tuned so that none folds the skin alone at c <= 1, nor all of them at 0.5, without that guard.
-
-Adaptive placement (Zhou & Liu): a muscle end is stored as coefficients in the frame of three
-MPEG-4 feature points (``place`` / ``frame_coefficients``), so the same recipe places it on any
+Adaptive placement (Zhou & Liu): a muscle end is stored as coefficients in the basis of three
+MPEG-4 feature points (``place`` / ``place_coefficients``), so the same recipe places it on any
 face that has the feature points; ``default_muscles(face)`` does this for the default set and
 puts each end on the nearest skin vertex (the muscle formulas use 3D distances to the ends, so an
 end floating off the skin would shift every zone).
@@ -90,37 +46,6 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
-
-__all__ = [
-    "MODES",
-    "MUSCLE_NAMES",
-    "ControlPointMuscles",
-    "EdgeConstraints",
-    "LinearMuscle",
-    "Muscle",
-    "MuscleModel",
-    "Sphincter",
-    "control_point_displacements",
-    "default_muscles",
-    "folded_triangles",
-    "frame_coefficients",
-    "mirror_muscle",
-    "muscles_from_json",
-    "muscles_to_json",
-    "place",
-    "repelled_travel",
-]
-
-MODES = ("classic", "improved")
-EDGE_MIN_HEIGHT = 0.05  # edge constraints keep a corner's height above this share of its rest height
-EDGE_ITERATIONS = 8  # most relaxation sweeps per fix (they stop as soon as nothing is squeezed)
-EDGE_RINGS = 2  # rings of triangles around the squeezed ones whose vertices the sweeps may move
-EDGE_TARGET = 1.5  # a squeezed corner is pushed to this multiple of its floor
-EDGE_OVERRELAX = 1.0  # the sweeps' averaged corrections are scaled by this (1: plain averaged Jacobi)
-EDGE_DAMP = 0.75  # the fallback shrinks a squeezed triangle's vertices' displacement by this factor
-EDGE_DAMP_STEPS = 12  # this many times at most, then drops it
-EDGE_DAMP_RINGS = (0.85, 0.95)  # and the rings of vertices around them by these factors
 
 
 @dataclass
@@ -151,378 +76,11 @@ Muscle = LinearMuscle | Sphincter
 
 # -- the displacement laws ----------------------------------------------------------------------
 
-def _linear_field(m: LinearMuscle, points: np.ndarray):
-    """(rows, unit direction to m_o, classic travel per unit contraction, D) for the points inside
-    the muscle's zone."""
-    axis = np.asarray(m.insertion, float) - np.asarray(m.fixed, float)
-    rel = points - np.asarray(m.fixed, float)
-    dist = np.linalg.norm(rel, axis=1)
-    cos_mu = rel @ axis / np.maximum(dist * np.linalg.norm(axis), 1e-300)
-    mu = np.arccos(np.clip(cos_mu, -1.0, 1.0))
-    alpha = np.radians(m.alpha)
-    rows = np.flatnonzero((dist > 0) & (dist < m.r_f) & (mu < alpha))
-    d, angle = dist[rows], mu[rows]
-    radial = np.where(d <= m.r_e, np.sin(0.5 * np.pi * d / m.r_e),
-                      np.cos(0.5 * np.pi * (d - m.r_e) / (m.r_f - m.r_e)))
-    travel = m.pull * np.cos(0.5 * np.pi * angle / alpha) * radial
-    direction = -rel[rows] / d[:, None]
-    return rows, direction, travel, d
-
-
-def _sphincter_field(s: Sphincter, points: np.ndarray):
-    """The same four arrays for a sphincter (travel per unit contraction, toward the centre in x, y)."""
-    rel = points - np.asarray(s.center, float)
-    q = np.linalg.norm(rel / np.asarray(s.radii, float), axis=1)
-    flat = rel.copy()
-    flat[:, 2] = 0.0
-    dist = np.linalg.norm(flat, axis=1)
-    rows = np.flatnonzero((q < 1.0) & (dist > 0))
-    d, qq = dist[rows], q[rows]
-    travel = s.squeeze * np.cos(0.5 * np.pi * qq) ** 2 * d
-    return rows, -flat[rows] / d[:, None], travel, d
-
-
-def _field(m: Muscle, points: np.ndarray):
-    return _linear_field(m, points) if isinstance(m, LinearMuscle) else _sphincter_field(m, points)
-
-
-def repelled_travel(travel: np.ndarray, dist: np.ndarray) -> np.ndarray:
-    """The improved law's travel toward the attractor for classic travel ``travel`` at rest distance
-    ``dist``: unchanged up to dist / 2, then dist - dist^2 / (4 travel) (the repulsive spring's
-    balance, module docstring), always below ``dist``."""
-    return np.where(travel <= 0.5 * dist, travel, dist - dist * dist / np.maximum(4.0 * travel, 1e-300))
-
-
-def control_point_displacements(muscles: Sequence[Muscle], contractions: Mapping[str, float],
-                                points: np.ndarray) -> np.ndarray:
-    """Displacements (n, 3) of control points (n, 3) for muscle contractions {name: c}: each muscle
-    moves the points inside its zone by the improved law (no point crosses its fixed end); the
-    caller spreads them over the skin (DFFD, ``Runtime.deform``)."""
-    return ControlPointMuscles(muscles, points).displace(contractions)
-
-
-class ControlPointMuscles:
-    """``control_point_displacements`` for one fixed set of points, their fields computed once
-    (the runtime's control-point mode: per frame only the contracting muscles' few points)."""
-
-    def __init__(self, muscles: Sequence[Muscle], points: np.ndarray) -> None:
-        self.muscles = list(muscles)
-        self.points = np.asarray(points, dtype=float)
-        self._fields = {m.name: _field(m, self.points) for m in self.muscles}
-
-    def moved(self) -> np.ndarray:
-        """Indices of the points some muscle moves."""
-        return np.unique(np.concatenate([np.zeros(0, np.int64), *(f[0] for f in self._fields.values())]))
-
-    def displace(self, contractions: Mapping[str, float], out: np.ndarray | None = None) -> np.ndarray:
-        """Displacements (n, 3) for contractions {name: c}, added to ``out`` when given."""
-        out = np.zeros_like(self.points) if out is None else out
-        for m in _contracting(self.muscles, contractions):
-            rows, direction, travel, dist = self._fields[m.name]
-            out[rows] += repelled_travel(float(contractions[m.name]) * travel, dist)[:, None] * direction
-        return out
-
-
-def _contracting(muscles: Sequence[Muscle], contractions: Mapping[str, float]) -> list[Muscle]:
-    """The muscles with a non-zero contraction; an unknown name is an error that lists the known."""
-    known = {m.name for m in muscles}
-    unknown = sorted(set(contractions) - known)
-    if unknown:
-        raise KeyError(f"unknown muscle(s) {unknown}; known: {sorted(known)}")
-    return [m for m in muscles if contractions.get(m.name, 0.0) != 0.0]
-
-
-# -- vertex modes -------------------------------------------------------------------------------
-
-class MuscleModel:
-    """Muscles acting on the vertices of one mesh, classic or improved (see module docstring).
-
-    Everything that depends on the rest mesh is computed once here: each muscle's rows, directions
-    and travels, the classic mode's sparse matrix (3V x muscles) and, for the improved mode, the
-    triangle corners the edge constraints watch. ``movable`` (vertex indices, default all) limits
-    which vertices muscles move (the default face: its skin, not the eyeballs and teeth).
-    """
-
-    def __init__(self, vertices: np.ndarray, triangles: np.ndarray, muscles: Sequence[Muscle],
-                 mode: str = "classic", movable: np.ndarray | None = None) -> None:
-        if mode not in MODES:
-            raise ValueError(f"mode {mode!r}: expected one of {MODES}")
-        self.rest = np.asarray(vertices, dtype=float)
-        self.muscles = list(muscles)
-        self.mode = mode
-        mask = np.zeros(len(self.rest), dtype=bool)
-        mask[np.arange(len(self.rest)) if movable is None else np.asarray(movable)] = True
-        self._fields = {}
-        for m in self.muscles:
-            rows, direction, travel, dist = _field(m, self.rest)
-            keep = mask[rows]
-            self._fields[m.name] = (rows[keep], direction[keep], travel[keep], dist[keep])
-        self._classic = self._classic_matrix()
-        self._edges = EdgeConstraints(self.rest, np.asarray(triangles), mask, self._reached())
-        self._watch_cache: dict[tuple[str, ...], np.ndarray] = {}
-
-    def _classic_matrix(self) -> sp.csr_matrix:
-        """G (3V x muscles): the classic displacement is G @ contractions, raveled (V, 3)."""
-        rows, cols, vals = [], [], []
-        for j, (r, direction, travel, _) in enumerate(self._fields.values()):
-            rows.append((3 * r[:, None] + np.arange(3)).ravel())
-            cols.append(np.full(3 * len(r), j))
-            vals.append((travel[:, None] * direction).ravel())
-        shape = (3 * len(self.rest), len(self.muscles))
-        if not rows:
-            return sp.csr_matrix(shape)
-        return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=shape)
-
-    def _reached(self) -> np.ndarray:
-        """Vertices some muscle can move."""
-        reached = np.zeros(len(self.rest), dtype=bool)
-        for rows, *_ in self._fields.values():
-            reached[rows] = True
-        return reached
-
-    def displace(self, contractions: Mapping[str, float]) -> np.ndarray:
-        """Vertex displacements (V, 3) for contractions {muscle name: c}; missing muscles rest."""
-        active = _contracting(self.muscles, contractions)
-        if self.mode == "classic":
-            c = np.array([float(contractions.get(m.name, 0.0)) for m in self.muscles])
-            return (self._classic @ c).reshape(-1, 3)
-        out = np.zeros_like(self.rest)
-        for m in active:
-            rows, direction, travel, dist = self._fields[m.name]
-            out[rows] += repelled_travel(float(contractions[m.name]) * travel, dist)[:, None] * direction
-        if active:
-            self._edges.relax(out, self._watched(tuple(m.name for m in active)))
-        return out
-
-    def _watched(self, names: tuple[str, ...]) -> np.ndarray:
-        """The edge constraints' triangles that muscles ``names`` can squeeze (cached per set)."""
-        if names not in self._watch_cache:
-            if len(self._watch_cache) >= 64:
-                self._watch_cache.clear()
-            rows = np.concatenate([self._fields[n][0] for n in names])
-            self._watch_cache[names] = self._edges.touching(rows)
-        return self._watch_cache[names]
-
-
-class EdgeConstraints:
-    """Compression-only springs from each triangle corner to its opposite edge (improved mode and
-    the runtime's fold guard).
-
-    Built once per mesh for the triangles that touch a ``reached`` vertex (bool mask, default all)
-    and a ``movable`` one (bool mask), with the vertex -> triangle adjacency (CSR) of those
-    triangles; only vertices both reached and movable move (the others have infinite mass), so
-    every triangle a fix can change is watched. A corner is *squeezed* when its height above the opposite
-    edge, in the plane normal to the triangle's rest normal, is below its floor, ``EDGE_MIN_HEIGHT``
-    of its rest height; a triangle folds exactly when a corner crosses its opposite edge (height
-    < 0), so a displacement with no squeezed corner folds nothing. ``relax`` (on a displacement)
-    and ``guard`` (on positions) fix a field in place, touching only the neighbourhood of the
-    squeezed triangles:
-
-    1. **Sweeps**: the squeezed triangles grown by ``EDGE_RINGS`` rings (through shared vertices)
-       are the vertices that may move; every corner of the triangles around them is watched. Up to
-       ``EDGE_ITERATIONS`` vectorised, over-relaxed Jacobi sweeps: each corner below its floor is
-       projected (position-based, inverse-mass weighted: the corner and the two edge ends move along
-       the edge's in-plane normal by their share of the gradient) to ``EDGE_TARGET`` times its floor,
-       the corrections averaged per vertex and scaled by ``EDGE_OVERRELAX``; they stop as soon as
-       no watched corner is squeezed.
-    2. **Fallback**, only if some corner is still squeezed (a muscle at several times its normal
-       contraction dragging the skin past fixed parts, where the springs ask for the impossible):
-       the displacement of every vertex of a squeezed triangle is scaled toward rest by
-       ``EDGE_DAMP`` (and the rings around by ``EDGE_DAMP_RINGS``, so the motion saturates
-       smoothly instead of leaving a dent), after ``EDGE_DAMP_STEPS`` such steps dropped,
-       re-checking only the triangles around the vertices it changed, until no corner is squeezed.
-       The rest mesh squeezes no corner and every pass shrinks some non-zero displacement for good,
-       so this ends, and the result folds no watched triangle. The price: where it acts (several
-       times the normal contraction) the squeezed skin moves less than the muscle asks, e.g. the
-       lip corner under the zygomatic major at 10 moves less than at 3 (docs/muscle_experiment.md).
-
-    When nothing is squeezed this costs one vectorised check (``squeezed``) and changes nothing.
-    Usable on any displacement field, e.g. the skin after DFFD.
-    """
-
-    def __init__(self, rest: np.ndarray, triangles: np.ndarray, movable: np.ndarray | None = None,
-                 reached: np.ndarray | None = None) -> None:
-        rest = np.asarray(rest, dtype=float)
-        triangles = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
-        movable = np.ones(len(rest), bool) if movable is None else np.asarray(movable, bool)
-        reached = np.ones(len(rest), bool) if reached is None else np.asarray(reached, bool)
-        tri = triangles[reached[triangles].any(axis=1) & movable[triangles].any(axis=1)]
-        self.rest = rest
-        self.n = len(rest)
-        self.triangles = tri
-        self._all = np.arange(len(tri))
-        normal = np.cross(rest[tri[:, 1]] - rest[tri[:, 0]], rest[tri[:, 2]] - rest[tri[:, 0]])
-        self.normal = normal / np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
-        self._normal_t = np.ascontiguousarray(self.normal.T)
-        self._corners = tuple(np.ascontiguousarray(tri[:, k]) for k in range(3))
-        area, perp2 = self._area_perp2(rest, self._all)
-        height = np.abs(area) / np.sqrt(np.maximum(perp2, 1e-300))
-        self.floor = np.ascontiguousarray(EDGE_MIN_HEIGHT * height.T)  # (T, 3): corner k's floor
-        self._floor2 = np.ascontiguousarray((self.floor * self.floor).T)  # (3, T)
-        self.inv_mass = (movable & reached).astype(float)  # only reached vertices move: their triangles are all watched
-        flat = tri.ravel()
-        order = np.argsort(flat, kind="stable")
-        self._vt_ptr = np.searchsorted(flat[order], np.arange(self.n + 1))
-        self._vt_tri = order // 3
-
-    # -- geometry ----------------------------------------------------------------------------
-
-    def _area_perp2(self, x: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """For triangles ``idx`` of positions ``x``: twice the area projected along the rest normal
-        (negative: folded) and, per corner (rows 0, 1, 2), the squared length of the opposite edge
-        in the plane normal to it. The corner's height is the first over the root of the second.
-        Coordinates as rows (x, y, z) of contiguous arrays: a few dozen cheap whole-array steps."""
-        full = idx is self._all
-        xt = np.ascontiguousarray(np.asarray(x, dtype=float).T)
-        p0, p1, p2 = (xt[:, c if full else c[idx]] for c in self._corners)
-        n = self._normal_t if full else self._normal_t[:, idx]
-        u, v, w = p1 - p0, p2 - p0, p2 - p1
-        area = (u[1] * v[2] - u[2] * v[1]) * n[0]
-        area += (u[2] * v[0] - u[0] * v[2]) * n[1]
-        area += (u[0] * v[1] - u[1] * v[0]) * n[2]
-        perp2 = np.empty((3, len(idx)))
-        for k, edge in enumerate((w, v, u)):  # opposite corner 0, 1, 2 (the sign does not matter)
-            along = edge[0] * n[0] + edge[1] * n[1] + edge[2] * n[2]
-            perp2[k] = edge[0] * edge[0] + edge[1] * edge[1] + edge[2] * edge[2] - along * along
-        return area, perp2
-
-    def _squeezed(self, x: np.ndarray, idx: np.ndarray) -> np.ndarray:
-        """Mask over triangles ``idx``: some corner of positions ``x`` is below its floor."""
-        area, perp2 = self._area_perp2(x, idx)
-        perp2 *= self._floor2 if idx is self._all else self._floor2[:, idx]
-        return (area < 0) | (area * area < perp2.max(axis=0))
-
-    def touching(self, vertices: np.ndarray) -> np.ndarray:
-        """Indices of the watched triangles that touch ``vertices`` (ids or a bool mask): what a
-        displacement that moves only those vertices can squeeze (``among`` below)."""
-        vertices = np.asarray(vertices)
-        tris = self._touching(np.flatnonzero(vertices) if vertices.dtype == bool else np.unique(vertices))
-        return self._all if len(tris) == len(self._all) else tris  # all: the check's faster path
-
-    def squeezed(self, positions: np.ndarray, among: np.ndarray | None = None) -> bool:
-        """Whether some corner of deformed ``positions`` (V, 3) is below its floor (only the watched
-        triangles ``among`` are checked when given)."""
-        return bool(self._squeezed(positions, self._all if among is None else among).any())
-
-    # -- fixing ------------------------------------------------------------------------------
-
-    def guard(self, positions: np.ndarray, among: np.ndarray | None = None) -> bool:
-        """Fix deformed ``positions`` (V, 3) in place if some corner is below its floor; returns
-        whether it had to. ``among``: the watched triangles that can be squeezed, when the caller
-        knows (``touching`` the vertices it moved); all by default."""
-        idx = self._all if among is None else among
-        bad = idx[self._squeezed(positions, idx)]
-        if len(bad) == 0:
-            return False
-        displacement = positions - self.rest
-        self._fix(displacement, bad)
-        positions[...] = self.rest + displacement
-        return True
-
-    def relax(self, displacement: np.ndarray, among: np.ndarray | None = None) -> bool:
-        """Fix ``displacement`` (V, 3) from the rest mesh in place (class docstring); returns
-        whether some corner was squeezed. ``among`` as for ``guard``."""
-        idx = self._all if among is None else among
-        bad = idx[self._squeezed(self.rest + displacement, idx)]
-        if len(bad) == 0:
-            return False
-        self._fix(displacement, bad)
-        return True
-
-    def _fix(self, displacement: np.ndarray, bad: np.ndarray) -> None:
-        grown = self._grow(bad, EDGE_RINGS)
-        watched = self._grow(grown, 1)
-        free = np.zeros(self.n, bool)
-        free[self.triangles[grown].ravel()] = True
-        left = self._sweep(displacement, watched, free)
-        if len(left):
-            self._damp(displacement, left)
-
-    def _touching(self, verts: np.ndarray) -> np.ndarray:
-        """The watched triangles that touch vertices ``verts`` (sorted, unique)."""
-        start, end = self._vt_ptr[verts], self._vt_ptr[verts + 1]
-        lens = end - start
-        idx = np.repeat(start - np.cumsum(lens) + lens, lens) + np.arange(lens.sum())
-        return np.unique(self._vt_tri[idx])
-
-    def _grow(self, tris: np.ndarray, rings: int) -> np.ndarray:
-        for _ in range(rings):
-            tris = self._touching(np.unique(self.triangles[tris]))
-        return tris
-
-    def _sweep(self, displacement: np.ndarray, watched: np.ndarray, free: np.ndarray) -> np.ndarray:
-        """The sweeps (class docstring, step 1) on triangles ``watched``, moving only ``free`` movable
-        vertices; returns the watched triangles still squeezed. The three corners of every triangle
-        are one batch (corner k of triangle i is row k * T + i), so a sweep is a few whole-array steps."""
-        verts, local = np.unique(self.triangles[watched], return_inverse=True)
-        local = local.reshape(-1, 3)
-        v, a, b = (np.concatenate([local[:, (k + j) % 3] for k in range(3)]) for j in range(3))
-        x = self.rest[verts] + displacement[verts]
-        w_v = self.inv_mass[verts] * free[verts]
-        normal = np.tile(self.normal[watched], (3, 1))
-        floor = self.floor[watched].T.ravel()
-        m = len(verts)
-        for _ in range(EDGE_ITERATIONS):
-            edge = x[b] - x[a]
-            rel = x[v] - x[a]
-            across = np.cross(normal, edge)
-            across /= np.maximum(np.sqrt(np.einsum("ij,ij->i", across, across)), 1e-300)[:, None]
-            height = np.einsum("ij,ij->i", rel, across)
-            low = np.flatnonzero(height < floor)
-            if len(low) == 0:
-                break
-            e = edge[low]
-            t = np.clip(np.einsum("ij,ij->i", rel[low], e) / np.maximum(np.einsum("ij,ij->i", e, e), 1e-300), 0, 1)
-            corner_ids = np.stack([v[low], a[low], b[low]])  # (3, c)
-            grad = np.stack([np.ones(len(low)), t - 1.0, -t])  # d height / d position, along `across`
-            wg = w_v[corner_ids] * grad
-            denom = (wg * grad).sum(axis=0)
-            ok = denom > 0
-            step = np.where(ok, (EDGE_TARGET * floor[low] - height[low]) / np.where(ok, denom, 1.0), 0.0)
-            ids_all = corner_ids.ravel()
-            vec_all = ((wg * step)[..., None] * across[low][None]).reshape(-1, 3)
-            moving = np.any(vec_all != 0, axis=1)
-            count = np.maximum(np.bincount(ids_all, weights=moving, minlength=m), 1.0)
-            for j in range(3):
-                x[:, j] += EDGE_OVERRELAX * np.bincount(ids_all, weights=vec_all[:, j], minlength=m) / count
-        displacement[verts] = x - self.rest[verts]
-        return watched[self._squeezed(self.rest + displacement, watched)]
-
-    def _damp(self, displacement: np.ndarray, bad: np.ndarray) -> None:
-        """The fallback (class docstring, step 2), from squeezed triangles ``bad``: the displacement
-        becomes ``scale * displacement`` with a per-vertex scale that only shrinks (``steps``: how
-        often each vertex was a squeezed triangle's)."""
-        start = displacement.copy()
-        scale = np.ones(self.n)
-        steps = np.zeros(self.n, np.int64)
-        while len(bad):
-            core = np.unique(self.triangles[bad])
-            steps[core] += 1
-            scale[core] = np.where(steps[core] >= EDGE_DAMP_STEPS, 0.0, EDGE_DAMP * scale[core])
-            inside = core
-            for factor in EDGE_DAMP_RINGS:  # the rings around shrink less: a smooth saturation, not a dent
-                grown = np.unique(self.triangles[self._touching(inside)])
-                ring = np.setdiff1d(grown, inside, assume_unique=True)
-                scale[ring] *= factor
-                inside = grown
-            verts = inside
-            displacement[verts] = scale[verts, None] * start[verts]
-            near = self._touching(verts)
-            bad = near[self._squeezed(self.rest + displacement, near)]
-
-
-def folded_triangles(rest: np.ndarray, deformed: np.ndarray, triangles: np.ndarray) -> np.ndarray:
-    """Boolean mask of triangles whose normal turned against its rest normal (dot < 0)."""
-    def normals(x: np.ndarray) -> np.ndarray:
-        return np.cross(x[triangles[:, 1]] - x[triangles[:, 0]], x[triangles[:, 2]] - x[triangles[:, 0]])
-    return np.einsum("ij,ij->i", normals(np.asarray(deformed, float)), normals(np.asarray(rest, float))) < 0
-
-
 # -- adaptive placement ---------------------------------------------------------------------------
 
-def _frame(corners: np.ndarray) -> np.ndarray:
+def _basis(corners: np.ndarray) -> np.ndarray:
     """Rows A, B - A, C - A and the triangle's normal scaled to its size (sqrt of twice the area),
-    turned forward (+z) so that mirroring a face mirrors the frame."""
+    turned forward (+z) so that mirroring a face mirrors the basis."""
     a, b, c = corners
     n = np.cross(b - a, c - a)
     size = np.linalg.norm(n)
@@ -531,21 +89,21 @@ def _frame(corners: np.ndarray) -> np.ndarray:
 
 
 def place(feature_points: Mapping[str, np.ndarray], ids: Sequence[str], coefficients: Sequence[float]) -> np.ndarray:
-    """The point w_a A + w_b B + w_c C + h n of the frame of feature points ``ids`` = (A, B, C),
+    """The point w_a A + w_b B + w_c C + h n of the basis of feature points ``ids`` = (A, B, C),
     for ``coefficients`` (w_a, w_b, w_c, h): barycentric weights (normalised to sum 1) and an
     offset along the triangle's forward normal in units of the triangle's size. The same
     coefficients place the same anatomical point on another face (Zhou & Liu's adaptive muscles)."""
-    frame = _frame(np.array([feature_points[i] for i in ids], dtype=float))
+    basis = _basis(np.array([feature_points[i] for i in ids], dtype=float))
     wa, wb, wc, h = (float(x) for x in coefficients)
     total = wa + wb + wc
-    return frame[0] + (wb * frame[1] + wc * frame[2]) / total + h * frame[3]
+    return basis[0] + (wb * basis[1] + wc * basis[2]) / total + h * basis[3]
 
 
-def frame_coefficients(point: np.ndarray, feature_points: Mapping[str, np.ndarray], ids: Sequence[str]) -> np.ndarray:
+def place_coefficients(point: np.ndarray, feature_points: Mapping[str, np.ndarray], ids: Sequence[str]) -> np.ndarray:
     """The coefficients (w_a, w_b, w_c, h) that ``place`` turns back into ``point``: how a muscle
     end drawn on one face is written down for every face."""
-    frame = _frame(np.array([feature_points[i] for i in ids], dtype=float))
-    wb, wc, h = np.linalg.solve(frame[1:].T, np.asarray(point, float) - frame[0])
+    basis = _basis(np.array([feature_points[i] for i in ids], dtype=float))
+    wb, wc, h = np.linalg.solve(basis[1:].T, np.asarray(point, float) - basis[0])
     return np.array([1.0 - wb - wc, wb, wc, h])
 
 

@@ -24,10 +24,12 @@ def rotation(axis: np.ndarray, angle: float) -> np.ndarray:
 def about(pivot: np.ndarray, R: np.ndarray, translation: np.ndarray | None = None) -> np.ndarray:
     """Motion rotating by R about ``pivot``, then translating: x' = R (x - pivot) + pivot + t."""
     pivot = np.asarray(pivot, dtype=float)
-    t = pivot - R @ pivot
+    motion = np.empty((3, 4))
+    motion[:, :3] = R
+    motion[:, 3] = pivot - R @ pivot
     if translation is not None:
-        t = t + translation
-    return np.hstack([R, t[:, None]])
+        motion[:, 3] += translation
+    return motion
 
 
 def apply(motion: np.ndarray, points: np.ndarray) -> np.ndarray:

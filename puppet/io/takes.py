@@ -255,6 +255,8 @@ def open_take(folder: str | os.PathLike) -> Take:
     ``META_TYPES``: a TakeError names the file and the first key that is wrong."""
     folder = Path(folder)
     meta_path = folder / META_NAME
+    if not folder.exists():
+        raise TakeError(f"{folder}: no such take folder")
     if not meta_path.is_file():
         raise TakeError(f"{folder}: not a take (no {META_NAME})")
     try:

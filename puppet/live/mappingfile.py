@@ -31,34 +31,10 @@ and sends the shaped values to targets: FAPs (in FAPU units, as in a .fap file),
       - {head: yaw, source: pad.X, range: [-30, 30]}          # degrees, written as FAP 49 in AU
       - {expression: joy, source: [pad.A, box.ch0], combine: max}
 
-A channel is shaped in this order: calibrate (clamped to the range) -> invert -> button (toggle /
-momentary: the channel becomes 0 or 1) or dead zone -> curve -> smoothing -> rate limit.
-Curves act on the magnitude (a bipolar channel keeps its sign): ``linear``; ``expo`` with
-``factor`` k in 0..1, ``(1 - k) x + k x^3``; ``gamma``, ``x ** gamma``; ``points``, a
-piecewise-linear curve through ``[[0, y0], ..., [1, yn]]`` (x strictly rising, y never falling).
-Smoothing is ``{type: one_euro, min_cutoff, beta, d_cutoff}`` or ``{type: exponential, tau}``
-(seconds), both driven by the samples' timestamps (``puppet.live.filters``).
-
-A target takes one source or a list (``combine: sum`` (default), ``max`` -- the largest
-magnitude, sign kept -- or ``last``, the source fed most recently), multiplies by ``gain``
-(default 1), maps the source domain (0..1 or -1..1; a target's sources must agree) linearly onto
-``range`` and clamps to it (so a bipolar source's centre lands midway: give it a symmetric range,
-``[-200, 200]``, for a face at rest when the control is). ``range`` is required for ``fap``,
-``head``, ``eyes``, ``eye_l`` and ``eye_r``: degrees for the rotations, written as FAPs 48-50 /
-23-26 in AU with each FAP's own positive direction (pitch down, yaw toward the face's left, roll
-toward its right). Muscles (the default face's, ``puppet.face.muscles.MUSCLE_NAMES``; an unknown
-name names the closest) default to [0, 1], a contraction; visemes (blend) and expressions
-(intensity) to [0, 63]. Targets that write the same FAP or muscle add up. One source may feed any number of targets.
-
 Per-device ``options`` are folded into the device URL's query, so ``Mapping.devices`` is just
 {name: URL}. Before its first sample a channel reads 0 (the face at rest). ``pose(t_ns)`` carries
 smoothing and rate limits on to ``t_ns`` with each input held, without keeping anything: devices
 that only report changes (MIDI, HID) still settle between their messages.
-
-Visemes and expressions become the Pose's FAP 1 / FAP 2 fields: the strongest viseme is
-``(select, 0, blend)`` (blended against viseme 0, none), the two strongest expressions are
-``(select1, intensity1, select2, intensity2)``; any weaker ones are expanded into low-level FAPs
-and added to ``Pose.fap``, so the face changes continuously when the order of strengths changes.
 
 Loading is ``yaml.safe_load`` (nothing in a mapping is executed as code) and the whole file is
 checked before a device opens; every problem is reported with the file, line, key path
@@ -67,33 +43,28 @@ checked before a device opens; every problem is reported with the file, line, ke
 cannot say (min < centre < max, monotonic points, sources naming declared channels) is checked
 here.
 
-``feed(sample)`` shapes the sample's channels at once (plain Python floats, no per-sample dict or
-YAML walking beyond the sample's own values); ``pose()`` combines the targets into a ``Pose``.
+The checked channels and targets become a ``Mapping`` (``puppet.live.channels``), which shapes
+the channels and makes the Poses.
 """
 
 from __future__ import annotations
 
-import bisect
 import difflib
 import math
 import os
 import re
 import reprlib
 from dataclasses import dataclass
-from pathlib import Path
 from urllib.parse import parse_qsl, urlencode, urlsplit
 
-import numpy as np
 import yaml
 
 from devices import DeviceError, backends, device_class
-from devices.base import Sample, Url
+from devices.base import Url
 from puppet.errors import PuppetError
 from puppet.face.muscles import MUSCLE_NAMES
-from puppet.fap.pose import Pose
 from puppet.fap.table import N_FAPS, faps
-from puppet.fap.units import AU
-from puppet.live.filters import Exponential, OneEuro, RateLimit
+from puppet.live.channels import COMBINE_MODES, EXPRESSIONS, EYE_AXES, HEAD_AXES, ChannelSpec, Mapping, TargetSpec
 
 # -- the format -------------------------------------------------------------------------------
 
@@ -109,20 +80,13 @@ BUTTON_MODES = ("toggle", "momentary")
 RANGES = ("unipolar", "bipolar")
 TARGET_KINDS = ("fap", "muscle", "viseme", "expression", "head", "eyes", "eye_l", "eye_r")
 TARGET_KEYS = TARGET_KINDS + ("source", "combine", "range", "gain", "description")
-COMBINE_MODES = ("sum", "max", "last")
-EXPRESSIONS = {"joy": 1, "sadness": 2, "anger": 3, "fear": 4, "disgust": 5, "surprise": 6}
 VISEMES = range(1, 15)
-HEAD_AXES = {"pitch": (48,), "yaw": (49,), "roll": (50,)}
-EYE_AXES = {"eyes": {"yaw": (23, 24), "pitch": (25, 26)},
-            "eye_l": {"yaw": (23,), "pitch": (25,)},
-            "eye_r": {"yaw": (24,), "pitch": (26,)}}
 DEFAULT_RANGES = {"muscle": (0.0, 1.0), "viseme": (0.0, 63.0), "expression": (0.0, 63.0)}
 NEEDS_RANGE = ("fap", "head", "eyes", "eye_l", "eye_r")
 
 DEVICE_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_-]*\Z")
 SOURCE = re.compile(r"([A-Za-z_][A-Za-z0-9_-]*)\.(\S+)\Z")
 URL = re.compile(r"([A-Za-z][A-Za-z0-9+.-]*):([A-Za-z][A-Za-z0-9+.-]*:)?//")  # serial:loop:// too
-DEG_TO_AU = math.pi / 180.0 / AU
 
 RAW_LIMIT = 1e12        # largest raw value a channel's min / centre / max may name
 RAW_SPAN = 1e-9         # nearest min, centre and max may be (so 1 / span stays finite)
@@ -132,9 +96,11 @@ TAU_LIMIT = 3600.0      # seconds
 RATE_LIMIT = 1e6        # shaped units per second
 GAMMA_LIMIT = 100.0
 ALIAS_BUDGET = 10_000   # values a document's YAML aliases may add once expanded
+MAX_MAPPING_CHARS = 1 << 20  # a mapping's length (the shipped ARKit mappings are 95 KB)
 """Every number a mapping holds has a sane range (the schema says the same), so that no mapping
 that loads can make a NaN or an infinity anywhere in the shaping: a cutoff of 1e308 Hz, a range
-of +-1e308 or a min and max 1e-320 apart are refused with the file, line and key path."""
+of +-1e308 or a min and max 1e-320 apart are refused with the file, line and key path. A mapping
+of more than ``MAX_MAPPING_CHARS`` is refused unread (40,000 targets, 2.8 MB, held 195 MB)."""
 
 
 def fap_names() -> list[str]:
@@ -174,7 +140,8 @@ def load_mapping(path: str | os.PathLike) -> Mapping:
     """Read, check and compile a mapping file; ``MappingError`` lists every problem."""
     file = str(path)
     try:
-        text = Path(path).read_text(encoding="utf-8")
+        with open(path, encoding="utf-8") as stream:
+            text = stream.read(MAX_MAPPING_CHARS + 1)
     except (OSError, UnicodeDecodeError) as exc:
         raise MappingError(file, [Problem("", None, f"cannot read the mapping: {exc}")]) from None
     return parse_mapping(text, file)
@@ -182,9 +149,11 @@ def load_mapping(path: str | os.PathLike) -> Mapping:
 
 def parse_mapping(text: str, file: str = "<mapping>") -> Mapping:
     """A mapping from YAML text (``file`` names it in errors)."""
+    if len(text) > MAX_MAPPING_CHARS:
+        raise MappingError(file, [Problem("", None, f"expected a mapping of at most {MAX_MAPPING_CHARS >> 20} MiB "
+                                                    f"(the shipped ARKit mappings are 95 KB), found more")])
     try:
-        lines, duplicates, added = _lines(text)
-        data = yaml.safe_load(text) if added <= ALIAS_BUDGET else None
+        lines, duplicates, added, data = _load(text)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None) or getattr(exc, "context_mark", None)
         what = " ".join(filter(None, (getattr(exc, "context", None), getattr(exc, "problem", None)))) or str(exc)
@@ -195,19 +164,38 @@ def parse_mapping(text: str, file: str = "<mapping>") -> Mapping:
         raise MappingError(file, [Problem("", mark.line + 1 if mark else None, f"{kind}{at}: {what}")]) from None
     except RecursionError:
         raise MappingError(file, [Problem("", None, "the YAML is nested too deeply")]) from None
+    except UnicodeError as exc:  # text that is no valid Unicode (lone surrogates)
+        raise MappingError(file, [Problem("", None, f"expected UTF-8 text, found {_clip(str(exc), 80)}")]) from None
     except ValueError as exc:  # a number PyYAML cannot build (an integer of over 4300 digits)
         raise MappingError(file, [Problem("", None, f"expected numbers of sane size, found one that is "
                                                     f"not ({_clip(str(exc), 60)})")]) from None
     if added > ALIAS_BUDGET:
         raise MappingError(file, [Problem("", None, f"expected YAML aliases to add at most {ALIAS_BUDGET:,} "
                                                     f"values when expanded, found more (aliases nested in aliases)")])
-    return Mapping.from_data(data, file, lines=lines, duplicates=duplicates)
+    return compile_mapping(data, file, lines=lines, duplicates=duplicates)
 
 
-def _lines(text: str) -> tuple[dict[tuple, int], list[Problem], int]:
+_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+"""libyaml's safe loader where PyYAML was built with it (its wheels are): the same documents and
+marks, read about 10 times faster than the pure-Python one (0.1 s for a shipped ARKit mapping)."""
+
+
+def _load(text: str) -> tuple[dict[tuple, int], list[Problem], int, object]:
+    """The document composed once: its lines, duplicate keys and alias growth (``_lines``), then,
+    only when the aliases are within ``ALIAS_BUDGET``, the data built from it (else None)."""
+    loader = _LOADER(text)
+    try:
+        root = loader.get_single_node()
+        lines, duplicates, added = _lines(root)
+        data = loader.construct_document(root) if root is not None and added <= ALIAS_BUDGET else None
+        return lines, duplicates, added, data
+    finally:
+        loader.dispose()
+
+
+def _lines(root) -> tuple[dict[tuple, int], list[Problem], int]:
     """Line of every key path (from the composed YAML nodes), the keys written twice, and how
     many values the document's aliases add when expanded (counted, never expanded)."""
-    root = yaml.compose(text, Loader=yaml.SafeLoader)
     lines: dict[tuple, int] = {}
     duplicates: list[Problem] = []
     seen: set[int] = set()
@@ -243,23 +231,25 @@ def _lines(text: str) -> tuple[dict[tuple, int], list[Problem], int]:
 
     if root is None:
         return lines, duplicates, 0
-    distinct = _distinct_nodes(root)
+    distinct, references = _distinct_nodes(root)
     budget += distinct
-    added = expanded(root) - distinct
+    added = expanded(root) - distinct if references + 1 > distinct else 0  # else a tree: no alias
     if added <= ALIAS_BUDGET:
         walk(root, (), root.start_mark.line + 1)
     return lines, duplicates, added
 
 
-def _distinct_nodes(root) -> int:
-    """How many nodes a composed YAML document holds, each alias's target once."""
-    seen, stack = {id(root)}, [root]
+def _distinct_nodes(root) -> tuple[int, int]:
+    """How many nodes a composed YAML document holds, each alias's target once, and how many
+    times nodes are named as children (one less than the nodes when no alias repeats one)."""
+    seen, stack, references = {id(root)}, [root], 0
     while stack:
         for child in _children(stack.pop()):
+            references += 1
             if id(child) not in seen:
                 seen.add(id(child))
                 stack.append(child)
-    return len(seen)
+    return len(seen), references
 
 
 def _children(node) -> list:
@@ -331,33 +321,6 @@ def _is_number(value) -> bool:
 
 
 # -- checking ---------------------------------------------------------------------------------
-
-@dataclass
-class _ChannelSpec:
-    name: str
-    device: str
-    channel: str
-    bipolar: bool
-    low: float
-    centre: float
-    high: float
-    invert: bool = False
-    dead_zone: float = 0.0
-    curve: tuple | None = None          # ("expo", k) | ("gamma", g) | ("points", xs, ys)
-    smoothing: tuple | None = None      # ("one_euro", min_cutoff, beta, d_cutoff) | ("exponential", tau)
-    rate_limit: float | None = None
-    button: tuple | None = None         # (mode, threshold, release)
-
-
-@dataclass
-class _TargetSpec:
-    kind: str
-    key: object                          # FAP number, muscle name, viseme / expression number, axis
-    sources: list[str]
-    combine: str = "sum"
-    range: tuple[float, float] | None = None
-    gain: float = 1.0
-
 
 class _Checker:
     """Walks the loaded document once, collecting every problem with its path and line."""
@@ -521,7 +484,7 @@ class _Checker:
         base, _, fragment = url.partition("#")
         return base + ("&" if parts.query else "?") + urlencode(extra) + ("#" + fragment if fragment else "")
 
-    def channels(self, value) -> dict[str, _ChannelSpec]:
+    def channels(self, value) -> dict[str, ChannelSpec]:
         path = ("channels",)
         if not isinstance(value, dict):
             self.expect(path, "a mapping of device.channel -> channel options", value)
@@ -542,7 +505,7 @@ class _Checker:
                 out[name] = parsed
         return out
 
-    def channel(self, where: tuple, name: str, device: str, channel: str, spec) -> _ChannelSpec | None:
+    def channel(self, where: tuple, name: str, device: str, channel: str, spec) -> ChannelSpec | None:
         spec = self.mapping(where, spec, CHANNEL_KEYS, f"channel {name!r}")
         if spec is None:
             return None
@@ -596,7 +559,7 @@ class _Checker:
             return None
         if centre is None:
             centre = (low + high) / 2
-        return _ChannelSpec(name, device, channel, bipolar, low, centre, high, invert, dead, curve,
+        return ChannelSpec(name, device, channel, bipolar, low, centre, high, invert, dead, curve,
                             smoothing, rate, button)
 
     def curve(self, where: tuple, value, bipolar: bool) -> tuple | None:
@@ -697,7 +660,7 @@ class _Checker:
             return None
         return (mode, threshold, release)
 
-    def targets(self, value, channels: dict) -> list[_TargetSpec]:
+    def targets(self, value, channels: dict) -> list[TargetSpec]:
         path = ("targets",)
         if not isinstance(value, list) or not value:
             self.expect(path, "a list of targets (at least one)", value)
@@ -709,7 +672,7 @@ class _Checker:
                 out.append(target)
         return out
 
-    def target(self, where: tuple, spec, channels: dict) -> _TargetSpec | None:
+    def target(self, where: tuple, spec, channels: dict) -> TargetSpec | None:
         spec = self.mapping(where, spec, TARGET_KEYS, "a target")
         if spec is None:
             return None
@@ -749,7 +712,7 @@ class _Checker:
                            + ", ".join(f"{s} ({'bipolar' if channels[s].bipolar else 'unipolar'})" for s in sources))
         if len(self.problems) > before or kind is None or key is None or not sources:
             return None
-        return _TargetSpec(kind, key, sources, combine, rng or DEFAULT_RANGES.get(kind), gain)
+        return TargetSpec(kind, key, sources, combine, rng or DEFAULT_RANGES.get(kind), gain)
 
     def target_key(self, where: tuple, kind: str, value):
         if isinstance(value, float) and value.is_integer():  # 3.0 is the number 3, as in JSON
@@ -817,450 +780,16 @@ class _Checker:
         return out if len(out) == len(items) else None
 
 
-def _check(data, file: str, lines=None, duplicates=()) -> tuple[dict, dict, list]:
+def compile_mapping(data, file: str = "<mapping>", *, lines: dict | None = None, duplicates=()) -> Mapping:
+    """Check an already-loaded document (a dict as ``yaml.safe_load`` gives) and compile it into a
+    ``Mapping``; ``MappingError`` lists every problem (``lines``: each key path's line)."""
     checker = _Checker(data, lines)
     checker.problems.extend(duplicates)
     result = checker.root(data)
     if checker.problems:
         checker.problems.sort(key=lambda p: (p.line or 0))
         raise MappingError(file, checker.problems)
-    return result
+    devices, channels, targets = result
+    return Mapping(file, devices, channels, targets, data.get("description", ""))
 
 
-# -- the compiled mapping ---------------------------------------------------------------------
-
-@dataclass(frozen=True)
-class ChannelState:
-    """What a monitor shows for one channel: the last raw value (None before any), the shaped
-    value, the targets it drives, and where the raw value sits in the channel's calibrated range
-    (0 at ``min``, 1 at ``max``; None before any)."""
-
-    name: str
-    raw: float | None
-    value: float
-    targets: tuple[str, ...]
-    raw_fraction: float | None = None
-
-
-def _curve_function(curve: tuple | None):
-    """The curve as a function of the magnitude 0..1 (None for linear)."""
-    if curve is None:
-        return None
-    if curve[0] == "expo":
-        k = curve[1]
-        return lambda m: m * ((1.0 - k) + k * m * m)
-    if curve[0] == "gamma":
-        g = curve[1]
-        return lambda m: m ** g
-    xs, ys = curve[1], curve[2]
-    last = len(xs) - 2
-
-    def points(m: float) -> float:
-        i = bisect.bisect_right(xs, m) - 1
-        i = 0 if i < 0 else last if i > last else i
-        t = (m - xs[i]) / (xs[i + 1] - xs[i])   # each step is monotonic in m, however close the xs
-        y = ys[i] + t * (ys[i + 1] - ys[i])
-        return ys[i] if y < ys[i] else ys[i + 1] if y > ys[i + 1] else y
-
-    return points
-
-
-class _Channel:
-    """One source channel, shaped in place on every sample (plain floats, no allocation)."""
-
-    __slots__ = ("name", "bipolar", "low", "centre", "k", "k_low", "k_high", "invert", "dead",
-                 "curve", "button", "threshold", "release", "pressed", "latched", "smoother",
-                 "limiter", "timed", "raw", "pre", "value", "out", "t_ns", "seq", "targets")
-
-    def __init__(self, spec: _ChannelSpec) -> None:
-        self.name = spec.name
-        self.bipolar = spec.bipolar
-        self.low, self.centre = spec.low, spec.centre
-        self.k = 1.0 / (spec.high - spec.low)
-        self.k_low = 1.0 / (spec.centre - spec.low)
-        self.k_high = 1.0 / (spec.high - spec.centre)
-        self.invert = spec.invert
-        self.dead = spec.dead_zone
-        self.curve = _curve_function(spec.curve)
-        self.button = spec.button[0] if spec.button else None
-        self.threshold, self.release = (spec.button[1], spec.button[2]) if spec.button else (0.0, 0.0)
-        if spec.smoothing is None:
-            self.smoother = None
-        elif spec.smoothing[0] == "one_euro":
-            self.smoother = OneEuro(*spec.smoothing[1:])
-        else:
-            self.smoother = Exponential(spec.smoothing[1])
-        self.limiter = RateLimit(spec.rate_limit) if spec.rate_limit else None
-        self.timed = self.smoother is not None or self.limiter is not None
-        self.targets: list[str] = []
-        self.reset()
-
-    def reset(self) -> None:
-        self.raw = None
-        self.pre = self.value = self.out = 0.0
-        self.t_ns = None
-        self.seq = -1
-        self.pressed = self.latched = False
-        for f in (self.smoother, self.limiter):
-            if f is not None:
-                f.reset()
-
-    def update(self, raw: float, t_ns: int, seq: int) -> None:
-        self.raw = raw
-        if self.bipolar:
-            d = raw - self.centre
-            x = d * self.k_high if d >= 0.0 else d * self.k_low
-            x = 1.0 if x > 1.0 else -1.0 if x < -1.0 else x
-            if self.invert:
-                x = -x
-        else:
-            x = (raw - self.low) * self.k
-            x = 1.0 if x > 1.0 else 0.0 if x < 0.0 else x
-            if self.invert:
-                x = 1.0 - x
-        if self.button is not None:
-            if self.pressed:
-                if x < self.release:
-                    self.pressed = False
-            elif x >= self.threshold:
-                self.pressed = True
-                self.latched = not self.latched
-            x = 1.0 if (self.latched if self.button == "toggle" else self.pressed) else 0.0
-        else:
-            m = -x if x < 0.0 else x
-            if self.dead:
-                m = 0.0 if m <= self.dead else (m - self.dead) / (1.0 - self.dead)
-            if self.curve is not None:
-                m = self.curve(m)
-            x = -m if x < 0.0 else m
-        self.pre = x
-        if self.smoother is not None:
-            x = self.smoother.step(x, t_ns)
-        if self.limiter is not None:
-            x = self.limiter.step(x, t_ns)
-        self.value = self.out = x
-        self.t_ns = t_ns
-        self.seq = seq
-
-    _STATE = ("raw", "pre", "value", "out", "t_ns", "seq", "pressed", "latched", "centre", "k_low", "k_high")
-
-    def recentre(self, centre: float) -> bool:
-        """Make ``centre`` the rest point of a bipolar channel (a stick that drifted); False when
-        it is not strictly inside the channel's range (nothing changes)."""
-        high = self.low + 1.0 / self.k
-        if not (self.bipolar and self.low < centre < high):
-            return False
-        self.centre = centre
-        self.k_low, self.k_high = 1.0 / (centre - self.low), 1.0 / (high - centre)
-        return True
-
-    def snapshot(self) -> dict:
-        """Everything ``update`` has built up, as JSON-able data (see ``Mapping.snapshot``)."""
-        data = {key: getattr(self, key) for key in self._STATE}
-        for key in ("smoother", "limiter"):
-            f = getattr(self, key)
-            data[key] = None if f is None else f.snapshot()
-        return data
-
-    def restore(self, data: dict) -> None:
-        for key in self._STATE:
-            setattr(self, key, data[key])
-        for key in ("smoother", "limiter"):
-            f = getattr(self, key)
-            if f is not None and data.get(key) is not None:
-                f.restore(data[key])
-
-    def preview(self, t_ns: int) -> float:
-        """The value a sample repeating the last input at ``t_ns`` would give (nothing is kept)."""
-        x = self.pre
-        if self.smoother is not None:
-            x = self.smoother.peek(x, t_ns)
-        if self.limiter is not None:
-            x = self.limiter.peek(x, t_ns)
-        return x
-
-
-_SUM, _MAX, _LAST = 0, 1, 2
-
-
-class _Guard:
-    """Targets whose value came out NaN (a corrupt restored state, say): each holds its last good
-    value; ``count`` counts such evaluations and ``first`` says what happened the first time."""
-
-    __slots__ = ("count", "first")
-
-    def __init__(self) -> None:
-        self.count, self.first = 0, None
-
-    def held(self, target: _Target) -> float:
-        self.count += 1
-        if self.first is None:
-            self.first = (f"{target.label} came out as NaN; its last good value ({target.last:g}) is held "
-                          f"(sources: {', '.join(s.name for s in target.sources)})")
-        return target.last
-
-
-class _Target:
-    """One target compiled: its sources, the affine map from their domain onto the range, a clamp."""
-
-    __slots__ = ("kind", "key", "slots", "sources", "mode", "gain", "x0", "scale", "low", "cmin", "cmax",
-                 "label", "last", "guard")
-
-    def __init__(self, spec: _TargetSpec, sources: list[_Channel], bipolar: bool, guard: _Guard) -> None:
-        self.kind, self.key = spec.kind, spec.key
-        self.guard = guard
-        self.sources = tuple(sources)
-        self.mode = (_SUM, _MAX, _LAST)[COMBINE_MODES.index(spec.combine)]
-        self.gain = spec.gain
-        low, high = spec.range
-        if spec.kind in ("head", "eyes", "eye_l", "eye_r"):
-            low, high = low * DEG_TO_AU, high * DEG_TO_AU
-        if spec.kind == "fap":
-            self.slots = (spec.key - 1,)
-        elif spec.kind == "head":
-            self.slots = tuple(n - 1 for n in HEAD_AXES[spec.key])
-        elif spec.kind in EYE_AXES:
-            self.slots = tuple(n - 1 for n in EYE_AXES[spec.kind][spec.key])
-        else:
-            self.slots = ()
-        self.x0 = -1.0 if bipolar else 0.0
-        self.scale = (high - low) / (1.0 - self.x0)
-        self.low = low
-        self.cmin, self.cmax = min(low, high), max(low, high)
-        if spec.kind == "muscle":
-            self.cmin, self.cmax = max(self.cmin, 0.0), min(self.cmax, 1.0)
-        elif spec.kind in ("viseme", "expression"):
-            self.cmin, self.cmax = max(self.cmin, 0.0), min(self.cmax, 63.0)
-        name = ""
-        if spec.kind == "fap":
-            name = faps()[spec.key - 1].name
-        elif spec.kind == "expression":
-            name = next(k for k, v in EXPRESSIONS.items() if v == spec.key)
-        self.label = f"{spec.kind} {spec.key}" + (f" {name}" if name else "")
-        rest = low - self.x0 * self.scale  # every source at 0: the value before any sample
-        self.last = self.cmin if rest < self.cmin else self.cmax if rest > self.cmax else rest
-
-    def evaluate(self) -> float:
-        sources = self.sources
-        if len(sources) == 1:
-            x = sources[0].out
-        elif self.mode == _SUM:
-            x = 0.0
-            for s in sources:
-                x += s.out
-        elif self.mode == _MAX:
-            x = 0.0
-            for s in sources:
-                v = s.out
-                if (v if v >= 0.0 else -v) > (x if x >= 0.0 else -x):
-                    x = v
-        else:
-            best = sources[0]
-            for s in sources:
-                if s.seq > best.seq:
-                    best = s
-            x = best.out
-        v = self.low + (self.gain * x - self.x0) * self.scale
-        v = self.cmin if v < self.cmin else self.cmax if v > self.cmax else v
-        if v != v:  # NaN (the clamp lets it through): hold the last good value, and say so
-            return self.guard.held(self)
-        self.last = v
-        return v
-
-
-class Mapping:
-    """A checked, compiled mapping: ``feed`` Samples in, take ``pose()`` out.
-
-    ``devices`` is {name: URL} (per-device options folded into the URL's query) for the session
-    to open; Samples whose ``device`` is one of these names are shaped, others are ignored."""
-
-    def __init__(self, file: str, devices: dict[str, str], channels: dict[str, _ChannelSpec],
-                 targets: list[_TargetSpec], description: str = "") -> None:
-        self.file = file
-        self.description = description
-        self.devices = dict(devices)
-        self.bad_values = 0
-        self._seq = 0
-        self._specs = dict(channels)
-        self._channels = {name: _Channel(spec) for name, spec in channels.items()}
-        self._by_device: dict[str, dict[str, _Channel]] = {}
-        for spec in channels.values():
-            self._by_device.setdefault(spec.device, {})[spec.channel] = self._channels[spec.name]
-        self._timed = tuple(c for c in self._channels.values() if c.timed)
-        self._guard = _Guard()
-        compiled = []
-        for spec in targets:
-            sources = [self._channels[s] for s in spec.sources]
-            target = _Target(spec, sources, sources[0].bipolar, self._guard)
-            compiled.append(target)
-            for s in sources:
-                if target.label not in s.targets:
-                    s.targets.append(target.label)
-        self._faps = tuple(t for t in compiled if t.slots)
-        self._muscles = tuple(t for t in compiled if t.kind == "muscle")
-        self._visemes = tuple(t for t in compiled if t.kind == "viseme")
-        self._expressions = tuple(t for t in compiled if t.kind == "expression")
-        self.muscle_names = tuple(dict.fromkeys(t.key for t in self._muscles))
-        self._shapes = None
-        if self._visemes or self._expressions:
-            from puppet.fap.highlevel import high_level_faps
-
-            self._shapes = high_level_faps()
-
-    @classmethod
-    def from_data(cls, data, file: str = "<mapping>", *, lines: dict | None = None,
-                  duplicates=()) -> Mapping:
-        """Check and compile an already-loaded document (a dict as ``yaml.safe_load`` gives)."""
-        devices, channels, targets = _check(data, file, lines, duplicates)
-        return cls(file, devices, channels, targets, data.get("description", ""))
-
-    # -- the hot path --------------------------------------------------------------------------
-
-    def feed(self, sample) -> None:
-        """Shape the channels of one Sample (``t_ns``, ``device``, ``values``); filters use ``t_ns``."""
-        channels = self._by_device.get(sample.device)
-        if channels is None:
-            return
-        t_ns = sample.t_ns
-        for name, raw in sample.values.items():
-            channel = channels.get(name)
-            if channel is None:
-                continue
-            try:
-                raw = float(raw)
-            except (TypeError, ValueError, OverflowError):
-                self.bad_values += 1
-                continue
-            if raw != raw:  # NaN (the cheapest test for it): garbage from the device, skipped
-                self.bad_values += 1
-                continue
-            self._seq += 1
-            channel.update(raw, t_ns, self._seq)
-
-    def pose(self, t_ns: int | None = None) -> Pose:
-        """The Pose for the channels as last fed; with ``t_ns``, smoothing and rate limits are
-        carried on to that time with each input held (without changing the state), so the face
-        settles between the samples of devices that only report changes."""
-        if t_ns is None:
-            for c in self._timed:
-                c.out = c.value
-        else:
-            for c in self._timed:
-                c.out = c.preview(t_ns) if c.t_ns is not None and t_ns > c.t_ns else c.value
-        fap = np.zeros(N_FAPS)
-        for t in self._faps:
-            v = t.evaluate()
-            for i in t.slots:
-                fap[i] += v
-        muscles = dict.fromkeys(self.muscle_names, 0.0)
-        for t in self._muscles:
-            muscles[t.key] += t.evaluate()
-        for name, v in muscles.items():
-            muscles[name] = 0.0 if v < 0.0 else 1.0 if v > 1.0 else v
-        viseme = self._viseme(fap) if self._visemes else None
-        expression = self._expression(fap) if self._expressions else None
-        return Pose(fap, viseme, expression, muscles, t_ns)
-
-    def _strengths(self, targets) -> list[tuple[float, int]]:
-        """(strength 0..63, select) per distinct select, strongest first (ties: target order)."""
-        by_key: dict[int, float] = {}
-        for t in targets:
-            by_key[t.key] = by_key.get(t.key, 0.0) + t.evaluate()
-        order = sorted(by_key.items(), key=lambda kv: -kv[1])
-        return [(min(v, 63.0), k) for k, v in order]
-
-    def _viseme(self, fap: np.ndarray) -> tuple:
-        ranked = self._strengths(self._visemes)
-        w, select = ranked[0]
-        for weaker, other in ranked[1:]:
-            if weaker > 0.0:
-                fap += self._shapes["visemes"][other] * (weaker / 63.0)
-        return (select, 0, w) if w > 0.0 else (0, 0, 0.0)
-
-    def _expression(self, fap: np.ndarray) -> tuple:
-        ranked = self._strengths(self._expressions) + [(0.0, 0)]
-        (i1, s1), (i2, s2) = ranked[0], ranked[1]
-        for weaker, other in ranked[2:]:
-            if weaker > 0.0:
-                fap += self._shapes["expressions"][other] * (weaker / 63.0)
-        return (s1 if i1 > 0 else 0, i1, s2 if i2 > 0 else 0, i2)
-
-    @property
-    def held_values(self) -> int:
-        """How many target values came out NaN and were replaced by the target's last good one."""
-        return self._guard.count
-
-    @property
-    def held_problem(self) -> str | None:
-        """What the first such value was (None while there has been none), for a one-line report."""
-        return None if self._guard.first is None else f"{self.file}: {self._guard.first}"
-
-    # -- for people --------------------------------------------------------------------------
-
-    def channels(self) -> list[ChannelState]:
-        """Every channel: raw value, shaped value and the targets it drives (for a monitor)."""
-        return [ChannelState(c.name, c.raw, c.value, tuple(c.targets), None if c.raw is None else (c.raw - c.low) * c.k)
-                for c in self._channels.values()]
-
-    def drives(self, channel: str) -> tuple[set[int], set[str]]:
-        """What a channel (``device.channel``) moves: its FAP slots (0-based) and the high-level
-        kinds (``viseme``, ``expression``, ``muscle``) among its targets."""
-        if channel not in self._channels:
-            raise KeyError(f"{self.file}: no channel {channel!r}; channels: {', '.join(self._channels)}")
-        c = self._channels[channel]
-        slots: set[int] = set()
-        kinds: set[str] = set()
-        for t in (*self._faps, *self._muscles, *self._visemes, *self._expressions):
-            if c in t.sources:
-                slots.update(t.slots)
-                if t.kind in ("viseme", "expression", "muscle"):
-                    kinds.add(t.kind)
-        return slots, kinds
-
-    def resting(self) -> dict[str, float]:
-        """The last raw value of every bipolar channel that has one: where its stick rests when
-        the performer lets go (what ``recentre`` takes to undo drift)."""
-        return {name: c.raw for name, c in self._channels.items() if c.bipolar and c.raw is not None}
-
-    def recentre(self, centres: dict[str, float]) -> dict[str, float]:
-        """Make ``centres`` {channel: raw} the rest points of those bipolar channels; returns the
-        ones taken (a centre outside its channel's range is not)."""
-        return {name: raw for name, raw in centres.items()
-                if name in self._channels and self._channels[name].recentre(raw)}
-
-    def reset(self) -> None:
-        """Every channel back to rest (no sample seen, filters empty, buttons released)."""
-        for c in self._channels.values():
-            c.reset()
-        self._seq = 0
-
-    def snapshot(self) -> dict:
-        """The state the fed Samples left (raw and shaped values, filters, buttons), JSON-able
-        and exact: a take keeps it from its first frame, so replaying the take's log from it
-        gives the same poses as the live session did."""
-        return {"seq": self._seq, "channels": {name: c.snapshot() for name, c in self._channels.items()}}
-
-    def restore(self, snapshot: dict, recorded: Mapping | None = None) -> None:
-        """Take up a ``snapshot`` made by ``recorded`` (default: this mapping): exactly for every
-        channel shaped the same in both, and for the others by feeding their last raw input
-        again (their filters start settled on it). A re-mapped take starts from where the
-        performer's hands were."""
-        self.reset()
-        self._seq = snapshot["seq"]
-        specs = self._specs if recorded is None else recorded._specs
-        readings: dict[tuple[int, str], dict[str, float]] = {}
-        for name, data in snapshot["channels"].items():
-            channel = self._channels.get(name)
-            if channel is None:
-                continue
-            if specs.get(name) == self._specs[name]:
-                channel.restore(data)
-            elif data["raw"] is not None and data["t_ns"] is not None:
-                device, _, source = name.partition(".")
-                readings.setdefault((data["t_ns"], device), {})[source] = data["raw"]
-        for (t_ns, device), values in sorted(readings.items()):
-            self.feed(Sample(t_ns, device, values))
-
-    def __repr__(self) -> str:
-        return (f"Mapping({self.file!r}: {len(self.devices)} devices, {len(self._channels)} channels, "
-                f"{len(self._faps) + len(self._muscles) + len(self._visemes) + len(self._expressions)} targets)")

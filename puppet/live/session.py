@@ -9,7 +9,7 @@
 2. feed each Sample to the mapping (and, while recording, to the take's raw log; frame ticks
    that fall before a Sample are written first, see *Recording*);
 3. take the mapping's Pose at ``now`` and deform the face into buffers allocated once
-   (``Frame.vertices`` / ``Frame.normals`` *are* those buffers: copy them to keep a frame).
+   (``LiveFrame.vertices`` / ``LiveFrame.normals`` *are* those buffers: copy them to keep a frame).
 
 Holding the pose
     While every device is OPEN the Pose is taken at ``now``, so smoothing settles between
@@ -53,6 +53,7 @@ from __future__ import annotations
 import heapq
 import os
 import statistics
+import threading
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -71,7 +72,7 @@ from puppet.runtime.runtime import Runtime
 
 
 @dataclass
-class Frame:
+class LiveFrame:
     """One frame of the live loop. ``vertices`` and ``normals`` are the session's buffers,
     overwritten by the next frame; ``newest_sample_ns`` is the newest Sample ever fed (None before
     any); ``n_samples`` how many Samples this frame fed, ``sample_ns`` their timestamps."""
@@ -118,6 +119,7 @@ class LiveSession:
                                  f"Samples would not reach the mapping's {name!r} channels")
         self.devices: dict[str, Device] = {}
         self.urls: dict[str, str] = {}
+        self._wake = threading.Event()  # set by every device when it queues a Sample
         try:
             for name, url in self.mapping.devices.items():
                 self.devices[name] = overrides.pop(name) if name in overrides else open_device(url, name)
@@ -126,6 +128,7 @@ class LiveSession:
             for name, device in self.devices.items():
                 self.urls[name] = device.url or f"override:{type(device).__name__}"
             for device in self.devices.values():
+                device.wake = self._wake
                 device.start()
         except BaseException:
             self._close_devices()
@@ -149,7 +152,7 @@ class LiveSession:
 
     # -- the live loop ----------------------------------------------------------------------
 
-    def frame(self, now_ns: int | None = None) -> Frame:
+    def frame(self, now_ns: int | None = None) -> LiveFrame:
         """Drain, map, deform: one frame at ``now_ns`` (default: ``time.monotonic_ns()``)."""
         try:
             return self._frame(now_ns)
@@ -158,7 +161,7 @@ class LiveSession:
                 self._end_take(f"the live loop failed: {type(exc).__name__}: {exc}")
             raise
 
-    def _frame(self, now_ns: int | None) -> Frame:
+    def _frame(self, now_ns: int | None) -> LiveFrame:
         states = self.states
         batches = [d.drain() for d in self.devices.values()]
         now = time.monotonic_ns() if now_ns is None else int(now_ns)
@@ -198,18 +201,23 @@ class LiveSession:
             self.pose_error = self.mapping.held_problem
             warnings.warn(self.pose_error, RuntimeWarning, stacklevel=2)
         if samples or pose_ns != self._last_pose_ns or not self._have_mesh or self.layer is not None:
-            fap, viseme, expression = pose.fap, pose.viseme, pose.expression
-            if self.layer is not None:
-                fap, viseme, expression = self._layered(now, pose)
-            d, motions = self.runtime.fap_controls(fap, viseme=viseme, expression=expression)
-            self.runtime.deform_with_normals(d, motions, out=self._vertices, normals_out=self._normals,
-                                             muscles=pose.muscles)
+            shown = pose if self.layer is None else Pose(*self._layered(now, pose), pose.muscles)
+            self.runtime.deform_pose(shown, out=self._vertices, normals_out=self._normals)
             self._have_mesh = True
         # else: nothing changed since the last frame (a held pose): the buffers already hold it
         self._last_pose_ns = pose_ns
         self.frames += 1
-        return Frame(self._vertices, self._normals, pose, now, self.newest_sample_ns, states, len(samples),
+        return LiveFrame(self._vertices, self._normals, pose, now, self.newest_sample_ns, states, len(samples),
                      tuple(sample.t_ns for sample in samples))
+
+    def wait_for_input(self, timeout: float) -> bool:
+        """Wait until some device has a Sample queued (at most ``timeout`` seconds): a loop that
+        starts its frame then, rather than on a clock of its own, shows a Sample as soon as it
+        can. Returns whether one is there."""
+        self._wake.clear()
+        if any(device.backlog for device in self.devices.values()):
+            return True
+        return self._wake.wait(timeout)
 
     def neutral(self, now_ns: int | None = None) -> None:
         """Every channel back to rest (the neutral key), at the next frame (and so in the take)."""
@@ -342,17 +350,19 @@ def measure_latency(session: LiveSession, renderer, seconds: float = 3.0) -> dic
     ``sample_to_mesh_ms`` until its vertices and normals are ready, before drawing;
     ``frame_work_ms`` is a frame's own work from taking the Samples in to the mesh ready, and
     ``draw_ms`` its drawing and read-back: a Sample waits for the frame being drawn when it
-    arrives, then for its own. Medians and 99th percentiles. The device's own transport (USB, the pty) comes before the Sample's
+    arrives, then for its own. The loop starts a frame as soon as a Sample is queued
+    (``wait_for_input``), as a live loop free of a display's clock would. Medians and 99th percentiles. The device's own transport (USB, the pty) comes before the Sample's
     timestamp and is not included.
     """
     if renderer.camera is None:
-        renderer.frame(session.runtime.rest)
+        renderer.aim(session.runtime.rest)
     renderer.render(session.runtime.rest, session.runtime.rest_normals)  # warm-up (shaders, buffers)
     drawn, mesh, work, draw = [], [], [], []
     frames = 0
     start = time.monotonic_ns()
     end = start + int(seconds * 1e9)
     while time.monotonic_ns() < end:
+        session.wait_for_input(0.1)
         f = session.frame()
         ready = time.monotonic_ns()
         renderer.render(f.vertices, f.normals)

@@ -39,7 +39,7 @@ from puppet.fap.table import faps
 from puppet.io.fapfile import iter_fap
 from puppet.io.samplelog import LogEvent
 from puppet.io.takes import TakeError
-from puppet.live.mappingfile import Mapping
+from puppet.live.channels import Mapping
 
 WriteFrame = Callable[[np.ndarray, "tuple | np.ndarray | None", "tuple | np.ndarray | None"], None]
 """Writes one frame: 68 FAP values (FAPU; FAP 1/2 slots unused), viseme and expression fields."""

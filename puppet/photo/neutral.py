@@ -64,12 +64,12 @@ def neutralise(face: Face, points, targets: np.ndarray, roles: dict[str, int]) -
     with its motion removed) for landmarks at ``points`` (``puppet.photo.build.MeshPoints``) on ``face``,
     the default face; ``roles`` name the rows of the inner lip feature points."""
     runtime = _runtime(face)
-    rest = points.on(runtime.pose(np.zeros(N_FAPS)))
+    rest = points.on(runtime.deform_faps(np.zeros(N_FAPS)))
     shown = expression_shown(face, rest, targets, roles)
     if shown == 0.0:
         return np.zeros(N_FAPS), targets
     values = shown * fit_expression(runtime, points, targets, roles)
-    own = targets - points.on(runtime.pose(values))  # the performer's own shape: offsets from the default
+    own = targets - points.on(runtime.deform_faps(values))  # the performer's own shape: offsets from the default
     mouth = shown * _mouth_weight(face, rest)
     return values, rest + (1.0 - mouth[:, None]) * own + mouth[:, None] * _scaled(rest, own, mouth)
 
@@ -117,7 +117,7 @@ def _mouth_weight(face: Face, rest: np.ndarray) -> np.ndarray:
 def fit_expression(runtime: Runtime, points, targets: np.ndarray, roles: dict[str, int]) -> np.ndarray:
     """The FAP values (68, FAPU; only ``EXPRESSION_FAPS`` nonzero) that best explain ``targets``
     as the default face plus a smooth shape of its own (module docstring)."""
-    rest = points.on(runtime.pose(np.zeros(N_FAPS)))
+    rest = points.on(runtime.deform_faps(np.zeros(N_FAPS)))
     columns = np.array([n - 1 for n in EXPRESSION_FAPS])
     smooth = np.kron(_residual_operator(rest), np.eye(3))
     units = np.array([runtime.face.fapu[fap(n).unit] for n in EXPRESSION_FAPS])
@@ -126,7 +126,7 @@ def fit_expression(runtime: Runtime, points, targets: np.ndarray, roles: dict[st
     for _ in range(REFINE + 1):
         J = _response(runtime, points, values, columns)
         # the performer's own shape is ``wanted - J f``, linearised about ``values``
-        wanted = (targets - points.on(runtime.pose(values))).ravel() + J @ values[columns]
+        wanted = (targets - points.on(runtime.deform_faps(values))).ravel() + J @ values[columns]
         rows = [smooth @ J, on_shape @ J, np.diag(FAP_COST * units), on_values]
         goals = [smooth @ wanted, on_shape @ wanted, np.zeros(len(columns)), np.zeros(len(on_values))]
         values[columns] = lsq_linear(np.vstack(rows), np.concatenate(goals), bounds=_bounds(runtime, columns)).x
@@ -170,7 +170,7 @@ def _response(runtime: Runtime, points, values: np.ndarray, columns: np.ndarray)
         up, down = values.copy(), values.copy()
         up[c] += STEP
         down[c] -= STEP
-        J.append((points.on(runtime.pose(up)) - points.on(runtime.pose(down))).ravel() / (2 * STEP))
+        J.append((points.on(runtime.deform_faps(up)) - points.on(runtime.deform_faps(down))).ravel() / (2 * STEP))
     return np.stack(J, axis=1)
 
 

@@ -56,10 +56,10 @@ from scipy.optimize import lsq_linear
 from scipy.spatial import cKDTree
 
 from puppet.face.autorig import build_rig
-from puppet.face.muscles import folded_triangles
 from puppet.face.rig import Rig
 from puppet.fap.table import N_FAPS, clamp_ranges, fap, faps
 from puppet.runtime.fapengine import LID_FAPS
+from puppet.runtime.musclesolver import folded_triangles
 from puppet.runtime.runtime import Runtime
 
 HELD_OUT = ("browOuterUpLeft", "browOuterUpRight", "cheekSquintLeft", "cheekSquintRight",
@@ -184,10 +184,10 @@ def fit_faps(runtime: Runtime, displacement: np.ndarray, *, refine: int = 2, whe
     model = _LinearModel(runtime, skin, held=held)
     target = model.rows(displacement)
     values = np.zeros(N_FAPS)
-    rest = model.runtime.pose(values)
+    rest = model.runtime.deform_faps(values)
     for step in range(refine + 1):
         J = model.response(values) if step else model.J0
-        now = model.rows(model.runtime.pose(values) - rest)
+        now = model.rows(model.runtime.deform_faps(values) - rest)
         values[model.columns] = _bounded(J, target - now + J @ values[model.columns], model.bounds, model.differences)
     return values
 
@@ -219,7 +219,7 @@ def _reach(runtime: Runtime, triangles: np.ndarray, number: int, end: float, ste
     def folds(value: float) -> bool:
         values = np.zeros(N_FAPS)
         values[number - 1] = value
-        return bool(folded_triangles(runtime.rest, runtime.pose(values), triangles).any())
+        return bool(folded_triangles(runtime.rest, runtime.deform_faps(values), triangles).any())
 
     if not folds(end):
         return None
@@ -244,7 +244,7 @@ def _unlimited(runtime: Runtime) -> Runtime:
 def relative_residual(runtime: Runtime, values: np.ndarray, displacement: np.ndarray) -> float:
     """|V(values) - V0 - D| / |D| over the vertices ``displacement`` moves, on the real rig."""
     moved = np.linalg.norm(displacement, axis=1) > 0
-    error = runtime.pose(values) - runtime.pose(np.zeros(N_FAPS)) - displacement
+    error = runtime.deform_faps(values) - runtime.deform_faps(np.zeros(N_FAPS)) - displacement
     return float(np.linalg.norm(error[moved]) / np.linalg.norm(displacement[moved]))
 
 
@@ -357,7 +357,7 @@ class _LinearModel:
             up, down = values.copy(), values.copy()
             up[c] += step
             down[c] -= step
-            J[:, j] = self.rows(runtime.pose(up) - runtime.pose(down)) / (2 * step)
+            J[:, j] = self.rows(runtime.deform_faps(up) - runtime.deform_faps(down)) / (2 * step)
         return J
 
     def _prior(self, coarse: Runtime) -> list[np.ndarray]:

@@ -111,7 +111,7 @@ class FapEngine:
         solved += [(n, part, point, sign, "IRISD0") for n, (part, point, sign) in LID_FAPS.items()]
         for number, part, point, sign, unit in solved:
             if part in parts:
-                drops = _drop_reach(self.face.feature_points[point] - parts[part].pivot, parts[part].axis)
+                drops = _drop_reach(self._arc(part, point))
                 low, high = np.sort(sign * drops / self.fapu[unit])
                 reach[:, number - 1] = max(low, -TRANSLATION_LIMIT), min(high, TRANSLATION_LIMIT)
         return reach
@@ -195,30 +195,66 @@ class FapEngine:
 
     def controls(self, values: np.ndarray) -> tuple[np.ndarray, dict[str, np.ndarray]]:
         """Control point displacements (K, 3) and rigid motions for 68 low-level FAP values, as
-        the face shows them (``shown``)."""
+        the face shows them (``shown``). A part's motion is made again only when the FAPs it
+        follows change (the motions are shared from frame to frame, so they are read-only)."""
         v = self.shown(values)
         d = (self._translations @ np.clip(v, self.skin_reach[0], self.skin_reach[1])).reshape(-1, 3)
-        motions = {"jaw": self._jaw(v), "head": self._head(v)}
-        for part, (yaw, pitch, thrust) in EYE_FAPS.items():
-            motions[part] = self._eye(part, v[yaw - 1], v[pitch - 1], v[thrust - 1])
+        return d, {part: self._motion(part, make, v) for part, (make, _) in self._parts.items()}
+
+    @functools.cached_property
+    def _parts(self) -> dict[str, tuple]:
+        """{rigid part: (its motion from the 68 values, the FAPs (0-based) it follows)}."""
+        parts = {"jaw": (self._jaw, [2, 13, 14]), "head": (self._head, [n - 1 for n in HEAD_FAPS])}
+        for part, numbers in EYE_FAPS.items():
+            parts[part] = (functools.partial(self._eye_of, part), [n - 1 for n in numbers])
         for number, (part, point, sign) in LID_FAPS.items():
-            if part in self.rig.rigid_parts:
-                motions[part] = self._lid(part, point, sign * v[number - 1] * self.fapu["IRISD0"])
-        if "tongue" in self.rig.rigid_parts:
-            motions["tongue"] = self._tongue(v)
-        return d, {k: m for k, m in motions.items() if k in self.rig.rigid_parts}
+            parts[part] = (functools.partial(self._lid_of, part, point, sign, number - 1), [number - 1])
+        parts["tongue"] = (self._tongue, [n - 1 for n in TONGUE_FAPS])
+        return {part: entry for part, entry in parts.items() if part in self.rig.rigid_parts}
+
+    def _motion(self, part: str, make, v: np.ndarray) -> np.ndarray:
+        key = v[self._parts[part][1]].tobytes()
+        last = self._last_motions.get(part)
+        if last is None or last[0] != key:
+            motion = make(v)
+            motion.setflags(write=False)
+            last = self._last_motions[part] = (key, motion)
+        return last[1]
+
+    @functools.cached_property
+    def _last_motions(self) -> dict[str, tuple[bytes, np.ndarray]]:
+        return {}
+
+    def _eye_of(self, part: str, v: np.ndarray) -> np.ndarray:
+        yaw, pitch, thrust = EYE_FAPS[part]
+        return self._eye(part, v[yaw - 1], v[pitch - 1], v[thrust - 1])
+
+    def _lid_of(self, part: str, point: str, sign: int, index: int, v: np.ndarray) -> np.ndarray:
+        return self._lid(part, point, sign * v[index] * self.fapu["IRISD0"])
 
     def _jaw(self, v: np.ndarray) -> np.ndarray:
         jaw = self.rig.rigid_parts["jaw"]
         drop = v[2] * self.fapu["MNS0"]
-        angle = _angle_for_drop(self.face.feature_points["2.1"] - jaw.pivot, jaw.axis, drop)
+        angle = _angle_for_drop(self._arc("jaw", "2.1"), drop)
         shift = v[13] * self.fapu["MNS0"] * Z - v[14] * self.fapu["MW0"] * X
         return rigid.about(jaw.pivot, rigid.rotation(jaw.axis, angle), shift)
 
     def _lid(self, part: str, point: str, drop: float) -> np.ndarray:
         lid = self.rig.rigid_parts[part]
-        angle = _angle_for_drop(self.face.feature_points[point] - lid.pivot, lid.axis, drop)
+        angle = _angle_for_drop(self._arc(part, point), drop)
         return rigid.about(lid.pivot, rigid.rotation(lid.axis, angle))
+
+    def _arc(self, part: str, point: str) -> tuple[float, float, float]:
+        """``_arc`` of a feature point about a rigid part's axis, made once."""
+        key = (part, point)
+        if key not in self._arcs:
+            self._arcs[key] = _arc(self.face.feature_points[point] - self.rig.rigid_parts[part].pivot,
+                                   self.rig.rigid_parts[part].axis)
+        return self._arcs[key]
+
+    @functools.cached_property
+    def _arcs(self) -> dict[tuple[str, str], tuple[float, float, float]]:
+        return {}
 
     def _eye(self, part: str, yaw: float, pitch: float, thrust: float) -> np.ndarray:
         au = self.fapu["AU"]
@@ -332,26 +368,28 @@ def _own_displacement(point, delta: np.ndarray, motion: np.ndarray | None) -> np
     return np.linalg.solve(A, delta - w * (R @ p0 + t - p0))
 
 
-def _angle_for_drop(offset: np.ndarray, axis: np.ndarray, drop: float) -> float:
-    """The turn about ``axis`` that lowers a point at ``offset`` from the pivot by ``drop`` in y."""
+def _arc(offset: np.ndarray, axis: np.ndarray) -> tuple[float, float, float]:
+    """(A, radius, psi) of a point at ``offset`` from a pivot turning about ``axis``: turned by t,
+    the y of its offset from the axis goes from A to radius cos(t - psi)."""
     a = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
     r = offset - (offset @ a) * a
-    A, C = float(r[1]), float(a[2] * r[0] - a[0] * r[2])  # C: (a x r)_y, in scalars (per frame, per lid)
+    A, C = float(r[1]), float(a[2] * r[0] - a[0] * r[2])  # C: (a x r)_y
     radius = math.hypot(A, C)
+    return A, radius, math.atan2(C, A)
+
+
+def _angle_for_drop(arc: tuple[float, float, float], drop: float) -> float:
+    """The turn about the arc's axis that lowers its point by ``drop`` in y."""
+    A, radius, psi = arc
     if radius < 1e-12 or drop == 0:
         return 0.0
-    psi = math.atan2(C, A)
     target = min(1.0, max(-1.0, (A - drop) / radius))
     return psi - math.copysign(math.acos(target), psi) if psi else math.acos(target)
 
 
-def _drop_reach(offset: np.ndarray, axis: np.ndarray) -> np.ndarray:
-    """(lowest, highest) drop ``_angle_for_drop`` can reach for a point at ``offset``: its arc's
-    top and bottom."""
-    a = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
-    r = offset - (offset @ a) * a
-    A, C = float(r[1]), float(a[2] * r[0] - a[0] * r[2])
-    radius = math.hypot(A, C)
+def _drop_reach(arc: tuple[float, float, float]) -> np.ndarray:
+    """(lowest, highest) drop ``_angle_for_drop`` can reach on an arc: its top and bottom."""
+    A, radius, _ = arc
     return np.array([A - radius, A + radius])
 
 

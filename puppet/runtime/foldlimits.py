@@ -1,7 +1,7 @@
 """How far this face's FAPs can go without folding the skin: the rig's ``fap_follow`` and
 ``fap_reach``, found on the face itself and applied at pose time (``FapEngine.shown``).
 
-A fold is a triangle whose normal turns against its rest normal (``muscles.folded_triangles``).
+A fold is a triangle whose normal turns against its rest normal (``puppet.runtime.musclesolver.folded_triangles``).
 ``fap_coding_params.csv`` gives each FAP a coding range far beyond what a face can do (a brow
 lowered by 900 ENS is 4 cm; a lip raised by 1860 MNS, 3.5 cm), so a FAP at its range end folds
 the skin unless something limits it. Two limits can, both physical, both at pose time: the values

@@ -53,7 +53,7 @@ class VertexNormals:
         flat = np.ascontiguousarray(vertices, dtype=self._corners.dtype).reshape(-1)
         if flat.size != 3 * self.n_vertices:
             raise ValueError(f"expected ({self.n_vertices}, 3) vertices, got {np.shape(vertices)}")
-        np.take(flat, self._gather, out=self._corners)
+        np.take(flat, self._gather, out=self._corners, mode="clip")  # not "raise": it would buffer ``out``
         a, b = self._edges
         np.subtract(self._corners[1], self._corners[0], out=a)
         np.subtract(self._corners[2], self._corners[0], out=b)

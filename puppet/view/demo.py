@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from puppet.view.renderer import Renderer, save_png, write_video
-from puppet.view.rendertake import FapPlayback, frame_head
+from puppet.view.rendertake import FapPlayback, aim_at_head
 
 
 def demo_take() -> Path:
@@ -29,7 +29,7 @@ def run_demo(out: Path, size: tuple[int, int] = (640, 480), view: str = "three_q
     face = playback.face
     neutral = face.vertices
     with Renderer.for_face(face, width=size[0], height=size[1]) as renderer:
-        frame_head(renderer, face, view)
+        aim_at_head(renderer, face, view)
         still = _Still(face.feature_vertices["2.2"], face.feature_vertices["2.3"])
         frames = (still.keep(renderer.render(v, n), v) for v, n in playback)
         video = out / "demo_take.mp4"

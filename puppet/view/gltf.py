@@ -128,40 +128,52 @@ def export_glb(take_or_fap_path: str | os.PathLike, out_path: str | os.PathLike,
         raise ValueError(f"max_frames must be at least 1, got {max_frames}")
     out_path = writable(out_path, ".glb")
     playback = FapPlayback(take_or_fap_path, face)
-    runtime, face = playback.runtime, playback.face
-    rest = np.asarray(runtime.rest, dtype=np.float64)
+    rest = np.asarray(playback.runtime.rest, dtype=np.float64)
     rest32 = rest.astype(np.float32)
-    limit = max_frames if max_frames is not None else (FRAMES_LIMIT if mode == "frames" else MORPH_FRAMES_LIMIT) + 1
-    played = []
-    for vertices, _normals in playback:
-        if limit is not None and len(played) >= limit:
-            break
-        played.append(np.asarray(vertices, dtype=np.float32))
-    if not played:
-        raise TakeError(f"{take_or_fap_path}: the take holds no frames")
-    if mode == "frames" and max_frames is None and len(played) > FRAMES_LIMIT:
-        raise TakeError(f"{take_or_fap_path}: more than {FRAMES_LIMIT} frames; mode='frames' "
-                        "makes one morph target per frame -- pass max_frames or use mode='morph'")
-    if max_frames is None and len(played) > MORPH_FRAMES_LIMIT:
-        raise TakeError(f"{take_or_fap_path}: more than {MORPH_FRAMES_LIMIT} frames, which the export"
-                        " holds in memory at once -- pass max_frames (or export it in parts)")
-    frames, n = len(played), len(rest)
-    D = (np.stack(played) - rest32).reshape(frames, 3 * n)
-    del played
-
+    D = _displacements(playback, take_or_fap_path, rest32, mode, max_frames)
+    frames, n = len(D), len(rest)
     if mode == "morph":
         if tolerance is None:
             tolerance = 1e-3 * float(np.ptp(rest, axis=0).max())
         weights, targets = _basis(D, MAX_TARGETS, EXPLAINED, tolerance)
-        interpolation = "LINEAR"
     else:
         weights, targets = np.eye(frames), D
-        interpolation = "STEP"
     weights32 = weights.astype(np.float32)
     targets32 = targets.astype(np.float32).reshape(len(targets), n, 3)
     max_error = _max_error(playback, rest32, weights32, targets32, frames)
-
+    interpolation = "LINEAR" if mode == "morph" else "STEP"
     b = _Builder()
+    gltf = _document(b, playback, rest32, weights32, targets32, interpolation)
+    total = _write_glb(out_path, gltf, b.blob)
+    return {"frames": frames, "targets": len(targets32), "max_error": max_error, "bytes": total,
+            "mode": mode, "fps": playback.fps}
+
+
+def _displacements(playback: FapPlayback, source: str | os.PathLike, rest32: np.ndarray, mode: str,
+                   max_frames: int | None) -> np.ndarray:
+    """Every played frame's displacement from rest, (frames, 3V) float32, within the mode's limits."""
+    limit = max_frames if max_frames is not None else (FRAMES_LIMIT if mode == "frames" else MORPH_FRAMES_LIMIT) + 1
+    played = []
+    for vertices, _normals in playback:
+        if len(played) >= limit:
+            break
+        played.append(np.asarray(vertices, dtype=np.float32))
+    if not played:
+        raise TakeError(f"{source}: the take holds no frames")
+    if mode == "frames" and max_frames is None and len(played) > FRAMES_LIMIT:
+        raise TakeError(f"{source}: more than {FRAMES_LIMIT} frames; mode='frames' "
+                        "makes one morph target per frame -- pass max_frames or use mode='morph'")
+    if max_frames is None and len(played) > MORPH_FRAMES_LIMIT:
+        raise TakeError(f"{source}: more than {MORPH_FRAMES_LIMIT} frames, which the export"
+                        " holds in memory at once -- pass max_frames (or export it in parts)")
+    return (np.stack(played) - rest32).reshape(len(played), -1)
+
+
+def _document(b: _Builder, playback: FapPlayback, rest32: np.ndarray, weights32: np.ndarray,
+              targets32: np.ndarray, interpolation: str) -> dict:
+    """The glTF JSON of the face mesh with its morph targets and their animated weights, its
+    arrays added to ``b``."""
+    face, runtime = playback.face, playback.runtime
     position = b.add(rest32, "VEC3", ARRAY_BUFFER, bounds=True)
     normal = b.add(_unit(runtime.rest_normals), "VEC3", ARRAY_BUFFER)
     attributes = {"POSITION": position, "NORMAL": normal}
@@ -182,7 +194,7 @@ def export_glb(take_or_fap_path: str | os.PathLike, out_path: str | os.PathLike,
     if len(targets32):
         primitive["targets"] = [{"POSITION": b.add(t, "VEC3", ARRAY_BUFFER, bounds=True)} for t in targets32]
         mesh["weights"] = [0.0] * len(targets32)
-        times = b.add(np.arange(frames, dtype=np.float32) / np.float32(playback.fps), "SCALAR", bounds=True)
+        times = b.add(np.arange(len(weights32), dtype=np.float32) / np.float32(playback.fps), "SCALAR", bounds=True)
         values = b.add(weights32.ravel(), "SCALAR")
         gltf["animations"] = [{
             "name": "take",
@@ -191,16 +203,19 @@ def export_glb(take_or_fap_path: str | os.PathLike, out_path: str | os.PathLike,
         }]
     b.blob += b"\0" * (-len(b.blob) % 4)
     gltf.update(bufferViews=b.views, accessors=b.accessors, buffers=[{"byteLength": len(b.blob)}])
+    return gltf
 
+
+def _write_glb(out_path: str | os.PathLike, gltf: dict, blob: bytes | bytearray) -> int:
+    """Write the binary glTF container (header, JSON chunk, BIN chunk); return its size in bytes."""
     text = json.dumps(gltf, separators=(",", ":")).encode("utf-8")
     text += b" " * (-len(text) % 4)
-    total = 12 + 8 + len(text) + 8 + len(b.blob)
+    total = 12 + 8 + len(text) + 8 + len(blob)
     with open(out_path, "wb") as out:
         out.write(struct.pack("<III", GLB_MAGIC, GLB_VERSION, total))
         out.write(struct.pack("<II", len(text), CHUNK_JSON) + text)
-        out.write(struct.pack("<II", len(b.blob), CHUNK_BIN) + bytes(b.blob))
-    return {"frames": frames, "targets": len(targets32), "max_error": max_error, "bytes": total,
-            "mode": mode, "fps": playback.fps}
+        out.write(struct.pack("<II", len(blob), CHUNK_BIN) + bytes(blob))
+    return total
 
 
 def _max_error(playback: FapPlayback, rest32: np.ndarray, weights32: np.ndarray,

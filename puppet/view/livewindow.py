@@ -40,7 +40,7 @@ from puppet.live.calibrate import CalibrationError, GuidedCalibration, calibrati
 from puppet.live.mappingfile import load_mapping
 from puppet.view.overlay import Cockpit, device_lines
 from puppet.view.renderer import Renderer
-from puppet.view.rendertake import VIEWS, frame_head
+from puppet.view.rendertake import VIEWS, aim_at_head
 from puppet.view.window import NoDisplayError, WindowError, check_display, open_window
 
 WINDOW_S = 1.0
@@ -231,7 +231,7 @@ class LiveView:
             self.renderer.release()
         face = self.session.runtime.face
         self.renderer = Renderer.for_face(face, width=size[0], height=size[1], ctx=self.window.ctx)
-        frame_head(self.renderer, face, self.view)
+        aim_at_head(self.renderer, face, self.view)
         self.window.fbo.viewport = (0, 0, *size)
 
     def _draw_cockpit(self, states: dict[str, Any]) -> None:

@@ -56,18 +56,18 @@ def mouth_pixels(face, runtime, open_jaw: float = 400.0, *, view: str = "front",
     FAP open_jaw = ``open_jaw`` (MNS units), rendered at ``size`` x ``size`` from ``view``
     (framed on the rest face, as ``puppet.view.renderer.render_face`` does)."""
     fap = {"open_jaw": open_jaw}
-    vertices = runtime.pose(fap)
+    vertices = runtime.deform_faps(fap)
     normals = runtime.normals(vertices, runtime.fap_controls(fap)[1])
     teeth = np.zeros(len(face.vertices), dtype=bool)
     for part in TEETH_PARTS:
         teeth[face.parts.get(part, [])] = True
     without = face.triangles[~teeth[face.triangles].all(axis=1)]
     with Renderer.for_face(face, width=size, height=size, **EXACT) as r:
-        r.frame(face.vertices, view=view)
+        r.aim(face.vertices, view=view)
         image = r.render(vertices, normals)
         polygon = r.project(vertices[face.contours["mouth_opening"]])
     with Renderer(without, len(face.vertices), face.colors, width=size, height=size, **EXACT) as r:
-        r.frame(face.vertices, view=view)
+        r.aim(face.vertices, view=view)
         bare = r.render(vertices, normals)
     inside = polygon_mask(polygon, size, size)
     luma = luminance(image)

@@ -154,7 +154,7 @@ class Cockpit:
 
 
 def device_lines(states: Mapping[str, Any], devices: Mapping[str, Any]) -> list[DeviceLine]:
-    """Each device's state (``Frame.states``) and, when it is not open, the reason its adapter gave."""
+    """Each device's state (``LiveFrame.states``) and, when it is not open, the reason its adapter gave."""
     lines = []
     for name, state in states.items():
         text = getattr(state, "value", str(state)).lower()

@@ -16,6 +16,7 @@ import numpy as np
 from puppet.face.load import load_face
 from puppet.face.model import Face
 from puppet.fap.held import held_low_level
+from puppet.fap.pose import Pose
 from puppet.io.fapfile import iter_fap
 from puppet.io.outputs import writable
 from puppet.io.takes import TakeError, take_fap
@@ -43,8 +44,7 @@ class FapPlayback:
     def __iter__(self) -> Iterator[tuple[np.ndarray, np.ndarray]]:
         with iter_fap(self.path) as reader:
             for values in held_low_level(reader):
-                d, motions = self.runtime.faps.controls(values)
-                yield self.runtime.deform_with_normals(d, motions)
+                yield self.runtime.deform_pose(Pose(values))
 
 
 def render_take(path: str | os.PathLike, out: str | os.PathLike, *, face: Face | None = None,
@@ -62,7 +62,7 @@ def render_take(path: str | os.PathLike, out: str | os.PathLike, *, face: Face |
     partial = out.with_name(f".{out.stem}.partial{out.suffix}")
     try:
         with Renderer.for_face(playback.face, width=size[0], height=size[1]) as renderer:
-            frame_head(renderer, playback.face, view)
+            aim_at_head(renderer, playback.face, view)
             total = playback.header.declared_frames
             frames = _progress((renderer.render(v, n) for v, n in playback), total, progress)
             count = write_video(_not_empty(frames, path), partial, playback.fps if fps is None else fps)
@@ -82,14 +82,14 @@ def _not_empty(frames: Iterator[np.ndarray], path: str | os.PathLike) -> Iterato
 
 
 
-def frame_head(renderer: Renderer, face: Face, view: str) -> None:
+def aim_at_head(renderer: Renderer, face: Face, view: str) -> None:
     """Aim the camera at the head (above the neck), from a named view."""
     if view not in VIEWS:
         raise ValueError(f"view {view!r}: expected one of {VIEWS}")
     skin = face.vertices[face.parts["skin"]]
     chin = face.feature_points.get("2.1")
     keep = skin[:, 1] > chin[1] - 0.25 * np.ptp(skin[:, 1]) if chin is not None else slice(None)
-    renderer.frame(skin[keep], view=view)
+    renderer.aim(skin[keep], view=view)
 
 
 def _progress(frames: Iterator[np.ndarray], total: int | None, show: bool) -> Iterator[np.ndarray]:

@@ -51,11 +51,12 @@ import numpy as np
 from puppet.errors import PuppetError
 from puppet.face.model import Face
 from puppet.fap.held import held_low_level
+from puppet.fap.pose import Pose
 from puppet.fap.table import N_FAPS
 from puppet.io.fapfile import FapError, FapReader, FapWarning, iter_fap
 from puppet.runtime.runtime import Runtime
 from puppet.view.renderer import Renderer, software_rasteriser
-from puppet.view.rendertake import VIEWS, FapPlayback, frame_head
+from puppet.view.rendertake import VIEWS, FapPlayback, aim_at_head
 
 BACKENDS = ("pyglet", "glfw")
 """moderngl-window backends tried in order (glfw only where its package is installed)."""
@@ -270,11 +271,9 @@ class HeldTable:
             raise IndexError(f"frame {k}: the take has {self._count} frames")
         return self._chunks[k // self.CHUNK][k % self.CHUNK]
 
-    def pose(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+    def mesh(self, k: int) -> tuple[np.ndarray, np.ndarray]:
         """Vertices and normals of frame ``k``."""
-        faps = self.runtime.faps
-        displacements, motions = faps.controls(self.low_level(k).astype(np.float64))
-        return self.runtime.deform_with_normals(displacements, motions)
+        return self.runtime.deform_pose(Pose(self.low_level(k).astype(np.float64)))
 
     def close(self) -> None:
         if self._reader is not None:
@@ -427,7 +426,7 @@ class Player:
         if self.renderer is None or self.renderer.size != size:
             self._make_renderer(size)
         if k != self._shown:
-            self._pose, self._shown = self.table.pose(k), k
+            self._pose, self._shown = self.table.mesh(k), k
         self.renderer.draw(*self._pose, framebuffer=self.window.fbo)
         self._drawn_at = now
         self.window.swap_buffers()  # also handles the window's events
@@ -467,7 +466,7 @@ class Player:
             self.renderer.release()
         face = self.face
         self.renderer = Renderer.for_face(face, width=size[0], height=size[1], ctx=self.window.ctx)
-        frame_head(self.renderer, face, self.view)
+        aim_at_head(self.renderer, face, self.view)
         self.window.fbo.viewport = (0, 0, *size)
 
     def _on_key(self, key: Any, action: Any, modifiers: Any) -> None:

@@ -1,0 +1,140 @@
+"""Where the live loop's input-to-photon milliseconds go: the loop of ``puppet bench --only latency``
+(the shipped slider box in a process of its own at 200 readings/s, the default face, a 640x480
+offscreen frame with the live window's settings, drawn and read back), every stage of every frame
+timed, wall clock and this thread's CPU:
+
+* ``wait``: the loop waiting for a Sample (``LiveSession.wait_for_input``);
+* ``frame``: ``LiveSession.frame``, split into ``controls`` (FAP engine), ``deform`` (DFFD,
+  muscles and their fold guard, rigid parts) and ``normals``; what is left is draining the
+  devices and the mapping;
+* ``draw``: the renderer's GL calls (upload, llvmpipe's vertex work and binning run here);
+* ``gl``: waiting for the GL to finish (``Renderer.finish``: llvmpipe's threads shade, the GIL is free);
+* ``read``: reading the image back.
+
+Then each Sample's latency (its timestamp to its frame read back) is split into the wait for
+the frame being drawn when it came and its own frame. Medians and 99th percentiles; the process's
+CPU time per frame, llvmpipe's threads included, shows how much of the two cores a frame takes.
+
+    OPENBLAS_NUM_THREADS=1 python tools/latency_profile.py [--seconds 5] [--size 640x480]
+"""
+
+from __future__ import annotations
+
+import argparse
+import multiprocessing
+import os
+import statistics
+import sys
+import tempfile
+import time
+from collections import defaultdict
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from puppet.bench import pipeline as loadbench
+from puppet.face.load import load_face
+from puppet.runtime.runtime import Runtime
+
+
+class Stopwatch:
+    """Wall and this thread's CPU nanoseconds per named stage, for the frame in progress."""
+
+    def __init__(self) -> None:
+        self.frame: dict[str, list[int]] = defaultdict(lambda: [0, 0])
+
+    def timed(self, name: str, fn):
+        def wrapper(*args, **kwargs):
+            wall, cpu = time.monotonic_ns(), time.thread_time_ns()
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                entry = self.frame[name]
+                entry[0] += time.monotonic_ns() - wall
+                entry[1] += time.thread_time_ns() - cpu
+        return wrapper
+
+
+def profile(seconds: float, size: tuple[int, int]) -> None:
+    runtime = Runtime(load_face())
+    watch = Stopwatch()
+    runtime.fap_controls = watch.timed("controls", runtime.fap_controls)
+    runtime._deform = watch.timed("deform", runtime._deform)
+    runtime._normals = watch.timed("normals", runtime._normals)
+    spawn = multiprocessing.get_context("spawn")
+    with tempfile.TemporaryDirectory() as root:
+        link, stop = os.path.join(root, "box"), spawn.Event()
+        box = spawn.Process(target=loadbench.serve_joystick, args=(link, 200.0, stop), daemon=True)
+        box.start()
+        try:
+            loadbench._wait_for(link, box)
+            session = loadbench._session(runtime, f"serial://{link}?protocol=ascii", root)
+            renderer = loadbench._renderer(runtime, size)
+            try:
+                frames, latencies, process_cpu = _loop(session, renderer, watch, seconds)
+            finally:
+                renderer.release()
+                session.close()
+        finally:
+            stop.set()
+            box.join(5)
+    _report(frames, latencies, process_cpu)
+
+
+def _loop(session, renderer, watch: Stopwatch, seconds: float):
+    renderer.render(session.runtime.rest, session.runtime.rest_normals)  # warm-up
+    stages = {"wait": session.wait_for_input, "frame": session.frame, "draw": renderer.draw,
+              "gl": renderer.finish, "read": renderer.read}
+    stages = {name: watch.timed(name, fn) for name, fn in stages.items()}
+    frames, latencies = [], []
+    end = time.monotonic_ns() + int(seconds * 1e9)
+    cpu_start, wall_start = time.process_time(), time.monotonic()
+    while time.monotonic_ns() < end:
+        watch.frame.clear()
+        stages["wait"](0.1)
+        start = time.monotonic_ns()
+        f = stages["frame"]()
+        stages["draw"](f.vertices, f.normals)
+        stages["gl"]()
+        stages["read"]()
+        done = time.monotonic_ns()
+        frames.append({name: tuple(v) for name, v in watch.frame.items()})
+        latencies.extend((start - t, done - start) for t in f.sample_ns)
+    process_cpu = (time.process_time() - cpu_start) / max(len(frames), 1), time.monotonic() - wall_start
+    return frames, latencies, process_cpu
+
+
+def _stats(values: list[float]) -> str:
+    ordered = sorted(values)
+    return f"{statistics.median(ordered):6.2f} {ordered[min(len(ordered) - 1, int(0.99 * len(ordered)))]:6.2f}"
+
+
+def _report(frames: list[dict], latencies: list[tuple[int, int]], process_cpu) -> None:
+    order = ["wait", "frame", "controls", "deform", "normals", "draw", "gl", "read"]
+    print(f"{len(frames)} frames in {process_cpu[1]:.1f} s ({len(frames) / process_cpu[1]:.0f} fps), "
+          f"{len(latencies)} samples; load average {' '.join(open('/proc/loadavg').read().split()[:3])}")
+    print(f"{'stage':10s} {'wall median p99':>16s}   {'cpu median p99':>15s}  (ms; controls, deform and normals are inside frame)")
+    for name in order:
+        wall = [f[name][0] / 1e6 for f in frames if name in f]
+        cpu = [f[name][1] / 1e6 for f in frames if name in f]
+        if wall:
+            print(f"{name:10s} {_stats(wall):>16s}   {_stats(cpu):>15s}")
+    busy = [sum(f[n][0] for n in ("frame", "draw", "gl", "read") if n in f) / 1e6 for f in frames]
+    print(f"{'frame total':10s} {_stats(busy):>16s}   process CPU per frame, all threads: {1e3 * process_cpu[0]:.2f} ms")
+    waited = [w / 1e6 for w, _ in latencies]
+    own = [o / 1e6 for _, o in latencies]
+    total = [(w + o) / 1e6 for w, o in latencies]
+    print(f"sample -> drawn {_stats(total)} = waiting for its frame to start {_stats(waited)} + its frame {_stats(own)} "
+          "(median p99, ms)")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seconds", type=float, default=5.0)
+    parser.add_argument("--size", default="640x480")
+    args = parser.parse_args()
+    profile(args.seconds, tuple(int(x) for x in args.size.split("x")))
+
+
+if __name__ == "__main__":
+    main()
