@@ -19,7 +19,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 TIMED = """
 import sys, time
-from puppet.mapping import load_mapping
+from puppet.live.mappingfile import load_mapping
 load_mapping(sys.argv[1])  # imports and first-use caches out of the way
 times = []
 for _ in range(5):
