@@ -6,7 +6,8 @@ Each recipe is a weighted sum of the artist's ARKit shapes of the default face
 shipped rig (``fit_faps`` over the whole skin, within the face's limits, the eyeballs held still),
 made left/right symmetric, rounded to whole FAPU, and then eased where the sum folds the skin:
 while a triangle is turned over, the FAP pair (a FAP and its mirror) whose easing to 80% unfolds
-most is eased (the artist's joy itself folds a few triangles where cheek and smile meet).
+most is eased (the artist's joy itself folds a few triangles where cheek and smile meet). What is
+written is what the face shows (``FapEngine.shown``: an eased lip FAP's twin follows it).
 
 Fitting the sum beat summing the shapes' own fits (``arkit_faps.json``, eyeballs zeroed): before
 easing, the fit left less of the sum unexplained in 7 of the 8 shapes (median 0.37 against 0.40;
@@ -31,7 +32,7 @@ import yaml
 import puppet
 from puppet.bench.assets import shared_assets
 from puppet.face.examples import load_examples
-from puppet.fap.facs import EXPRESSIONS, VISEMES, blendshapes, describe
+from puppet.fap.facs import EXPRESSIONS, VISEMES, artist_shape, describe
 from puppet.fap.highlevel import high_level_faps
 from puppet.fap.table import N_FAPS, fap
 from puppet.runtime.fapcalibration import fit_faps, mirror_fap, relative_residual
@@ -51,11 +52,6 @@ ACROSS = (15, 64)
 SMALLEST = 5
 """FAPU: smaller values are left out of the table."""
 EASE = 0.8
-
-
-def summed_shape(examples: dict[str, np.ndarray], units: dict[int, float]) -> np.ndarray:
-    """The artist's displacement for FACS ``units``: the weighted sum of the ARKit shapes that show them."""
-    return sum(weight * examples[name] for name, weight in blendshapes(units).items())
 
 
 def symmetric(values: np.ndarray) -> np.ndarray:
@@ -99,7 +95,8 @@ def build(runtime: Runtime, examples: dict[str, np.ndarray]) -> dict[str, dict[i
     """{"expressions" / "visemes": {number: 68 FAP values}} for every recipe of ``puppet.fap.facs``."""
     def values(kind: str, units: dict[int, float]) -> np.ndarray:
         held = EYEBALLS + (MIDLIP if kind == "expressions" and 26 not in units else ())
-        return unfolded(runtime, symmetric(fit_faps(runtime, summed_shape(examples, units), held=held)))
+        eased = unfolded(runtime, symmetric(fit_faps(runtime, artist_shape(examples, units), held=held)))
+        return np.round(runtime.faps.shown(eased))  # the lip pairs as they follow each other on the face
 
     return {kind: {number: values(kind, units) for number, (_, units) in recipes.items()}
             for kind, recipes in (("expressions", EXPRESSIONS), ("visemes", VISEMES))}
@@ -140,7 +137,7 @@ def main(argv: list[str] | None = None) -> int:
     print("relative residual |V(f)-V0-D|/|D| against the summed artist shape: before -> after (folds after)")
     for kind, recipes in (("expressions", EXPRESSIONS), ("visemes", VISEMES)):
         for number, (name, units) in recipes.items():
-            D = summed_shape(examples, units)
+            D = artist_shape(examples, units)
             residuals[(kind, number)] = relative_residual(runtime, built[kind][number], D)
             print(f"  {kind[:-1]} {number:>2} {name:<9} {relative_residual(runtime, before[kind][number], D):.3f} -> "
                   f"{residuals[(kind, number)]:.3f}   ({folds(runtime, built[kind][number])[0]} folds)")

@@ -24,6 +24,8 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
+import numpy as np
+
 
 def _both(stem: str) -> dict[str, float]:
     return {f"{stem}Left": 1.0, f"{stem}Right": 1.0}
@@ -74,6 +76,12 @@ def blendshapes(units: Mapping[int, float]) -> dict[str, float]:
         for name, weight in ACTION_UNITS[unit][1].items():
             out[name] = out.get(name, 0.0) + intensity * weight
     return out
+
+
+def artist_shape(examples: Mapping[str, np.ndarray], units: Mapping[int, float]) -> np.ndarray:
+    """The artist's displacement (N, 3) for ``units``: the weighted sum of the example shapes
+    ({ARKit name: (N, 3)}, ``puppet.face.examples.load_examples``) that show them."""
+    return sum(weight * np.asarray(examples[name]) for name, weight in blendshapes(units).items())
 
 
 def describe(units: Mapping[int, float]) -> str:
