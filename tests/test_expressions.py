@@ -18,11 +18,11 @@ from tools.build_high_level_faps import MARKER, unfolded, write
 
 EXAMPLES = shared_assets() / "makehuman" / "faceunits_arkit"
 
-RESIDUAL_AT_MOST = {("expressions", 1): 0.58, ("expressions", 2): 0.48, ("expressions", 3): 0.37,
+RESIDUAL_AT_MOST = {("expressions", 1): 0.64, ("expressions", 2): 0.48, ("expressions", 3): 0.37,
                     ("expressions", 4): 0.34, ("expressions", 5): 0.60, ("expressions", 6): 0.39,
                     ("visemes", 13): 0.44, ("visemes", 14): 0.45}
 """|V(f) - V0 - D| / |D| against the summed artist shape, as tools/build_high_level_faps.py
-measures it (0.55, 0.46, 0.34, 0.31, 0.57, 0.36, 0.41, 0.42) plus about 0.03. The hand-made
+measures it (0.61, 0.46, 0.34, 0.31, 0.57, 0.36, 0.41, 0.42) plus about 0.03. The hand-made
 tables before them left 0.75, 0.83, 1.16, 0.66, 1.05, 0.50, 0.56, 0.66."""
 
 FACS_BUILT = [("expressions", n) for n in EXPRESSIONS] + [("visemes", n) for n in VISEMES]
@@ -65,12 +65,23 @@ def test_a_recipe_is_the_sum_of_its_units_shapes():
 
 def test_joy_raises_both_lip_corners_and_both_cheeks(runtime, face):
     """The artist lifts the corners 746 MNS and the cheeks 190 ENS; the hand-made joy 200 and
-    120, this one 374 and 167 (the corners' fold-free reach holds them there)."""
+    120, this one 299 and 167 (the corners' fold-free reach holds them there)."""
     joy = _pose(runtime, "expressions", 1)
     for corner in ("8.3", "8.4"):
-        assert _moved(face, joy, corner, 1, "MNS0") >= 300
+        assert _moved(face, joy, corner, 1, "MNS0") >= 280
     for cheek in ("5.3", "5.4"):
         assert _moved(face, joy, cheek, 1, "ENS0") >= 150
+
+
+def test_joy_curves_the_lips_up_toward_the_corners(runtime, face):
+    """A smile, not a pout: each corner rises more than the upper lip midway to it (inner and
+    outer contour), and that more than the lips' middle."""
+    joy = _pose(runtime, "expressions", 1)
+    for corner, beside in (("8.3", ("2.6", "8.5")), ("8.4", ("2.7", "8.6"))):
+        rise = _moved(face, joy, corner, 1, "MNS0")
+        for point in beside:
+            assert rise > _moved(face, joy, point, 1, "MNS0") + 100
+            assert _moved(face, joy, point, 1, "MNS0") >= _moved(face, joy, "8.1", 1, "MNS0")
 
 
 def test_sadness_raises_the_inner_brows_and_lowers_the_lip_corners(runtime, face):

@@ -47,6 +47,12 @@ MIDLIP = (4, 5, 51, 52)
 """The lips' vertical FAPs on the mid-line, held at 0 in an expression that does not drop the jaw
 (FACS unit 26): it leaves the lips' opening to the visemes, so that p/b/m still closes them while
 smiling (the artist's smile lifts the lower lip 170 MNS past the upper one at the mid-line)."""
+UPPER_LIP_SIDES = (8, 9, 55, 56)
+"""The upper lip's points midway to the corners (2.6, 2.7, 8.5, 8.6), held at 0 in joy: the face
+lifts the corners only to their fold-free reach (327 of the artist's 746 MNS), and the fit then
+lifts the upper lip beside them further (395 to 449 MNS), which turns the smile into a pout
+(residual 0.55 that way, 0.61 this way; docs/realism_facs.png shows the smile)."""
+HELD = {("expressions", 1): UPPER_LIP_SIDES}
 ACROSS = (15, 64)
 """shift_jaw and bend_nose: a symmetric shape has none (their mirror is their negative)."""
 SMALLEST = 5
@@ -93,12 +99,12 @@ def unfolded(runtime: Runtime, values: np.ndarray) -> np.ndarray:
 
 def build(runtime: Runtime, examples: dict[str, np.ndarray]) -> dict[str, dict[int, np.ndarray]]:
     """{"expressions" / "visemes": {number: 68 FAP values}} for every recipe of ``puppet.fap.facs``."""
-    def values(kind: str, units: dict[int, float]) -> np.ndarray:
-        held = EYEBALLS + (MIDLIP if kind == "expressions" and 26 not in units else ())
+    def values(kind: str, number: int, units: dict[int, float]) -> np.ndarray:
+        held = EYEBALLS + (MIDLIP if kind == "expressions" and 26 not in units else ()) + HELD.get((kind, number), ())
         eased = unfolded(runtime, symmetric(fit_faps(runtime, artist_shape(examples, units), held=held)))
         return np.round(runtime.faps.shown(eased))  # the lip pairs as they follow each other on the face
 
-    return {kind: {number: values(kind, units) for number, (_, units) in recipes.items()}
+    return {kind: {number: values(kind, number, units) for number, (_, units) in recipes.items()}
             for kind, recipes in (("expressions", EXPRESSIONS), ("visemes", VISEMES))}
 
 
