@@ -3,8 +3,9 @@ puppet/data/high_level_faps.yaml from their FACS recipes (puppet/fap/facs.py).
 
 Each recipe is a weighted sum of the artist's ARKit shapes of the default face
 (``../shared/assets/makehuman/faceunits_arkit``). Its FAPs are fitted to that summed shape on the
-shipped rig (``fit_faps`` over the whole skin, within the face's limits, the eyeballs held still),
-made left/right symmetric, rounded to whole FAPU, and then eased where the sum folds the skin:
+shipped rig (``fit_faps`` over the whole skin, within the face's limits; the eyeballs held still,
+and the lips' mid-line where the jaw does not drop, and in joy the upper lip beside the corners:
+``MIDLIP``, ``UPPER_LIP_SIDES``), made left/right symmetric, rounded to whole FAPU, and then eased where the sum folds the skin:
 while a triangle is turned over, the FAP pair (a FAP and its mirror) whose easing to 80% unfolds
 most is eased (the artist's joy itself folds a few triangles where cheek and smile meet). What is
 written is what the face shows (``FapEngine.shown``: an eased lip FAP's twin follows it).
@@ -53,11 +54,13 @@ lifts the corners only to their fold-free reach (327 of the artist's 746 MNS), a
 lifts the upper lip beside them further (395 to 449 MNS), which turns the smile into a pout
 (residual 0.55 that way, 0.61 this way; docs/realism_facs.png shows the smile)."""
 HELD = {("expressions", 1): UPPER_LIP_SIDES}
+"""FAPs held at 0 in one shape, besides the eyeballs and the mid-line lips."""
 ACROSS = (15, 64)
 """shift_jaw and bend_nose: a symmetric shape has none (their mirror is their negative)."""
 SMALLEST = 5
 """FAPU: smaller values are left out of the table."""
 EASE = 0.8
+"""The share of its value a FAP pair keeps at each easing step (``unfolded``)."""
 
 
 def symmetric(values: np.ndarray) -> np.ndarray:
