@@ -175,7 +175,7 @@ def fit_faps(runtime: Runtime, displacement: np.ndarray, *, refine: int = 2, whe
     bounded least squares linearised at neutral, then ``refine`` Gauss-Newton steps on the real
     rig; over the whole skin (``where="skin"``: motion where the shape has none costs too) or only
     the vertices it moves (``"moved"``, the measure of the rig's issue 11 baseline). The FAPs
-    numbered in ``held`` stay at 0 (an expression that must not turn the eyeballs)."""
+    numbered in ``held`` stay at 0 (an expression's eyeballs, or the lips it leaves to the visemes)."""
     skin = _skin(runtime.face, runtime.rig)
     if where == "moved":
         skin = skin[np.linalg.norm(displacement[skin], axis=1) > 0]
