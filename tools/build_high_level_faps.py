@@ -19,7 +19,7 @@ Everything from the marker line of the YAML file to its end is written here; the
 visemes 0-12 above it are kept. Prints each shape's relative residual |V(f) - V0 - D| / |D|
 against the summed artist shape, before (the table as it was) and after.
 
-    .venv/bin/python tools/build_high_level_faps.py [--check]
+    PYTHONPATH=. .venv/bin/python tools/build_high_level_faps.py [--check]
 """
 
 from __future__ import annotations
