@@ -271,3 +271,16 @@ def _tied(J, b, box, limit):
     K[:, 0] += J[:, 0]
     y = lsq_linear(K, b - J[:, 0] * limit, bounds=(box[0][1:], box[1][1:]), method="bvls").x
     return np.concatenate([[y[0] + limit], y])
+
+
+def test_a_fit_holds_still_the_faps_it_is_told_to(runtime):
+    """A pose the rig made itself (jaw open 200 MNS, left corner up 150) is found again exactly;
+    with open_jaw held, the jaw stays shut and the rest cannot make up for it."""
+    values = np.zeros(68)
+    values[[fap("open_jaw").number - 1, fap("raise_l_cornerlip").number - 1]] = 200, 150
+    shape = runtime.deform_faps(values) - runtime.deform_faps(np.zeros(68))
+    free = fit_faps(runtime, shape)
+    np.testing.assert_allclose(free[[2, 11]], [200, 150], atol=1e-3)
+    held = fit_faps(runtime, shape, held=(3,))
+    assert held[2] == 0
+    assert relative_residual(runtime, held, shape) > 0.5 > relative_residual(runtime, free, shape)

@@ -50,7 +50,7 @@ def low_level(frame: int, joy: float) -> np.ndarray:
     inside the FAP ranges of fap_coding_params.csv (about 1 degree)."""
     v = np.zeros(68)
     t = frame / FPS
-    lower_from_joy = 250 * joy  # joy's close_b_*_eyelid (high_level_faps.yaml)
+    lower_from_joy = 250 * joy  # at least joy's close_b_*_eyelid (190 in high_level_faps.yaml)
     for start in BLINKS:
         k = frame - start
         if 0 <= k < 5:

@@ -1,6 +1,6 @@
 """Print the rig's realism figures and draw contact sheets of its poses.
 
-    .venv/bin/python tools/realism.py [--json] [--no-images] [--out docs]
+    .venv/bin/python tools/realism.py [--json] [--no-images] [--expressions-only] [--out docs]
 
 Measures the default face (``puppet.load_face()``) against the ARKit example shapes in
 ``../shared/assets/makehuman/faceunits_arkit`` (``$FACEPUPPET_SHARED``; all-zero shapes such as
@@ -22,10 +22,13 @@ tongueOut are skipped and named):
 4. **Targets**: met or missed for each.
 
 Images (unless ``--no-images``), in ``--out``: ``realism.png`` (each ARKit shape, the example
-beside the shipped rig's fit, front view; held-out shapes marked) and ``realism_expressions.png``
-(expressions, visemes and the open mouth on the shipped rig, front and three-quarter).
+beside the shipped rig's fit, front view; held-out shapes marked), ``realism_expressions.png``
+(expressions, visemes and the open mouth on the shipped rig, front and three-quarter) and
+``realism_facs.png`` (each expression and the visemes O and U: the artist's shapes for its FACS
+units summed, ``puppet.fap.facs``, beside the rig, front and three-quarter).
 ``--json`` prints the figures as one JSON document instead of the table. About 27 minutes on
-2 busy CPU cores (the two held-out calibrations are most of it).
+2 busy CPU cores (the two held-out calibrations are most of it); ``--expressions-only`` measures
+nothing and draws only the last two sheets.
 """
 
 from __future__ import annotations
@@ -42,6 +45,9 @@ import puppet
 from puppet.bench.assets import shared_assets
 from puppet.face.autorig import build_rig
 from puppet.face.examples import load_examples
+from puppet.fap.facs import EXPRESSIONS as FACS_EXPRESSIONS
+from puppet.fap.facs import VISEMES as FACS_VISEMES
+from puppet.fap.facs import artist_shape
 from puppet.fap.table import clamp_ranges, fap
 from puppet.runtime.fapcalibration import HELD_OUT, HELD_OUT_SIDE, calibrate, capacity, fit_faps, relative_residual
 from puppet.runtime.foldlimits import within_limits
@@ -271,13 +277,31 @@ def expression_sheet(renderer: Renderer, face, runtime) -> Image.Image:
     return sheet(tiles, 2 * COLUMNS)
 
 
-def draw_images(face, runtime, examples: dict[str, np.ndarray], fitted: dict[str, np.ndarray],
+def facs_sheet(renderer: Renderer, face, runtime, examples: dict[str, np.ndarray]) -> Image.Image:
+    """Per FACS-built shape (``puppet.fap.facs``: the expressions, visemes O and U), the artist's
+    summed shape beside the rig at full intensity, front and three-quarter."""
+    poses = ([(f"expression {n} {name}", units, {"expression": (n, 63, 0, 0)}) for n, (name, units) in FACS_EXPRESSIONS.items()]
+             + [(f"viseme {n} {name}", units, {"viseme": (n, 0, 63)}) for n, (name, units) in FACS_VISEMES.items()])
+    tiles = []
+    for label, units, pose in poses:
+        for view in ("front", "three_quarter"):
+            frame(renderer, face, view)
+            tiles += [labelled(renderer.render(face.vertices + artist_shape(examples, units)), f"{label}: artist"),
+                      labelled(rig_render(renderer, runtime, **pose), f"rig ({view.replace('_', '-')})")]
+    return sheet(tiles, 4)
+
+
+def draw_images(face, runtime, examples: dict[str, np.ndarray], fitted: dict[str, np.ndarray] | None,
                 out: Path) -> list[Path]:
+    """The contact sheets in ``out``; without ``fitted`` the ARKit one (realism.png) is left as it is."""
     out.mkdir(parents=True, exist_ok=True)
-    paths = [out / "realism.png", out / "realism_expressions.png"]
+    paths = [out / "realism_expressions.png", out / "realism_facs.png"]
     with Renderer.for_face(face, width=TILE, height=TILE) as renderer:
-        arkit_sheet(renderer, face, runtime, examples, fitted).save(paths[0], optimize=True)
-        expression_sheet(renderer, face, runtime).save(paths[1], optimize=True)
+        expression_sheet(renderer, face, runtime).save(paths[0], optimize=True)
+        facs_sheet(renderer, face, runtime, examples).save(paths[1], optimize=True)
+        if fitted is not None:
+            paths.append(out / "realism.png")
+            arkit_sheet(renderer, face, runtime, examples, fitted).save(paths[-1], optimize=True)
     return paths
 
 
@@ -296,9 +320,15 @@ def main() -> None:
     parser.add_argument("--json", action="store_true", help="print one JSON document instead of the table")
     parser.add_argument("--no-images", action="store_true", help="skip the contact sheets")
     parser.add_argument("--out", type=Path, default=Path("docs"), help="folder for the PNGs (default docs)")
+    parser.add_argument("--expressions-only", action="store_true",
+                        help="measure nothing; draw only realism_expressions.png and realism_facs.png (about a minute)")
     args = parser.parse_args()
     start = time.perf_counter()
     face, shipped, examples, skipped = load(shared_assets() / "makehuman" / "faceunits_arkit")
+    if args.expressions_only:
+        for path in draw_images(face, shipped, examples, None, args.out):
+            print(f"image: {path}")
+        return
     figures, fitted = measure(face, shipped, examples)
     report = {"examples": len(examples), "skipped": skipped, **figures}
     if not args.no_images:

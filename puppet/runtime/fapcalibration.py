@@ -169,17 +169,19 @@ def solve(runtime: Runtime, examples: Mapping[str, np.ndarray], *, held_out: tup
     return model, E, history
 
 
-def fit_faps(runtime: Runtime, displacement: np.ndarray, *, refine: int = 2, where: str = "skin") -> np.ndarray:
+def fit_faps(runtime: Runtime, displacement: np.ndarray, *, refine: int = 2, where: str = "skin",
+             held: tuple[int, ...] = ()) -> np.ndarray:
     """The 68 FAP values (within their ranges) whose pose best reproduces ``displacement`` (N, 3):
     bounded least squares linearised at neutral, then ``refine`` Gauss-Newton steps on the real
     rig; over the whole skin (``where="skin"``: motion where the shape has none costs too) or only
-    the vertices it moves (``"moved"``, the measure of the rig's issue 11 baseline)."""
+    the vertices it moves (``"moved"``, the measure of the rig's issue 11 baseline). The FAPs
+    numbered in ``held`` stay at 0 (an expression's eyeballs, or the lips it leaves to the visemes)."""
     skin = _skin(runtime.face, runtime.rig)
     if where == "moved":
         skin = skin[np.linalg.norm(displacement[skin], axis=1) > 0]
     elif where != "skin":
         raise ValueError(f"where {where!r}: expected 'skin' or 'moved'")
-    model = _LinearModel(runtime, skin)
+    model = _LinearModel(runtime, skin, held=held)
     target = model.rows(displacement)
     values = np.zeros(N_FAPS)
     rest = model.runtime.deform_faps(values)
@@ -305,12 +307,15 @@ def _held(J: np.ndarray, b: np.ndarray, bounds: tuple[np.ndarray, np.ndarray],
 
 class _LinearModel:
     """The rig on the skin, linearised at neutral: J0 (no calibration) and, per axis, the DFFD
-    columns of the points free to move along it (``free``, module docstring)."""
+    columns of the points free to move along it (``free``, module docstring); the FAPs numbered in
+    ``held`` are left out."""
 
-    def __init__(self, runtime: Runtime, skin: np.ndarray, coarse: Runtime | None = None) -> None:
+    def __init__(self, runtime: Runtime, skin: np.ndarray, coarse: Runtime | None = None,
+                 held: tuple[int, ...] = ()) -> None:
         self.runtime = _unlimited(runtime)  # the rig's response; its limits are the fits' bounds
         self.skin = skin
-        self.columns = np.array([f.number - 1 for f in faps() if f.number > 2 and f.number not in NOT_FITTED])
+        self.columns = np.array([f.number - 1 for f in faps()
+                                 if f.number > 2 and f.number not in NOT_FITTED and f.number not in held])
         self.fapu = np.array([runtime.face.fapu[fap(int(c) + 1).unit] for c in self.columns])
         self.J0 = self.response(np.zeros(N_FAPS))
         live = np.abs(self.J0).sum(axis=0) > 0
