@@ -190,15 +190,24 @@ def test_the_picker_saves_what_is_posted(shot, fdp11, tmp_path):
 
 # -- a smiling photo, the texture, a turned head ------------------------------------------------
 
+SMILE = {"open_jaw": 250, "raise_l_cornerlip": 180, "raise_r_cornerlip": 180, "raise_l_cornerlip_o": 200,
+         "raise_r_cornerlip_o": 200, "stretch_l_cornerlip": 120, "stretch_r_cornerlip": 120,
+         "stretch_l_cornerlip_o": 140, "stretch_r_cornerlip_o": 140, "lift_l_cheek": 120, "lift_r_cheek": 120,
+         "close_b_l_eyelid": 250, "close_b_r_eyelid": 250}
+"""A broad smile with parted lips, written out (not the shipped joy, whose FAPs the FACS fit may
+change): what the neutraliser must take out of the mouth, with cheeks and lids it leaves as the
+performer's."""
+
+
 @pytest.fixture(scope="module")
 def smiling(egl):
     """(photo, landmarks, posed vertices, projector): the default face smiling with the jaw open
-    (FAP 2 joy, open_jaw 250: parted lips, teeth showing), rendered frontally; its MediaPipe
-    landmarks projected with their exact depth (pixel scale, smaller is nearer)."""
+    (``SMILE``: parted lips, teeth showing), rendered frontally; its MediaPipe landmarks projected
+    with their exact depth (pixel scale, smaller is nearer)."""
     from puppet.view.renderer import Renderer
 
     face = load_face()
-    posed = Runtime(face).deform_faps({"open_jaw": 250}, expression=(1, 63, 0, 0))
+    posed = Runtime(face).deform_faps(SMILE)
     with Renderer.for_face(face, width=SIZE, height=SIZE) as renderer:
         camera = renderer.aim(face.vertices, view="front", fov=8.0)
         points = pf.mediapipe_points(face).on(posed)
