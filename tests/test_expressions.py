@@ -18,11 +18,11 @@ from tools.build_high_level_faps import MARKER, unfolded, write
 
 EXAMPLES = shared_assets() / "makehuman" / "faceunits_arkit"
 
-RESIDUAL_AT_MOST = {("expressions", 1): 0.64, ("expressions", 2): 0.48, ("expressions", 3): 0.37,
+RESIDUAL_AT_MOST = {("expressions", 1): 0.69, ("expressions", 2): 0.48, ("expressions", 3): 0.37,
                     ("expressions", 4): 0.34, ("expressions", 5): 0.60, ("expressions", 6): 0.39,
                     ("visemes", 13): 0.44, ("visemes", 14): 0.45}
 """|V(f) - V0 - D| / |D| against the summed artist shape, as tools/build_high_level_faps.py
-measures it (0.61, 0.46, 0.34, 0.31, 0.57, 0.36, 0.41, 0.42) plus about 0.03. The hand-made
+measures it (0.66, 0.46, 0.34, 0.31, 0.57, 0.36, 0.41, 0.42) plus about 0.03. The hand-made
 tables before them left 0.75, 0.83, 1.16, 0.66, 1.05, 0.50, 0.56, 0.66."""
 
 FACS_BUILT = [("expressions", n) for n in EXPRESSIONS] + [("visemes", n) for n in VISEMES]
@@ -63,14 +63,44 @@ def test_a_recipe_is_the_sum_of_its_units_shapes():
     np.testing.assert_array_equal(artist_shape(examples, VISEMES[13][1]), np.full((2, 3), 1.0 + 0.3 * 2.0))
 
 
-def test_joy_raises_both_lip_corners_and_both_cheeks(runtime, face):
-    """The artist lifts the corners 746 MNS and the cheeks 190 ENS; the hand-made joy 200 and
-    120, this one 299 and 167 (the corners' fold-free reach holds them there)."""
+def test_joy_raises_both_lip_corners_and_the_lower_lids(runtime, face):
+    """The artist lifts the corners 746 MNS; the hand-made joy 200, this one 327 (the corners'
+    fold-free reach holds them there). The cheek raiser (AU6) shows as the lower lids pushed up
+    and the cheeks puffed, not by lift_cheek, whose motion creases the cheek
+    (``test_joy_creases_no_cheek``)."""
     joy = _pose(runtime, "expressions", 1)
     for corner in ("8.3", "8.4"):
         assert _moved(face, joy, corner, 1, "MNS0") >= 280
-    for cheek in ("5.3", "5.4"):
-        assert _moved(face, joy, cheek, 1, "ENS0") >= 150
+    for lid in ("3.3", "3.4"):  # the bottom eyelids
+        assert _moved(face, joy, lid, 1, "IRISD0") > 0
+
+
+def test_joy_creases_no_cheek(runtime, face):
+    """Near the cheekbones (within 0.08 face widths of 5.3 and 5.4) no skin edge bends more than
+    20 degrees beyond its rest angle: the artist's own smile bends them at most 8, a joy with
+    lift_cheek 167 (the fit's choice) 56, a bright crease under each eye."""
+    joy = _pose(runtime, "expressions", 1)
+    triangles = np.asarray(face.triangles)
+    edges = np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]]), axis=1)
+    owner = np.tile(np.arange(len(triangles)), 3)
+    order = np.lexsort((edges[:, 1], edges[:, 0]))
+    edges, owner = edges[order], owner[order]
+    shared = (edges[1:] == edges[:-1]).all(axis=1)
+    pairs, edges = np.c_[owner[:-1][shared], owner[1:][shared]], edges[:-1][shared]
+
+    def bend(x: np.ndarray) -> np.ndarray:
+        n = np.cross(x[triangles[:, 1]] - x[triangles[:, 0]], x[triangles[:, 2]] - x[triangles[:, 0]])
+        n /= np.linalg.norm(n, axis=1)[:, None]
+        return np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", n[pairs[:, 0]], n[pairs[:, 1]]), -1, 1)))
+
+    extra = bend(joy) - bend(face.vertices)
+    skin = np.zeros(len(face.vertices), dtype=bool)
+    skin[face.parts["skin"]] = True
+    width = np.ptp(face.vertices[face.parts["skin"], 0])
+    for cheekbone in ("5.3", "5.4"):
+        near = np.linalg.norm(face.vertices[edges].mean(axis=1) - face.vertices[face.feature_vertices[cheekbone]], axis=1)
+        near = (near < 0.08 * width) & skin[edges].all(axis=1)
+        assert near.sum() > 20 and extra[near].max() < 20.0
 
 
 def test_joy_curves_the_lips_up_toward_the_corners(runtime, face):
