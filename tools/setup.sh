@@ -45,6 +45,9 @@ if [ ! -x "$VENV/bin/python" ]; then
   "$PYTHON" -m venv "$VENV"
 fi
 "$VENV/bin/python" -m pip install -q --upgrade pip
+# setuptools builds in ./build and keeps what is there: modules an older checkout had (before a
+# move or a rename) would be installed beside the new ones, so every set-up builds afresh.
+rm -rf build
 "$VENV/bin/python" -m pip install -q --force-reinstall --no-deps . \
   && "$VENV/bin/python" -m pip install -q '.[test,midi,osc,docs,batch]'
 
