@@ -21,18 +21,15 @@ CPU time per frame, llvmpipe's threads included, shows how much of the two cores
 from __future__ import annotations
 
 import argparse
-import multiprocessing
-import os
 import statistics
 import sys
-import tempfile
 import time
 from collections import defaultdict
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from puppet.bench import pipeline as loadbench
+from puppet.bench.pipeline import live_box
 from puppet.face.load import load_face
 from puppet.runtime.runtime import Runtime
 
@@ -61,23 +58,8 @@ def profile(seconds: float, size: tuple[int, int]) -> None:
     runtime.fap_controls = watch.timed("controls", runtime.fap_controls)
     runtime._deform = watch.timed("deform", runtime._deform)
     runtime._normals = watch.timed("normals", runtime._normals)
-    spawn = multiprocessing.get_context("spawn")
-    with tempfile.TemporaryDirectory() as root:
-        link, stop = os.path.join(root, "box"), spawn.Event()
-        box = spawn.Process(target=loadbench.serve_joystick, args=(link, 200.0, stop), daemon=True)
-        box.start()
-        try:
-            loadbench._wait_for(link, box)
-            session = loadbench._session(runtime, f"serial://{link}?protocol=ascii", root)
-            renderer = loadbench._renderer(runtime, size)
-            try:
-                frames, latencies, process_cpu = _loop(session, renderer, watch, seconds)
-            finally:
-                renderer.release()
-                session.close()
-        finally:
-            stop.set()
-            box.join(5)
+    with live_box(runtime, size) as (session, renderer):
+        frames, latencies, process_cpu = _loop(session, renderer, watch, seconds)
     _report(frames, latencies, process_cpu)
 
 

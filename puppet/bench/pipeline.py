@@ -17,10 +17,12 @@
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing
 import os
 import tempfile
 import time
+from collections.abc import Iterator
 
 import numpy as np
 
@@ -69,6 +71,15 @@ def _renderer(runtime: Runtime, size: tuple[int, int]) -> Renderer:
 
 def latency(runtime: Runtime, seconds: float = 3.0, size: tuple[int, int] = (640, 480)) -> dict:
     """Input-to-frame latency of the live loop (see the module docstring)."""
+    with live_box(runtime, size) as (session, renderer):
+        return measure_latency(session, renderer, seconds)
+
+
+@contextlib.contextmanager
+def live_box(runtime: Runtime, size: tuple[int, int]) -> Iterator[tuple[LiveSession, Renderer]]:
+    """(session, renderer): the slider box sending ascii lines at 200 readings/s from a process
+    of its own, a live session reading it once it sends, and an offscreen renderer of ``size``
+    with the live window's settings; all closed on leaving."""
     spawn = multiprocessing.get_context("spawn")  # a clean process: no GL or threads of ours forked
     with tempfile.TemporaryDirectory() as root:
         link, stop = os.path.join(root, "box"), spawn.Event()
@@ -79,7 +90,7 @@ def latency(runtime: Runtime, seconds: float = 3.0, size: tuple[int, int] = (640
             session = _session(runtime, f"serial://{link}?protocol=ascii", root)
             renderer = _renderer(runtime, size)
             try:
-                return measure_latency(session, renderer, seconds)
+                yield session, renderer
             finally:
                 renderer.release()
                 session.close()
