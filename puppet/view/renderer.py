@@ -12,7 +12,9 @@ normals; a three-light studio rig (warm key, cool fill, rim) attached to the cam
 scattered under skin; a normalised Blinn-Phong specular lobe with Schlick Fresnel whose strength
 and sharpness follow a per-vertex ``specular`` material (low for skin, high for wet eyes and
 teeth); and a sky/ground hemisphere ambient. Lighting is computed in linear space and encoded to
-sRGB on output.
+sRGB on output. A GPU lights every pixel; a software rasteriser lights every vertex and
+interpolates the colour (``choose_shading``): the face's triangles are a few pixels wide, so
+the image hardly changes and the draw costs a third less.
 
 Back faces are culled: they cost a software rasteriser a fifth of the frame (the back of the
 skull and the teeth's inner sides behind the face), and on the default face they show only
@@ -81,35 +83,14 @@ _LIGHT_COLORS = np.array(
 _SKY_COLOR = (0.11, 0.12, 0.14)
 _GROUND_COLOR = (0.05, 0.04, 0.035)
 
-# The mesh shaders are one source compiled in two variants: ``TEXTURED`` mixes a texture over the
-# vertex albedo; without it no texture is sampled and the uv + weight varying is gone. Varyings
-# are packed into vec4s (albedo + specular strength share one), so an untextured triangle sets up
-# three of them, which is most of a software rasteriser's per-triangle cost.
-_MESH_VERTEX_SHADER = """
-uniform mat4 view_projection;
-in vec3 in_position;
-in vec3 in_normal;
-in vec4 in_material;  // linear albedo, specular strength
-out vec3 v_position;
-out vec3 v_normal;
-out vec4 v_material;
-#ifdef TEXTURED
-in vec3 in_surface;   // uv, texture weight
-out vec3 v_surface;
-#endif
-
-void main() {
-    v_position = in_position;
-    v_normal = in_normal;
-    v_material = in_material;
-#ifdef TEXTURED
-    v_surface = in_surface;
-#endif
-    gl_Position = view_projection * vec4(in_position, 1.0);
-}
-"""
-
-_MESH_FRAGMENT_SHADER = """
+# The mesh shaders are one source compiled in variants. ``TEXTURED`` mixes a texture over the
+# vertex albedo; without it no texture is sampled and the uv + weight varying is gone.
+# ``PER_VERTEX`` lights each vertex in the vertex shader (``SHADING_MODES``): an untextured
+# triangle then interpolates one sRGB colour, a textured one its light and sheen, which the
+# fragment shader multiplies into the texture's albedo. Without it every pixel is lit from the
+# interpolated position and normal (varyings packed into vec4s: albedo + specular strength share
+# one). The lighting itself (``_LIGHTING``) is the same text in either stage.
+_LIGHTING = """
 const int N_LIGHTS = 3;
 const float WRAP = 0.5;                           // how far light wraps past the terminator
 const vec3 SCATTER_TINT = vec3(1.0, 0.38, 0.26);  // colour of the wrapped (scattered) light
@@ -120,15 +101,6 @@ uniform vec3 light_color[N_LIGHTS];      // linear
 uniform vec3 eye;
 uniform vec3 sky_color;
 uniform vec3 ground_color;
-
-in vec3 v_position;
-in vec3 v_normal;
-in vec4 v_material;
-#ifdef TEXTURED
-uniform sampler2D albedo_map;  // sRGB
-in vec3 v_surface;
-#endif
-out vec4 f_color;
 
 // Lambert plus the extra light of wrapped diffuse, tinted: skin's reddish terminator.
 vec3 skin_diffuse(float n_dot_l) {
@@ -152,6 +124,24 @@ float specular(vec3 n, vec3 l, vec3 v, float strength) {
     return strength * fresnel * lobe * max(dot(n, l), 0.0);
 }
 
+// The light a unit albedo reflects diffusely at unit normal n: hemisphere ambient and the rig.
+vec3 diffuse_light(vec3 n) {
+    vec3 light = mix(ground_color, sky_color, 0.5 + 0.5 * n.y);
+    for (int i = 0; i < N_LIGHTS; ++i) {
+        light += light_color[i] * skin_diffuse(dot(n, light_direction[i]));
+    }
+    return light;
+}
+
+// The rig's specular light toward the eye, seen from direction v.
+vec3 sheen(vec3 n, vec3 v, float strength) {
+    vec3 light = vec3(0.0);
+    for (int i = 0; i < N_LIGHTS; ++i) {
+        light += light_color[i] * specular(n, light_direction[i], v, strength);
+    }
+    return light;
+}
+
 vec3 srgb_decode(vec3 c) {
     return mix(c / 12.92, pow((c + 0.055) / 1.055, vec3(2.4)), step(0.04045, c));
 }
@@ -160,24 +150,98 @@ vec3 srgb_encode(vec3 c) {
     c = clamp(c, 0.0, 1.0);
     return mix(c * 12.92, 1.055 * pow(c, vec3(1.0 / 2.4)) - 0.055, step(0.0031308, c));
 }
+"""
+
+_MESH_VERTEX_SHADER = """
+uniform mat4 view_projection;
+in vec3 in_position;
+in vec3 in_normal;
+in vec4 in_material;  // linear albedo, specular strength
+#ifdef TEXTURED
+in vec3 in_surface;   // uv, texture weight
+out vec3 v_surface;
+#endif
+#ifdef PER_VERTEX
+#ifdef TEXTURED
+out vec3 v_albedo;
+out vec3 v_light;     // diffuse light, times the albedo per pixel
+out vec3 v_sheen;     // specular light, added
+#else
+out vec3 v_color;     // sRGB
+#endif
+#else
+out vec3 v_position;
+out vec3 v_normal;
+out vec4 v_material;
+#endif
 
 void main() {
+#ifdef TEXTURED
+    v_surface = in_surface;
+#endif
+#ifdef PER_VERTEX
+    vec3 n = normalize(in_normal);
+    vec3 light = diffuse_light(n);
+    vec3 shine = sheen(n, normalize(eye - in_position), in_material.a);
+#ifdef TEXTURED
+    v_albedo = in_material.rgb;
+    v_light = light;
+    v_sheen = shine;
+#else
+    v_color = srgb_encode(in_material.rgb * light + shine);
+#endif
+#else
+    v_position = in_position;
+    v_normal = in_normal;
+    v_material = in_material;
+#endif
+    gl_Position = view_projection * vec4(in_position, 1.0);
+}
+"""
+
+_MESH_FRAGMENT_SHADER = """
+#ifdef TEXTURED
+uniform sampler2D albedo_map;  // sRGB
+in vec3 v_surface;
+#endif
+#ifdef PER_VERTEX
+#ifdef TEXTURED
+in vec3 v_albedo;
+in vec3 v_light;
+in vec3 v_sheen;
+#else
+in vec3 v_color;
+#endif
+#else
+in vec3 v_position;
+in vec3 v_normal;
+in vec4 v_material;
+#endif
+out vec4 f_color;
+
+void main() {
+#if defined(PER_VERTEX) && !defined(TEXTURED)
+    f_color = vec4(v_color, 1.0);
+#else
+#ifdef PER_VERTEX
+    vec3 albedo = v_albedo;
+#else
+    vec3 albedo = v_material.rgb;
+#endif
+#ifdef TEXTURED
+    albedo = mix(albedo, srgb_decode(texture(albedo_map, v_surface.xy).rgb), v_surface.z);
+#endif
+#ifdef PER_VERTEX
+    vec3 color = albedo * v_light + v_sheen;
+#else
     vec3 n = normalize(v_normal);
     if (!gl_FrontFacing) {
         n = -n;
     }
-    vec3 v = normalize(eye - v_position);
-    vec3 albedo = v_material.rgb;
-#ifdef TEXTURED
-    albedo = mix(albedo, srgb_decode(texture(albedo_map, v_surface.xy).rgb), v_surface.z);
+    vec3 color = albedo * diffuse_light(n) + sheen(n, normalize(eye - v_position), v_material.a);
 #endif
-    vec3 color = albedo * mix(ground_color, sky_color, 0.5 + 0.5 * n.y);
-    for (int i = 0; i < N_LIGHTS; ++i) {
-        vec3 l = light_direction[i];
-        vec3 diffuse = albedo * skin_diffuse(dot(n, l));
-        color += light_color[i] * (diffuse + specular(n, l, v, v_material.a));
-    }
     f_color = vec4(srgb_encode(color), 1.0);
+#endif
 }
 """
 
@@ -259,6 +323,10 @@ softpipe and swrast, Google's SwiftShader, Mesa's Vulkan lavapipe under Zink."""
 ANTIALIAS_MODES = ("fxaa", "none")
 """Screen-space antialiasing after drawing: an FXAA-style post pass, or nothing."""
 
+SHADING_MODES = ("pixel", "vertex")
+"""Where the studio lighting is computed: per pixel from the interpolated normal, or per vertex
+with the colour interpolated (Gouraud)."""
+
 
 def software_rasteriser(ctx: moderngl.Context) -> bool:
     """Whether ``ctx`` draws on the CPU (``SOFTWARE_RASTERISERS``), where every sample costs."""
@@ -286,6 +354,23 @@ def choose_antialias(
         antialias = "fxaa" if software and samples <= 1 else "none"
     samples = min(int(samples), ctx.max_samples) if samples > 1 else 0
     return samples, antialias
+
+
+def choose_shading(ctx: moderngl.Context, shading: str | None = None, *, cull: bool = True) -> str:
+    """The ``SHADING_MODES`` entry a renderer on ``ctx`` uses, beside ``choose_antialias``.
+
+    On a software rasteriser, per vertex: the default face's triangles cover about ten pixels
+    each at 640x480, so lighting its 10k vertices instead of every covered pixel costs about a
+    third of the draw (the per-pixel lighting was 60% of it) and changes the image by 0.15 of a
+    level on average, most on the teeth and lips, whose sheen a vertex samples more coarsely
+    (``tests/test_render_variants.py``). On a GPU, per pixel: there it costs nothing. Drawing
+    back faces (``cull`` off) needs per pixel, which turns a back face's normal round.
+    """
+    if shading is not None and shading not in SHADING_MODES:
+        raise ValueError(f"shading {shading!r}: expected one of {SHADING_MODES}")
+    if not cull:
+        return "pixel"
+    return shading or ("vertex" if software_rasteriser(ctx) else "pixel")
 
 
 def wait_for_gl(ctx: moderngl.Context) -> None:
@@ -387,6 +472,7 @@ class Renderer:
         backend: str = "egl",
         samples: int | None = None,
         antialias: str | None = None,
+        shading: str | None = None,
         ctx: moderngl.Context | None = None,
         cull: bool = True,
     ) -> None:
@@ -396,8 +482,9 @@ class Renderer:
         ``SKIN_SPECULAR``. ``texture`` (H, W, 3) uint8 sRGB, top row first, with ``uv`` (N, 2)
         per vertex (v up, as in OBJ) and ``texture_weight`` (N,) in 0-1 (None: 1) paints the
         texture over the vertex colours. ``samples`` (MSAA, > 1 where supported) and
-        ``antialias`` (``ANTIALIAS_MODES``) default to ``choose_antialias``'s choice for the GL.
-        ``cull`` False draws back faces too (a mesh seen from inside).
+        ``antialias`` (``ANTIALIAS_MODES``) default to ``choose_antialias``'s choice for the GL,
+        ``shading`` (``SHADING_MODES``) to ``choose_shading``'s. ``cull`` False draws back faces
+        too (a mesh seen from inside), always shaded per pixel.
         """
         self.n_vertices = int(n_vertices)
         self.cull = cull
@@ -410,6 +497,7 @@ class Renderer:
         self.camera: Camera | None = None
         with self._current():
             samples, self.antialias = choose_antialias(self.ctx, samples, antialias)
+            self.shading = choose_shading(self.ctx, shading, cull=cull)
             self._create_texture(uv, texture, texture_weight)
             self._create_gl_objects(triangles, colors, materials, samples)
 
@@ -447,6 +535,7 @@ class Renderer:
         """Programs, static and dynamic buffers, vertex arrays, constant uniforms, targets
         (after ``_create_texture``: the mesh's shader variant follows whether there is one)."""
         header = "#version 330\n" + ("#define TEXTURED\n" if self._texture is not None else "")
+        header += ("#define PER_VERTEX\n" if self.shading == "vertex" else "") + _LIGHTING
         self._mesh_program = self.ctx.program(
             vertex_shader=header + _MESH_VERTEX_SHADER, fragment_shader=header + _MESH_FRAGMENT_SHADER
         )
