@@ -213,6 +213,7 @@ def test_every_error_class_in_puppet_is_a_puppet_error_with_its_builtin_base():
 
 
 def test_the_view_choices_are_the_renderers_views():
-    from puppet.view.renderer import VIEW_DIRECTIONS
+    from puppet.view.renderer import ANTIALIAS_MODES, VIEW_DIRECTIONS
 
     assert cli.VIEWS == tuple(VIEW_DIRECTIONS)
+    assert cli.ANTIALIAS_MODES == ANTIALIAS_MODES

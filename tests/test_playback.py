@@ -64,6 +64,26 @@ def test_render_take_writes_a_video_at_the_takes_fps(tmp_path, egl):
     assert np.abs(frames[-1].astype(int) - frames[0].astype(int)).max() > 30
 
 
+def test_render_antialias_smooths_the_videos_edges_when_asked(tmp_path, egl, capsys):
+    """``puppet render --antialias fxaa`` draws the frames through the FXAA pass: the same take
+    as drawn by default (this GL's choice, none on a software rasteriser) differs at edges only."""
+    values = np.zeros((2, 68))
+    values[:, 2] = 300
+    take = tmp_path / "take.fap"
+    write_fap(take, values, fps=20)
+    videos = {mode: tmp_path / f"{mode}.mp4" for mode in ("fxaa", "none")}
+    for mode, video in videos.items():
+        assert cli.main(["render", str(take), "-o", str(video), "--size", "160x120", "--antialias", mode]) == 0
+    fxaa, plain = (_first_frame(videos[mode]) for mode in ("fxaa", "none"))
+    changed = np.abs(fxaa - plain).max(axis=2) > 16
+    assert 0 < changed.mean() < 0.1  # some edge pixels, a small part of the frame
+
+
+def _first_frame(video) -> np.ndarray:
+    with imageio.get_reader(video) as reader:
+        return reader.get_data(0).astype(int)
+
+
 def test_the_shipped_demo_take_is_a_standard_fap_file():
     take = read_fap(demo_take())
     assert take.fps == 25 and len(take) == take.declared_frames > 50

@@ -96,7 +96,7 @@ def test_defaults_follow_the_rasteriser(egl_context) -> None:
     ctx = egl_context
     samples, antialias = render.choose_antialias(ctx)
     if render.software_rasteriser(ctx):
-        assert (samples, antialias) == (0, "fxaa")
+        assert (samples, antialias) == (0, "none")
     else:
         assert samples > 1 and antialias == "none"
     assert render.choose_antialias(ctx, samples=0, antialias="none") == (0, "none")

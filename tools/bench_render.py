@@ -125,6 +125,7 @@ def main() -> None:
         "new, 4x MSAA (a GPU's default)": render.Renderer.for_face(face, samples=4, **options),
         "new, no antialiasing": render.Renderer.for_face(face, samples=0, antialias="none", **options),
         "new default, both sides drawn": render.Renderer.for_face(face, cull=False, **options),
+        "new, lit per pixel, FXAA pass": render.Renderer.for_face(face, shading="pixel", antialias="fxaa", **options),
     }
     new_default = render.Renderer.for_face(face, **options)
     renderers[f"new default ({new_default.samples}x MSAA, {new_default.antialias})"] = new_default

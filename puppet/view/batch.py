@@ -45,13 +45,15 @@ class BatchError(PuppetError, ValueError):
 
 @dataclass(frozen=True)
 class RenderSettings:
-    """How every take of a batch is drawn: video size, camera view, fps (None: the take's)
-    and the face (a face folder or mesh path; None: the embedded face)."""
+    """How every take of a batch is drawn: video size, camera view, fps (None: the take's),
+    the face (a face folder or mesh path; None: the embedded face) and the antialiasing post
+    pass (None: this GL's default, ``renderer.choose_antialias``)."""
 
     size: tuple[int, int] = (640, 480)
     view: str = "front"
     fps: float | None = None
     face: str | None = None
+    antialias: str | None = None
 
 
 @dataclass(frozen=True)
@@ -80,7 +82,7 @@ def render_task(take: str, out_dir: str, settings: RenderSettings) -> TakeResult
     try:
         face, runtime = _face_and_runtime(settings.face)
         frames = render_take(take, video, face=face, runtime=runtime, size=settings.size,
-                             view=settings.view, fps=settings.fps, progress=False)
+                             view=settings.view, fps=settings.fps, progress=False, antialias=settings.antialias)
     except TAKE_ERRORS as exc:
         return TakeResult(str(take), str(video), error=_one_line(exc, take))
     return TakeResult(str(take), str(video), frames, sha256_file(video))

@@ -340,10 +340,14 @@ def choose_antialias(
     """The (MSAA samples, post pass) a renderer on ``ctx`` uses: the one place defaults are set.
 
     On a GPU, 4x MSAA and no post pass: the hardware resolves samples almost for free. On a
-    software rasteriser, no MSAA and the FXAA pass: llvmpipe shades and resolves every sample
-    on the CPU (4x cost 35 ms of a 52 ms frame at 640x480, and 2x as much as 4x), while the
-    post pass costs about one full-screen texture pass. Either value may be given to override
-    it; giving only ``samples`` > 1 turns the post pass off (MSAA already smooths edges).
+    software rasteriser, neither: llvmpipe shades and resolves every sample on the CPU (4x cost
+    35 ms of a 52 ms frame at 640x480, and 2x as much as 4x), and even the FXAA pass, one
+    texture pass over the head's screen box, is 40% of a frame lit per vertex (2.2 of 5.5 ms
+    at 640x480 on two cores), which a sample waits for on its way to the screen once in its own
+    frame and about half of it in the frame before. ``antialias="fxaa"`` asks for the pass (a
+    video render, where nobody waits: ``puppet render --antialias fxaa``). Either value may be
+    given to override the default; giving only ``samples`` > 1 turns the post pass off (MSAA
+    already smooths edges).
     """
     if antialias is not None and antialias not in ANTIALIAS_MODES:
         raise ValueError(f"antialias {antialias!r}: expected one of {ANTIALIAS_MODES}")
@@ -351,7 +355,7 @@ def choose_antialias(
     if samples is None:
         samples = 0 if software or antialias == "fxaa" else 4
     if antialias is None:
-        antialias = "fxaa" if software and samples <= 1 else "none"
+        antialias = "none"
     samples = min(int(samples), ctx.max_samples) if samples > 1 else 0
     return samples, antialias
 

@@ -49,9 +49,10 @@ class FapPlayback:
 
 def render_take(path: str | os.PathLike, out: str | os.PathLike, *, face: Face | None = None,
                 size: tuple[int, int] = (640, 480), view: str = "front", fps: float | None = None,
-                progress: bool = True, runtime: Runtime | None = None) -> int:
+                progress: bool = True, runtime: Runtime | None = None, antialias: str | None = None) -> int:
     """Render a .fap take to an MP4 at the take's fps (or ``fps``); return the frame count.
-    ``runtime`` (of ``face``) saves building one when many takes are rendered in turn.
+    ``runtime`` (of ``face``) saves building one when many takes are rendered in turn;
+    ``antialias`` None draws as the live window does on this GL (``renderer.choose_antialias``).
 
     The video is written beside ``out`` and renamed into place only when every frame has been
     rendered, so a bad take never leaves a broken video behind. The take, its folder and ``out``
@@ -61,7 +62,7 @@ def render_take(path: str | os.PathLike, out: str | os.PathLike, *, face: Face |
     playback = FapPlayback(path, face, runtime)
     partial = out.with_name(f".{out.stem}.partial{out.suffix}")
     try:
-        with Renderer.for_face(playback.face, width=size[0], height=size[1]) as renderer:
+        with Renderer.for_face(playback.face, width=size[0], height=size[1], antialias=antialias) as renderer:
             aim_at_head(renderer, playback.face, view)
             total = playback.header.declared_frames
             frames = _progress((renderer.render(v, n) for v, n in playback), total, progress)
