@@ -1,5 +1,5 @@
 """Before/after/diff sheet of the default face: the old renderer (studio shader, 4x MSAA) and the
-new default (untextured variant, this GL's default antialiasing), neutral and joy; writes
+new default (untextured variant, this GL's default antialiasing and shading), neutral and joy; writes
 docs/render_variants.png and prints the mean absolute differences (0-255)."""
 
 from __future__ import annotations
