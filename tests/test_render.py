@@ -157,3 +157,60 @@ def test_renderers_with_own_contexts_coexist(renderer: Renderer, sphere: trimesh
         other.render(sphere.vertices)
         np.testing.assert_array_equal(renderer.render(sphere.vertices), first)
     np.testing.assert_array_equal(renderer.render(sphere.vertices), first)
+
+
+def test_drawing_through_ctypes_draws_what_moderngl_draws(renderer: Renderer, sphere: trimesh.Trimesh,
+                                                          monkeypatch) -> None:
+    """The draw call and the wait go through the GL library with ctypes (the GIL let go); where
+    no GL library is found moderngl makes them: the same image either way."""
+    from puppet.view import renderer as render
+
+    assert render._gl_library() is not None  # this machine has one: the ctypes path is the one tested
+    vertices = CENTRE + (sphere.vertices - CENTRE) * [1.2, 0.9, 1.0]
+    through_ctypes = renderer.render(vertices)
+    monkeypatch.setattr(render, "_gl_library", lambda: None)
+    np.testing.assert_array_equal(renderer.render(vertices), through_ctypes)
+
+
+def test_other_threads_run_while_the_mesh_is_drawn(egl: None, monkeypatch) -> None:
+    """A device's reader thread is not held up by the draw call, where a software rasteriser
+    transforms, lights and bins the mesh on the calling thread: it runs during the call. With
+    moderngl's call (no GL library found) it cannot (the GIL is held throughout)."""
+    import sys
+    import threading
+
+    from puppet.view import renderer as render
+
+    mesh = trimesh.creation.icosphere(subdivisions=6)  # 82k triangles: milliseconds of draw call
+    with Renderer(mesh.faces, len(mesh.vertices), width=64, height=64) as r:
+        r.aim(mesh.vertices)
+        r.render(mesh.vertices, mesh.vertex_normals)
+
+        def counted_during_draw() -> int:
+            count, running, stop = [0], threading.Event(), threading.Event()
+
+            def count_up() -> None:
+                running.set()
+                while not stop.is_set():
+                    count[0] += 1
+
+            thread = threading.Thread(target=count_up)
+            thread.start()
+            running.wait()  # the counter has run; this thread holds the GIL again from here
+            with r._current():
+                before = count[0]
+                render.draw_triangles(r._mesh, r._index_count)
+                during = count[0] - before
+                render.wait_for_gl(r.ctx)
+            stop.set()
+            thread.join()
+            return during
+
+        interval = sys.getswitchinterval()
+        sys.setswitchinterval(0.05)  # the counter could take the GIL only after 50 ms of waiting
+        try:
+            assert counted_during_draw() > 0
+            monkeypatch.setattr(render, "_gl_library", lambda: None)
+            assert counted_during_draw() == 0
+        finally:
+            sys.setswitchinterval(interval)

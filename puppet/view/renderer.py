@@ -383,23 +383,49 @@ def wait_for_gl(ctx: moderngl.Context) -> None:
     library is found (moderngl's ``finish`` and ``read`` hold it, so while a software rasteriser
     draws for 10 ms no other Python thread runs: a device's reader could not stamp its samples);
     ``ctx.finish()`` elsewhere."""
-    finish = _gl_finish()
-    if finish is None:
+    gl = _gl_library()
+    if gl is None:
         ctx.finish()
     else:
-        finish()
+        gl.glFinish()
+
+
+def draw_triangles(vertex_array: moderngl.VertexArray, count: int) -> None:
+    """Draw ``count`` indices (32-bit) of ``vertex_array`` as triangles, letting go of the GIL
+    meanwhile as ``wait_for_gl`` does: on a software rasteriser the draw call itself transforms,
+    lights (per vertex) and bins the mesh on this thread, about 2 ms of the default face, during
+    which moderngl's ``render`` would keep every device's reader from stamping its samples.
+    ``vertex_array.render`` where the GL library is not found."""
+    gl = _gl_library()
+    if gl is None:
+        vertex_array.render(moderngl.TRIANGLES)
+        return
+    gl.glUseProgram(vertex_array.program.glo)
+    gl.glBindVertexArray(vertex_array.glo)
+    gl.glDrawElements(moderngl.TRIANGLES, count, _GL_UNSIGNED_INT, None)
+
+
+_GL_UNSIGNED_INT = 0x1405
 
 
 @functools.cache
-def _gl_finish():
-    """glFinish of the system's GL library (GLVND's libOpenGL, else libGL, else None)."""
+def _gl_library() -> ctypes.CDLL | None:
+    """The system's GL library (GLVND's libOpenGL, else libGL) with glFinish, glUseProgram,
+    glBindVertexArray and glDrawElements; None where there is none."""
     for name in ("OpenGL", "GL"):
         path = ctypes.util.find_library(name)
-        if path:
-            try:
-                return ctypes.CDLL(path).glFinish
-            except (OSError, AttributeError):
-                continue
+        if not path:
+            continue
+        try:
+            library = ctypes.CDLL(path)
+            for function in ("glFinish", "glUseProgram", "glBindVertexArray", "glDrawElements"):
+                getattr(library, function)
+        except (OSError, AttributeError):
+            continue
+        library.glUseProgram.argtypes = [ctypes.c_uint]
+        library.glBindVertexArray.argtypes = [ctypes.c_uint]
+        library.glDrawElements.argtypes = [ctypes.c_uint, ctypes.c_int, ctypes.c_uint, ctypes.c_void_p]
+        return library
     return None
 
 
@@ -552,6 +578,7 @@ class Renderer:
         self._dynamic = self.ctx.buffer(reserve=self._staging.nbytes, dynamic=True)
         self._static = self.ctx.buffer(_material_data(self.n_vertices, colors, materials))
         self._indices = self.ctx.buffer(np.ascontiguousarray(triangles, dtype="u4"))
+        self._index_count = 3 * len(triangles)
         attributes = [
             (self._dynamic, "3f 3f", "in_position", "in_normal"),
             (self._static, "4f", "in_material"),
@@ -816,7 +843,7 @@ class Renderer:
         self.ctx.enable(moderngl.DEPTH_TEST | (moderngl.CULL_FACE if self.cull else 0))
         if self._texture is not None:
             self._texture.use(location=0)
-        self._mesh.render(moderngl.TRIANGLES)
+        draw_triangles(self._mesh, self._index_count)
         self.ctx.disable(moderngl.CULL_FACE)
 
     def _upload(self, vertices: np.ndarray, normals: np.ndarray | None) -> None:
