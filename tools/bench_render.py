@@ -86,13 +86,14 @@ class Lambert:
 
 def old_render_module(rev: str, name: str = "old_render"):
     """The renderer as it was at ``rev`` (puppet/view/renderer.py, or puppet/render.py before the
-    package was layered), imported under another name."""
+    package was layered, its one import of ours moved to where it lives now), imported under
+    another name."""
     for where in ("puppet/view/renderer.py", "puppet/render.py"):
         shown = subprocess.run(["git", "-C", str(ROOT), "show", f"{rev}:{where}"], capture_output=True, text=True)
         if shown.returncode == 0:
             break
     shown.check_returncode()
-    source = shown.stdout
+    source = shown.stdout.replace("from puppet.normals import", "from puppet.runtime.normals import")  # issue 16's move
     path = Path(tempfile.mkdtemp()) / f"{name}.py"
     path.write_text(source)
     spec = importlib.util.spec_from_file_location(name, path)
@@ -128,9 +129,11 @@ def main() -> None:
         "new, lit per pixel, FXAA pass": render.Renderer.for_face(face, shading="pixel", antialias="fxaa", **options),
     }
     new_default = render.Renderer.for_face(face, **options)
-    renderers[f"new default ({new_default.samples}x MSAA, {new_default.antialias})"] = new_default
-    for r in renderers.values():
-        aim_at_head(r, face, "front")
+    renderers[f"new default ({new_default.samples}x MSAA, {new_default.antialias}, lit per {new_default.shading})"] = new_default
+    aim_at_head(new_default, face, "front")
+    camera = new_default.camera
+    for r in renderers.values():  # the old renderers' camera has the same look_at, not aim
+        r.look_at(camera.eye, camera.target, camera.up, camera.fov, camera.near, camera.far)
     view_projection = new_default._view_projection()
     lambert = Lambert(face, size, view_projection)
     runs = {name: r.render for name, r in renderers.items()}
