@@ -112,6 +112,7 @@ class Runtime:
         self._init_normals()
         self.muscle_names: tuple[str, ...] = tuple(m.name for m in self.rig.muscles)
         self._muscle_models: dict[str, MuscleModel] = {}
+        self._guard_last: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # share, rows, correction
 
     # -- set-up ---------------------------------------------------------------------------
 
@@ -367,12 +368,19 @@ class Runtime:
     def _guard_muscles(self, share: np.ndarray, out: np.ndarray) -> None:
         """The fold guard on the muscles' share ``share`` (their inputs, ``_muscle_spread``'s
         columns), measured on the guard's vertices alone; where it had to act, its correction is
-        added to ``out`` (which already holds the share as DFFD spreads it)."""
-        vertices, guard, spread = self._guard_set_up
-        moved = spread @ share
-        fixed = moved.copy()
-        if guard.relax(fixed, self._guarded(np.flatnonzero(np.any(share != 0, axis=1)))):
-            out[vertices] += (fixed - moved).astype(self.dtype, copy=False)
+        added to ``out`` (which already holds the share as DFFD spreads it). The correction is a
+        function of the share alone, so a held pose reuses the last frame's (``_guard_last``)."""
+        last = self._guard_last
+        if last is None or not np.array_equal(share, last[0]):
+            vertices, guard, spread = self._guard_set_up
+            moved = spread @ share
+            fixed = moved.copy()
+            rows, correction = np.zeros(0, np.int64), np.zeros((0, 3), self.dtype)
+            if guard.relax(fixed, self._guarded(np.flatnonzero(np.any(share != 0, axis=1)))):
+                changed = np.flatnonzero(np.any(fixed != moved, axis=1))
+                rows, correction = vertices[changed], (fixed[changed] - moved[changed]).astype(self.dtype)
+            last = self._guard_last = (share.copy(), rows, correction)
+        out[last[1]] += last[2]
 
     def _guarded(self, moving: np.ndarray) -> np.ndarray:
         """The fold guard's triangles that the muscles' share can squeeze when it moves the inputs
