@@ -494,10 +494,33 @@ class Runtime:
         for name, motion in rigid.items():
             if motion.shape != (3, 4):
                 raise ValueError(f"rigid motion {name!r} must be a 3x4 [R | t] matrix, got shape {motion.shape}")
-        for name, part in self.rig.rigid_parts.items():
-            if part.parent in rigid:
-                rigid[name] = compose(rigid[part.parent], rigid.get(name, _IDENTITY))
-        return {name: motion for name, motion in rigid.items() if not np.array_equal(motion, _IDENTITY)}
+        for name, parent in self._parents:
+            if parent in rigid:
+                rigid[name] = self._composed(name, rigid[parent], rigid.get(name, _IDENTITY))
+        if not rigid:
+            return rigid
+        still = (np.stack(list(rigid.values())) == _IDENTITY).all(axis=(1, 2))
+        return {name: motion for (name, motion), rest in zip(rigid.items(), still) if not rest}
+
+    @functools.cached_property
+    def _parents(self) -> list[tuple[str, str]]:
+        """(part, its parent) for the rig's parts that ride on another (parents first, as the rig lists them)."""
+        return [(name, part.parent) for name, part in self.rig.rigid_parts.items() if part.parent is not None]
+
+    def _composed(self, name: str, outer: np.ndarray, inner: np.ndarray) -> np.ndarray:
+        """``compose(outer, inner)`` for part ``name``, kept while its two motions stay the same
+        (a held jaw carries the tongue: the same motion every frame)."""
+        key = outer.tobytes() + inner.tobytes()
+        last = self._last_composed.get(name)
+        if last is None or last[0] != key:
+            motion = compose(outer, inner)
+            motion.setflags(write=False)
+            last = self._last_composed[name] = (key, motion)
+        return last[1]
+
+    @functools.cached_property
+    def _last_composed(self) -> dict[str, tuple[bytes, np.ndarray]]:
+        return {}
 
     def _move_part(self, part: str, source: np.ndarray, out: np.ndarray, R: np.ndarray,
                    t: np.ndarray | None = None) -> None:
