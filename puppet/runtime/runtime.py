@@ -43,7 +43,9 @@ Muscles (the rig's ``muscles``, ``muscle_names``; ``puppet.face.muscles``) join 
   frame it checks only the triangles touching the vertices the moving inputs' columns of B reach
   (cached per set of moving inputs), and of those exactly only the ones whose corners drifted
   past their reach from a reference field (``EdgeConstraints._bad``): with nothing squeezed, a
-  few whole-array steps and the share's sparse product. It acts only where a corner comes within 5% of
+  few whole-array steps and the share's sparse product. Its correction is a function of the
+  share alone, so a held pose (the share of the last frame) adds the last correction and checks
+  nothing. It acts only where a corner comes within 5% of
   its opposite edge (a triangle folds exactly when a corner crosses that edge), and then only on
   a few rings of triangles around those corners: sweeps, then scaling the share back toward rest
   there until no corner is that close, so no muscle folds the skin at any contraction. On the skin
