@@ -512,6 +512,7 @@ class _SweepPlan:
         coordinates = np.array([0, 1, 2, 0, 1])[None, :, None]  # x y z x y: the cross product's rolls are views
         self._gather = coordinates * m + self._ends[[1, 2, 0]][:, None, :]  # (edge start / end / corner, 5, rows)
         self._offsets = np.arange(3)[:, None] * m  # coordinate j of vertex i is bin j * m + i
+        self._grad = np.array([[[0.0], [1.0], [-1.0]], [[1.0], [-1.0], [0.0]]])  # grad = [0] * t + [1]
         self._rows = np.empty((14, len(self.floor)))  # edge (5), corner - edge start (5), unit normal (3), height
 
     def squeezed(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -534,7 +535,7 @@ class _SweepPlan:
         e, r, across, height = rows[0:3], rows[5:8], rows[10:13], rows[13]
         t = np.minimum(np.maximum((r * e).sum(axis=0) / np.maximum((e * e).sum(axis=0), 1e-300), 0.0), 1.0)
         ids = self._ends[:, low]  # the corner, then the edge's ends
-        grad = np.stack([np.ones_like(t), t - 1.0, -t])  # d height / d position, along `across`
+        grad = self._grad[0] * t + self._grad[1]  # 1, t - 1, -t: d height / d position, along `across`
         wg = self.w[ids] * grad
         denom = (wg * grad).sum(axis=0)
         ok = denom > 0
