@@ -256,3 +256,18 @@ def test_rigid_motions_kept_between_frames_are_those_a_fresh_engine_makes(runtim
             np.testing.assert_array_equal(motions[part], motions0[part], err_msg=part)
     with pytest.raises(ValueError):
         motions["jaw"][0, 3] = 1.0
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.lists(st.floats(-1000.0, 1000.0), min_size=68, max_size=68))
+def test_control_point_displacements_are_each_fap_times_its_motion_summed(runtime, frame):
+    """A frame's control point displacements are the sum over FAPs of each FAP's value (as the
+    face shows it) times that FAP's motion of every point: the engine's sparse product gives the
+    dense definition's sums, to float64 rounding."""
+    values = np.array(frame)
+    values[:2] = 0.0
+    engine = runtime.faps
+    shown = np.clip(engine.shown(values), engine.skin_reach[0], engine.skin_reach[1])
+    expected = (engine._translations * shown).sum(axis=1).reshape(-1, 3)
+    scale = max(np.abs(engine._translations).max() * np.abs(shown).sum(), 1e-300)
+    np.testing.assert_allclose(engine.controls(values)[0], expected, rtol=0, atol=1e-13 * scale)

@@ -59,6 +59,8 @@ import functools
 import math
 
 import numpy as np
+import scipy.sparse as sp
+from scipy.sparse import _sparsetools
 
 from puppet.face import rigid
 from puppet.fap.highlevel import expand
@@ -92,6 +94,7 @@ class FapEngine:
         self._index = {name: i for i, name in enumerate(runtime.control_points)}
         self._own = self._translation_matrix()
         self._translations = self._own + self._calibrated_matrix()
+        self._moves = sp.csr_matrix(self._translations)  # a quarter of it is non-zero: the per-frame product
         self.reach = self._face_limits()
         self.skin_reach = np.stack([np.full(N_FAPS, -np.inf), np.full(N_FAPS, np.inf)])
         for number, (low, high) in self.rig.fap_reach.items():
@@ -198,7 +201,11 @@ class FapEngine:
         the face shows them (``shown``). A part's motion is made again only when the FAPs it
         follows change (the motions are shared from frame to frame, so they are read-only)."""
         v = self.shown(values)
-        d = (self._translations @ np.clip(v, self.skin_reach[0], self.skin_reach[1])).reshape(-1, 3)
+        m = self._moves
+        d = np.zeros(m.shape[0])
+        _sparsetools.csr_matvec(m.shape[0], m.shape[1], m.indptr, m.indices, m.data,
+                                np.clip(v, self.skin_reach[0], self.skin_reach[1]), d)
+        d = d.reshape(-1, 3)
         return d, {part: self._motion(part, make, v) for part, (make, _) in self._parts.items()}
 
     @functools.cached_property

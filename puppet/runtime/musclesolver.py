@@ -492,48 +492,60 @@ class EdgeConstraints:
 class _SweepPlan:
     """What ``EdgeConstraints._sweep`` needs around one set of squeezed triangles, in local
     vertex numbering: every watched corner as a row (vertex ``v`` over edge ``a`` -> ``b``, the
-    rest normal, the floor) and each vertex's inverse mass (0 where it may not move)."""
+    rest normal, the floor) and each vertex's inverse mass (0 where it may not move).
+
+    A sweep on a few hundred rows costs numpy's per-call overhead more than arithmetic, so it is
+    written in as few whole-array calls as give the same sums in the same order: the rows' edge,
+    corner, in-plane normal and height in one buffer (one fancy index picks the squeezed rows),
+    and one ``bincount`` spreading every coordinate's corrections."""
 
     def __init__(self, edges: EdgeConstraints, watched: np.ndarray, free: np.ndarray) -> None:
         self.watched = watched
         self.verts, local = np.unique(edges.triangles[watched], return_inverse=True)
         local = local.reshape(-1, 3)
-        self.v, self.a, self.b = (np.concatenate([local[:, (k + j) % 3] for k in range(3)]) for j in range(3))
+        self._ends = np.stack([np.concatenate([local[:, (k + j) % 3] for k in range(3)]) for j in range(3)])  # v, a, b
         normal = np.tile(edges.normal[watched], (3, 1)).T  # (3, rows)
         self._n1, self._n2 = normal[[1, 2, 0]], normal[[2, 0, 1]]  # for the cross product's two terms
         self.floor = edges.floor[watched].T.ravel()
         self.w = edges.inv_mass[self.verts] * free[self.verts]
         m = len(self.verts)
-        self._gather = np.arange(3)[:, None, None] * m + np.stack([self.a, self.b, self.v])[None]
+        coordinates = np.array([0, 1, 2, 0, 1])[None, :, None]  # x y z x y: the cross product's rolls are views
+        self._gather = coordinates * m + self._ends[[1, 2, 0]][:, None, :]  # (edge start / end / corner, 5, rows)
+        self._offsets = np.arange(3)[:, None] * m  # coordinate j of vertex i is bin j * m + i
+        self._grad = np.array([[[0.0], [1.0], [-1.0]], [[1.0], [-1.0], [0.0]]])  # grad = [0] * t + [1]
+        self._rows = np.empty((14, len(self.floor)))  # edge (5), corner - edge start (5), unit normal (3), height
 
-    def squeezed(self, x: np.ndarray) -> tuple[np.ndarray, tuple[np.ndarray, ...]]:
+    def squeezed(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The rows of positions ``x`` (3, m) whose corner is below its floor, and for those rows
-        (edge, corner - edge start, unit in-plane normal of the edge, height)."""
-        corners = np.take(x, self._gather)  # (3 coordinates, edge start / edge end / corner, rows)
-        edge = corners[:, 1] - corners[:, 0]
-        rel = corners[:, 2] - corners[:, 0]
-        across = self._n1 * edge[[2, 0, 1]] - self._n2 * edge[[1, 2, 0]]  # normal x edge
+        (14, n): the edge and corner - edge start (each x y z x y), the edge's unit in-plane
+        normal, the corner's height."""
+        corners = np.take(x, self._gather)
+        rows = self._rows
+        np.subtract(corners[1:], corners[0], out=rows[:10].reshape(2, 5, -1))
+        edge, rel, across = rows[0:5], rows[5:8], rows[10:13]
+        np.subtract(self._n1 * edge[2:5], self._n2 * edge[1:4], out=across)  # normal x edge
         across /= np.maximum(np.sqrt((across * across).sum(axis=0)), 1e-300)
-        height = (rel * across).sum(axis=0)
-        low = np.flatnonzero(height < self.floor)
-        return low, (edge[:, low], rel[:, low], across[:, low], height[low])
+        np.sum(rel * across, axis=0, out=rows[13])
+        low = np.flatnonzero(rows[13] < self.floor)
+        return low, rows[:, low]
 
-    def correct(self, x: np.ndarray, low: np.ndarray, rows: tuple[np.ndarray, ...]) -> None:
+    def correct(self, x: np.ndarray, low: np.ndarray, rows: np.ndarray) -> None:
         """One sweep's projection of the squeezed rows ``low`` (``rows``: as ``squeezed`` gives
         them) into ``x`` in place."""
-        e, r, across, height = rows
-        t = np.clip((r * e).sum(axis=0) / np.maximum((e * e).sum(axis=0), 1e-300), 0, 1)
-        ids = np.concatenate([self.v[low], self.a[low], self.b[low]])  # the corner, then the edge's ends
-        grad = np.concatenate([np.ones(len(low)), t - 1.0, -t])  # d height / d position, along `across`
+        e, r, across, height = rows[0:3], rows[5:8], rows[10:13], rows[13]
+        t = np.minimum(np.maximum((r * e).sum(axis=0) / np.maximum((e * e).sum(axis=0), 1e-300), 0.0), 1.0)
+        ids = self._ends[:, low]  # the corner, then the edge's ends
+        grad = self._grad[0] * t + self._grad[1]  # 1, t - 1, -t: d height / d position, along `across`
         wg = self.w[ids] * grad
-        denom = (wg * grad).reshape(3, -1).sum(axis=0)
+        denom = (wg * grad).sum(axis=0)
         ok = denom > 0
         step = np.where(ok, (EDGE_TARGET * self.floor[low] - height) / np.where(ok, denom, 1.0), 0.0)
-        share = wg * np.tile(step, 3)  # each corner's move along its row's `across`
+        share = wg * step  # each corner's move along its row's `across`
         m = x.shape[1]
-        count = np.maximum(np.bincount(ids, weights=share != 0, minlength=m), 1.0)
-        for j, direction in enumerate(np.tile(across, (1, 3))):
-            x[j] += EDGE_OVERRELAX * np.bincount(ids, weights=share * direction, minlength=m) / count
+        count = np.maximum(np.bincount(ids.ravel(), weights=(share != 0).ravel(), minlength=m), 1.0)
+        moves = np.bincount((ids.ravel() + self._offsets).ravel(), weights=(share * across[:, None]).ravel(),
+                            minlength=3 * m).reshape(3, m)
+        x += EDGE_OVERRELAX * moves / count
 
 
 def folded_triangles(rest: np.ndarray, deformed: np.ndarray, triangles: np.ndarray) -> np.ndarray:
