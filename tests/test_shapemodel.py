@@ -102,21 +102,35 @@ def test_the_default_faces_own_landmarks_fit_it_with_zero_weights(model):
         assert len(fit.shape) == len(model) and np.abs(fit.shape).max() < 0.05, (depth, np.abs(fit.shape).max())
 
 
+def _shape_error(model, seed: int, depth_weight: float) -> float:
+    """How far the shape fitted to the MediaPipe landmarks of a face the model makes (weights
+    drawn from the prior with ``seed``) is from that face, over the front skin, as a share of
+    how far that face is from the default."""
+    face = load_face()
+    front, points = _front(face), pf.mediapipe_points(face)
+    truth = model.offsets(np.random.default_rng(seed).normal(size=len(model)))
+    weights = fit_shape(model, face.vertices, points, points.on(face.vertices + truth),
+                        depth_weight=depth_weight, noise=0.0, misfit=0.001)
+    error = np.linalg.norm(model.offsets(weights)[front] - truth[front], axis=1).mean()
+    return error / np.linalg.norm(truth[front], axis=1).mean()
+
+
 @settings(max_examples=8, deadline=None)
 @given(st.integers(0, 2 ** 32 - 1))
 def test_the_landmarks_of_a_face_the_model_makes_give_that_face_back(model, seed):
     """Weights drawn from the prior make a face; its MediaPipe landmarks, fitted, give back its
-    shape on the face: within 10% with their depth, within 40% from x and y alone (what a
-    frontal view cannot show is the prior's guess)."""
-    face = load_face()
-    front, points = _front(face), pf.mediapipe_points(face)
-    truth = model.offsets(np.random.default_rng(seed).normal(size=len(model)))
-    size = np.linalg.norm(truth[front], axis=1).mean()
-    for depth_weight, tolerance in ((1.0, 0.1), (0.0, 0.4)):
-        weights = fit_shape(model, face.vertices, points, points.on(face.vertices + truth),
-                            depth_weight=depth_weight, noise=0.0, misfit=0.001)
-        error = np.linalg.norm(model.offsets(weights)[front] - truth[front], axis=1).mean()
-        assert error < tolerance * size, (depth_weight, error / size)
+    shape on the face: within 25% with their depth, within 60% from x and y alone (what a
+    frontal view cannot show is the prior's guess). Over 3,000 draws the worst were 16% and 44%
+    (``test_a_typical_face_comes_back_closer`` holds the typical case)."""
+    for depth_weight, tolerance in ((1.0, 0.25), (0.0, 0.6)):
+        assert _shape_error(model, seed, depth_weight) < tolerance, depth_weight
+
+
+def test_a_typical_face_comes_back_closer(model):
+    """Over 40 faces the model makes, the median fit is within 4% of the face with the
+    landmarks' depth (2% over 3,000 draws) and within 20% from x and y alone (12%)."""
+    for depth_weight, tolerance in ((1.0, 0.04), (0.0, 0.2)):
+        assert np.median([_shape_error(model, seed, depth_weight) for seed in range(40)]) < tolerance, depth_weight
 
 
 def test_a_face_the_model_makes_comes_back_through_the_photo_fit(model):
