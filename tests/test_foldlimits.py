@@ -4,6 +4,8 @@ only, and a FAP still moves its own point by value x FAPU up to them (puppet.run
 from __future__ import annotations
 
 import copy
+import json
+from importlib import resources
 
 import numpy as np
 import pytest
@@ -21,7 +23,8 @@ def _folds(face, vertices) -> int:
     return int(folded_triangles(face.vertices, vertices, np.asarray(face.triangles)).sum())
 
 
-NEEDED_ENDS = {(3, 1080.0): "open_jaw past about 380 MNS: slivers beside the lip corners"}
+NEEDED_ENDS = {(3, 1080.0): "open_jaw (912 MNS shown) folds 4 slivers beside the lip corners: one a side in the "
+                            "sealed lip slit past about 400 MNS, one a side below the corner past about 900"}
 """Range ends that still fold: the NEEDED FAPs (puppet.runtime.foldlimits), whose reach goes as far as
 the artist's shapes (jawOpen) take them. Strict: move a case out once it folds nothing (the lids
 fold nothing since the sliver guard, puppet.runtime.sliverguard)."""
@@ -45,15 +48,11 @@ def test_no_fap_folds_the_face_at_either_end_of_its_range(runtime, face, number,
     assert _folds(face, runtime.deform_faps(values)) == 0
 
 
-WIDE_OPEN = pytest.mark.xfail(strict=True, reason="viseme 10 (A, wide open) opens the jaw to 520 MNS, past "
-                                                  "its fold-free 380: 2 slivers beside the lip corners")
-
-
-@pytest.mark.parametrize("kind, number", [pytest.param(kind, n, marks=WIDE_OPEN) if (kind, n) == ("visemes", 10)
-                                          else (kind, n)
-                                          for kind, top in (("expressions", 6), ("visemes", 14))
+@pytest.mark.parametrize("kind, number", [(kind, n) for kind, top in (("expressions", 6), ("visemes", 14))
                                           for n in range(1, top + 1)])
 def test_expressions_and_visemes_at_full_intensity_fold_nothing(runtime, face, kind, number):
+    """Viseme 10 (A, the jaw at 520 MNS) folded 2 slivers below the lip corners before their quads
+    were split along the other diagonal (``test_the_turned_quads_...``)."""
     pose = {"expression": (number, 63, 0, 0)} if kind == "expressions" else {"viseme": (number, 0, 63)}
     assert _folds(face, runtime.deform_faps(**pose)) == 0
 
@@ -152,3 +151,25 @@ def _unguarded(runtime):
     other = copy.copy(runtime)
     other._slivers = None
     return other
+
+
+def test_the_turned_quads_fold_split_makehuman_s_way_and_not_as_turned(runtime, face):
+    """tools/build_default_face.py splits the ``triangulation`` quads beside the lip corners along
+    their other diagonal: of each mirror pair, MakeHuman's split folds a triangle with the jaw open
+    wide (912 MNS shown), and the turned split folds none (nor at any other range end:
+    ``test_no_fap_folds_...``)."""
+    quads = json.loads((resources.files("puppet.data") / "default_face.json").read_text())["triangulation"]["turned_quads"]
+    vertex_of = {int(s): v for v, s in enumerate(face.source_index) if s >= 0}
+    quads = np.array([[vertex_of[s] for s in quad] for quad in quads])
+    a, b, c, d = quads.T
+    turned = np.concatenate([np.c_[b, c, d], np.c_[b, d, a]])
+    makehuman = np.concatenate([np.c_[a, b, c], np.c_[a, c, d]])
+    rows = {tuple(t) for t in np.asarray(face.triangles)}
+    assert all(tuple(t) in rows for t in turned)
+    values = np.zeros(68)
+    values[2] = 1080
+    wide = runtime.deform_faps(values)
+    assert not folded_triangles(face.vertices, wide, turned).any()
+    folds = folded_triangles(face.vertices, wide, makehuman).reshape(2, -1).any(axis=0)
+    assert folds.reshape(-1, 2).any(axis=1).all()  # each mirror pair
+    assert folds.sum() >= 8

@@ -19,7 +19,8 @@ What it does, in order (each step is a function below):
    bag and the eye sockets are part of the body skin and come with it (the bag is closed: the
    skin's only boundary is the neck loop). Plus the ``helper-tongue``. A face is kept when all its
    vertices are; vertices stay in ascending base order; quads become two triangles (a b c, a c d)
-   with their MakeHuman UVs per corner.
+   with their MakeHuman UVs per corner, except the ``TURNED_QUADS`` beside the lip corners, split
+   along their other diagonal (b c d, b d a): MakeHuman's split folds them as the jaw opens wide.
 3. Eyeballs: the 72-vertex helper eyes are replaced by generated UV spheres, one per eye, centred
    on the joint-eye cube centres with the candidates' eyeball radius and the pole on +z, so the
    front pole vertex is the pupil centre (3.5, 3.6). Rings are dense at the pupil and iris edges;
@@ -155,6 +156,22 @@ GUM_MARGIN_F, GUM_PAPILLA_F, GUM_SIDE_F, GUM_RIDGE_F = -0.04, 0.30, -0.32, -0.42
 GUM_MIN_DEPTH_F = -0.17  # where the mouth bag is shallow, the gum's deep rows may come up to here
 CLEARANCE = 0.004  # dm kept between teeth/gums and the mouth-bag skin
 LIP_SEAL = 0.0005  # dm: how far the closed lips' inner walls overlap across the meeting line
+
+# -- triangulation -------------------------------------------------------------------------------
+TURNED_QUADS = (  # mirror pairs: the face's right side, then its left
+    (498, 414, 427, 499), (7247, 7248, 7187, 7174),  # inner lip, 5 mm from the corners
+    (535, 552, 553, 536), (7280, 7281, 7296, 7295),  # inner lip, 13 mm in from the corners
+    (694, 677, 681, 698), (7419, 7423, 7408, 7404),  # mouth bag, 8 cm behind the corners
+    (3738, 3739, 712, 379), (10406, 7139, 7435, 10407),  # skin 3 mm outside the corners
+    (5145, 5149, 5155, 5144), (11759, 11758, 11769, 11763),  # skin 8 mm outside and above the corners
+)
+"""Body quads (base.obj vertices in the face's own order a b c d) split b c d / b d a instead of
+a b c / a c d. The rule that chose them, on the default face and its shipped rig: MakeHuman's
+split folds a triangle of the quad (its normal turns against its rest normal) at some FAP's
+range end, in practice open_jaw's (from 400 to 912 MNS), while the other split folds under none;
+each quad with its mirror twin. No rule on the rest shape alone picks them: the shorter
+diagonal, or the split with the larger smallest angle, would turn 2,128 or 1,436 quads and
+move the auto-rig's region borders (tests/test_foldlimits.py checks the rule on the shipped face)."""
 
 # -- colours (linear-ish albedo, 0..1) ---------------------------------------------------------------
 SKIN = np.array([0.87, 0.67, 0.57])
@@ -300,14 +317,22 @@ def cut_head(src: Source) -> tuple[np.ndarray, list[int], list[int]]:
     return kept_ids, kept_polys, loop
 
 
-def triangulate(src: Source, polygon_ids: list[int]) -> tuple[np.ndarray, np.ndarray]:
-    """Base-indexed triangles and their uv corners: each polygon fanned from its first corner."""
+def triangulate(src: Source, polygon_ids: list[int], turned=()) -> tuple[np.ndarray, np.ndarray]:
+    """Base-indexed triangles and their uv corners: each polygon fanned from its first corner, the
+    quads in ``turned`` (each given as its corners in order) from their second."""
+    turned = set(map(tuple, turned))
+    found = set()
     tri, tuv = [], []
     for i in polygon_ids:
         poly, puv = src.polygons[i], src.polygon_uvs[i]
+        if tuple(poly) in turned:
+            found.add(tuple(poly))
+            poly, puv = poly[1:] + poly[:1], puv[1:] + puv[:1]
         for k in range(1, len(poly) - 1):
             tri.append((poly[0], poly[k], poly[k + 1]))
             tuv.append((puv[0], puv[k], puv[k + 1]))
+    if found != turned:
+        raise SystemExit(f"build_default_face: quads to turn not in the mesh: {sorted(turned - found)}")
     return np.array(tri, dtype=np.int64), np.array(tuv, dtype=np.int64)
 
 
@@ -949,7 +974,7 @@ def build(source: Path) -> tuple[dict[str, np.ndarray], dict, str]:
     body_ids, body_polys, neck_loop = cut_head(src)
     tongue_ids = src.group_vertices(TONGUE_GROUP)
     tongue_polys = src.group_polygons(TONGUE_GROUP)
-    skin_tri_base, skin_tuv_base = triangulate(src, body_polys)
+    skin_tri_base, skin_tuv_base = triangulate(src, body_polys, TURNED_QUADS)
     tongue_tri_base, tongue_tuv_base = triangulate(src, tongue_polys)
     cand_xyz = {k: np.array(v["xyz"], float) for k, v in cand["points"].items()}
 
@@ -1295,6 +1320,12 @@ def json_document(src, V, T, parts, fp_doc, contours, cand, eye_centres, radius,
             "skin_closed": "the skin's only open boundary is the neck loop: the mouth bag behind the "
                            "lips and the eye sockets behind the lids are closed",
         },
+        "triangulation": {
+            "turned_quads": [list(q) for q in TURNED_QUADS],
+            "note": "body quads a b c d (base.obj vertices) are split a b c / a c d; these are split "
+                    "b c d / b d a: MakeHuman's split folds a triangle of each as the jaw opens wide "
+                    "(beside the lip corners), the other folds at no FAP's range end (mirror pairs)",
+        },
         "fapu": {"values": {k: v / 1024.0 for k, v in fapu_dist.items()} | {"AU": 1e-5},
                  "distances_dm": {k: round(float(v), 6) for k, v in fapu_dist.items()},
                  "definitions": cand["fapu"]["definitions"]},
@@ -1366,8 +1397,10 @@ The build is deterministic: the same source gives byte-identical files.
   `helper-tongue` (its vertices and faces; reshaped, below).
 - Dropped: the rest of the body, the eyelash, hair, clothing and genital helpers, the joint
   marker cubes, and the helper eyes and teeth (replaced, below).
-- Faces are kept when all their vertices are; quads are split a-b-c / a-c-d; MakeHuman's UVs are
-  kept per triangle corner. Kept vertices are in ascending base order; `source_index` gives each
+- Faces are kept when all their vertices are; quads are split a-b-c / a-c-d, except the ten listed
+  in `default_face.json` (`triangulation`), split b-c-d / b-d-a: MakeHuman's split folds them as
+  the jaw opens wide (beside the lip corners), the other folds at no FAP's range end; MakeHuman's
+  UVs are kept per triangle corner. Kept vertices are in ascending base order; `source_index` gives each
   one's base.obj index (-1 for generated vertices).
 
 | part | vertices | triangles | source |
