@@ -65,6 +65,7 @@ from scipy.sparse import _sparsetools
 from puppet.face import rigid
 from puppet.fap.highlevel import expand
 from puppet.fap.table import N_FAPS, fap, faps
+from puppet.runtime.lastmade import LastMade
 
 JAW_FAPS = (3, 14, 15)
 LID_FAPS = {19: ("upper_lid_l", "3.1", 1), 20: ("upper_lid_r", "3.2", 1),  # +: the point drops
@@ -220,17 +221,11 @@ class FapEngine:
         return {part: entry for part, entry in parts.items() if part in self.rig.rigid_parts}
 
     def _motion(self, part: str, make, v: np.ndarray) -> np.ndarray:
-        key = v[self._parts[part][1]].tobytes()
-        last = self._last_motions.get(part)
-        if last is None or last[0] != key:
-            motion = make(v)
-            motion.setflags(write=False)
-            last = self._last_motions[part] = (key, motion)
-        return last[1]
+        return self._last_motions.get(part, v[self._parts[part][1]].tobytes(), lambda: make(v))
 
     @functools.cached_property
-    def _last_motions(self) -> dict[str, tuple[bytes, np.ndarray]]:
-        return {}
+    def _last_motions(self) -> LastMade:
+        return LastMade()
 
     def _eye_of(self, part: str, v: np.ndarray) -> np.ndarray:
         yaw, pitch, thrust = EYE_FAPS[part]

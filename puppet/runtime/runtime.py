@@ -83,6 +83,7 @@ from puppet.face.rigid import compose
 from puppet.fap.pose import Pose
 from puppet.runtime import coefcache
 from puppet.runtime.dffd import DffdError, RegionDeformer
+from puppet.runtime.lastmade import LastMade
 from puppet.runtime.musclesolver import ControlPointMuscles, EdgeConstraints, MuscleModel
 from puppet.runtime.normals import VertexNormals
 from puppet.runtime.sliverguard import sliver_guard
@@ -521,17 +522,11 @@ class Runtime:
     def _composed(self, name: str, outer: np.ndarray, inner: np.ndarray) -> np.ndarray:
         """``compose(outer, inner)`` for part ``name``, kept while its two motions stay the same
         (a held jaw carries the tongue: the same motion every frame)."""
-        key = outer.tobytes() + inner.tobytes()
-        last = self._last_composed.get(name)
-        if last is None or last[0] != key:
-            motion = compose(outer, inner)
-            motion.setflags(write=False)
-            last = self._last_composed[name] = (key, motion)
-        return last[1]
+        return self._last_composed.get(name, outer.tobytes() + inner.tobytes(), lambda: compose(outer, inner))
 
     @functools.cached_property
-    def _last_composed(self) -> dict[str, tuple[bytes, np.ndarray]]:
-        return {}
+    def _last_composed(self) -> LastMade:
+        return LastMade()
 
     def _move_part(self, part: str, source: np.ndarray, out: np.ndarray, R: np.ndarray,
                    t: np.ndarray | None = None) -> None:
