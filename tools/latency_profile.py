@@ -65,6 +65,7 @@ def profile(seconds: float, size: tuple[int, int]) -> None:
 
 def _loop(session, renderer, watch: Stopwatch, seconds: float):
     renderer.render(session.runtime.rest, session.runtime.rest_normals)  # warm-up
+    session.frame()  # the Samples queued before the loop are not its latency (session.measure_latency)
     stages = {"wait": session.wait_for_input, "frame": session.frame, "draw": renderer.draw,
               "gl": renderer.finish, "read": renderer.read}
     stages = {name: watch.timed(name, fn) for name, fn in stages.items()}
