@@ -199,7 +199,7 @@ def test_other_threads_run_while_the_mesh_is_drawn(egl: None, monkeypatch) -> No
             running.wait()  # the counter has run; this thread holds the GIL again from here
             with r._current():
                 before = count[0]
-                render.draw_triangles(r._mesh, r._index_count)
+                render.draw_triangles(r._mesh)
                 during = count[0] - before
                 render.wait_for_gl(r.ctx)
             stop.set()

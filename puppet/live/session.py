@@ -354,9 +354,8 @@ def measure_latency(session: LiveSession, renderer, seconds: float = 3.0) -> dic
     (``wait_for_input``), as a live loop free of a display's clock would. Samples queued before
     the loop starts (while the device was opened and the shaders compiled, up to 100 ms old)
     are taken in by a frame of their own, not timed (``samples_before``): they were 1.3% of a 3 s
-    run, and all of its p99.
-    Medians and 99th percentiles. The device's own transport (USB, the pty) comes before the Sample's
-    timestamp and is not included.
+    run, and all of its p99. Medians and 99th percentiles. The device's own transport (USB, the
+    pty) comes before the Sample's timestamp and is not included.
     """
     if renderer.camera is None:
         renderer.aim(session.runtime.rest)

@@ -366,8 +366,8 @@ def choose_shading(ctx: moderngl.Context, shading: str | None = None, *, cull: b
     On a software rasteriser, per vertex: the default face's triangles cover about ten pixels
     each at 640x480, so lighting its 10k vertices instead of every covered pixel takes about a
     third off the frame (10.5 -> 7.3 ms with the FXAA pass, on two busy cores) and changes the
-    image by 0.15 of a level on average, most on the teeth and lips, whose sheen a vertex samples more coarsely
-    (``tests/test_render_variants.py``). On a GPU, per pixel: there it costs nothing. Drawing
+    image by 0.15 of a level on average, most on the teeth and lips, whose sheen a vertex
+    samples more coarsely (``tests/test_render_variants.py``). On a GPU, per pixel: there it costs nothing. Drawing
     back faces (``cull`` off) needs per pixel, which turns a back face's normal round.
     """
     if shading is not None and shading not in SHADING_MODES:
@@ -390,8 +390,8 @@ def wait_for_gl(ctx: moderngl.Context) -> None:
         gl.glFinish()
 
 
-def draw_triangles(vertex_array: moderngl.VertexArray, count: int) -> None:
-    """Draw ``count`` indices (32-bit) of ``vertex_array`` as triangles, letting go of the GIL
+def draw_triangles(vertex_array: moderngl.VertexArray) -> None:
+    """Draw an indexed ``vertex_array`` as triangles, letting go of the GIL
     meanwhile as ``wait_for_gl`` does: on a software rasteriser the draw call itself transforms,
     lights (per vertex) and bins the mesh on this thread, about 2 ms of the default face, during
     which moderngl's ``render`` would keep every device's reader from stamping its samples.
@@ -402,10 +402,11 @@ def draw_triangles(vertex_array: moderngl.VertexArray, count: int) -> None:
         return
     gl.glUseProgram(vertex_array.program.glo)
     gl.glBindVertexArray(vertex_array.glo)
-    gl.glDrawElements(moderngl.TRIANGLES, count, _GL_UNSIGNED_INT, None)
+    index_type = _GL_INDEX_TYPES[vertex_array.index_element_size]
+    gl.glDrawElements(moderngl.TRIANGLES, vertex_array.vertices, index_type, None)
 
 
-_GL_UNSIGNED_INT = 0x1405
+_GL_INDEX_TYPES = {1: 0x1401, 2: 0x1403, 4: 0x1405}  # bytes an index -> GL_UNSIGNED_BYTE, _SHORT, _INT
 
 
 @functools.cache
@@ -578,7 +579,6 @@ class Renderer:
         self._dynamic = self.ctx.buffer(reserve=self._staging.nbytes, dynamic=True)
         self._static = self.ctx.buffer(_material_data(self.n_vertices, colors, materials))
         self._indices = self.ctx.buffer(np.ascontiguousarray(triangles, dtype="u4"))
-        self._index_count = 3 * len(triangles)
         attributes = [
             (self._dynamic, "3f 3f", "in_position", "in_normal"),
             (self._static, "4f", "in_material"),
@@ -843,7 +843,7 @@ class Renderer:
         self.ctx.enable(moderngl.DEPTH_TEST | (moderngl.CULL_FACE if self.cull else 0))
         if self._texture is not None:
             self._texture.use(location=0)
-        draw_triangles(self._mesh, self._index_count)
+        draw_triangles(self._mesh)
         self.ctx.disable(moderngl.CULL_FACE)
 
     def _upload(self, vertices: np.ndarray, normals: np.ndarray | None) -> None:
