@@ -118,7 +118,6 @@ class Runtime:
         self._init_normals()
         self.muscle_names: tuple[str, ...] = tuple(m.name for m in self.rig.muscles)
         self._muscle_models: dict[str, MuscleModel] = {}
-        self._guard_last: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # share, rows, correction
         self._slivers = None  # the probes that find the sliver guard's triangles deform without it
         self._slivers = sliver_guard(self)
 
@@ -380,20 +379,26 @@ class Runtime:
         """The fold guard on the muscles' share ``share`` (their inputs, ``_muscle_spread``'s
         columns), measured on the guard's vertices alone; where it had to act, its correction is
         added to ``out`` (which already holds the share as DFFD spreads it). The correction is a
-        function of the share alone, so a held pose reuses the last frame's (``_guard_last``)."""
-        last = self._guard_last
-        if last is None or not np.array_equal(share, last[0]):
-            vertices, guard, spread = self._guard_set_up
-            moved = np.zeros((len(vertices), 3))  # spread @ share, without scipy's dispatch (a quarter of it)
-            _sparsetools.csr_matvecs(spread.shape[0], spread.shape[1], 3, spread.indptr, spread.indices, spread.data,
-                                     np.ascontiguousarray(share, dtype=float).ravel(), moved.ravel())
-            fixed = moved.copy()
-            rows, correction = np.zeros(0, np.int64), np.zeros((0, 3), self.dtype)
-            if guard.relax(fixed, self._guarded(np.flatnonzero(np.any(share != 0, axis=1)))):
-                changed = np.flatnonzero(np.any(fixed != moved, axis=1))
-                rows, correction = vertices[changed], (fixed[changed] - moved[changed]).astype(self.dtype)
-            last = self._guard_last = (share.copy(), rows, correction)
-        out[last[1]] += last[2]
+        function of the share alone, so a held pose reuses the last frame's."""
+        share = np.ascontiguousarray(share, dtype=float)
+        rows, correction = self._last_guarded.get("share", share.tobytes(), lambda: self._guard_correction(share))
+        out[rows] += correction
+
+    def _guard_correction(self, share: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(rows, what the fold guard adds to them) for the muscles' share ``share``."""
+        vertices, guard, spread = self._guard_set_up
+        moved = np.zeros((len(vertices), 3))  # spread @ share, without scipy's dispatch (a quarter of it)
+        _sparsetools.csr_matvecs(spread.shape[0], spread.shape[1], 3, spread.indptr, spread.indices, spread.data,
+                                 share.ravel(), moved.ravel())
+        fixed = moved.copy()
+        if not guard.relax(fixed, self._guarded(np.flatnonzero(np.any(share != 0, axis=1)))):
+            return np.zeros(0, np.int64), np.zeros((0, 3), self.dtype)
+        changed = np.flatnonzero(np.any(fixed != moved, axis=1))
+        return vertices[changed], (fixed[changed] - moved[changed]).astype(self.dtype)
+
+    @functools.cached_property
+    def _last_guarded(self) -> LastMade:
+        return LastMade()
 
     def _guarded(self, moving: np.ndarray) -> np.ndarray:
         """The fold guard's triangles that the muscles' share can squeeze when it moves the inputs
