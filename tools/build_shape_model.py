@@ -49,7 +49,7 @@ from photo_check import face_area
 
 from puppet.face.load import load_face
 from puppet.photo.build import _topology_hash
-from puppet.photo.depth import similarity_3d
+from puppet.photo.depth import face_width, similarity_3d
 from puppet.photo.shapemodel import SHAPE_MODEL
 
 OUT = REPO / "puppet" / "data"
@@ -311,7 +311,7 @@ def main(argv: list[str] | None = None) -> int:
     mods = modifiers(wheel)
     basis, explained = components(population(wheel), emphasis(wheel.skin))
     face = load_face()
-    width = float(np.ptp(face.vertices[face.contours["face_oval"], 0]))
+    width = face_width(face)
     args.out.mkdir(parents=True, exist_ok=True)
     np.savez_compressed(args.out / SHAPE_MODEL, basis=basis.astype(np.float16),
                         vertices=wheel.skin.astype(np.int32), explained=explained.astype(np.float32),

@@ -53,7 +53,7 @@ from scipy.spatial import cKDTree
 from puppet.face.load import load_face
 from puppet.face.model import Face
 from puppet.photo import build as pf
-from puppet.photo.depth import DEPTH_TRUST, similarity_3d
+from puppet.photo.depth import DEPTH_TRUST, face_width, similarity_3d
 from puppet.photo.detect import detect_landmarks, photo_python
 from puppet.photo.texture import _inside_distance
 from puppet.runtime.normals import VertexNormals
@@ -151,7 +151,7 @@ def regions(face: Face, area: np.ndarray, shown: np.ndarray) -> np.ndarray:
     of the width inside the face oval, then: forehead above the brows, the nose, the band of
     the eyes, the lower face), from its feature points."""
     v, fp = face.vertices[area], face.feature_points
-    width = float(np.ptp(face.vertices[face.contours["face_oval"], 0]))
+    width = face_width(face)
     eyes, mouth = (fp["3.7"][1] + fp["3.12"][1]) / 2, fp["2.3"][1]
     edge = _inside_distance(face.vertices[face.contours["face_oval"], :2], v[:, :2]) < 0.08 * width
     hidden = ~np.isin(area, shown)
@@ -216,7 +216,7 @@ def neutralised(base: Face) -> str:
         depth = (distance - distance.mean()) * focal / distance.mean()
         landmarks = pf.parse_landmarks(np.c_[renderer.project(points), depth].tolist())
         built, report = pf.face_from_photo(renderer.render(posed), landmarks)
-    width = float(np.ptp(base.vertices[base.contours["face_oval"], 0]))
+    width = face_width(base)
     fv = base.feature_vertices
 
     def mouth(v: np.ndarray) -> str:

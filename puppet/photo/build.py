@@ -58,11 +58,12 @@ from puppet.face.model import Face
 from puppet.fap.table import N_FAPS, fap
 from puppet.photo.depth import (
     DEPTH_TRUST,
-    LANDMARK_NOISE,
     DISTANCE,
+    LANDMARK_NOISE,
     PhotoCamera,
     Similarity3,
     Warp3,
+    face_width,
     fit_warp,
     focal_from_exif,
     similarity_3d,
@@ -458,7 +459,7 @@ def fit_photo(face: Face, landmarks: Landmarks, size: tuple[int, int], *, focal:
     pixels, points, roles, rows = model_points(face, landmarks)
     model = points.on(face.vertices)
     flat, residual, frontal = _checked(landmarks.layout, pixels, model, roles)
-    width = float(np.ptp(face.vertices[face.contours["face_oval"], 0]))
+    width = face_width(face)
     camera = PhotoCamera(focal or DISTANCE * width * flat.scale, np.asarray(size, float) / 2)
     depth = None if landmarks.depth is None else -landmarks.depth[rows]
     trust = 0.0 if depth is None else depth_trust

@@ -162,6 +162,12 @@ class Warp3:
         return ((moved[:3] - moved[3:]) / (2 * step)).T
 
 
+def face_width(face: Face) -> float:
+    """The width of ``face``'s oval (its ``face_oval`` contour, across x): the unit a photo's
+    errors, smoothings and distances are measured in."""
+    return float(np.ptp(face.vertices[face.contours["face_oval"], 0]))
+
+
 def fit_warp(face: Face, sites: np.ndarray, targets: np.ndarray, noise: float = LANDMARK_NOISE) -> Warp3:
     """The warp taking ``sites`` (M, 3, on ``face``) to ``targets`` (M, 3), the face's hidden
     head held still (``back_anchors``), x and y smoothed as much as landmarks erring by ``noise``
@@ -169,8 +175,8 @@ def fit_warp(face: Face, sites: np.ndarray, targets: np.ndarray, noise: float = 
     anchors = back_anchors(face)
     points = np.vstack([sites, anchors])
     shift = np.vstack([targets - sites, np.zeros_like(anchors)])
-    width = float(np.ptp(face.vertices[face.contours["face_oval"], 0]))
-    xy = RBFInterpolator(points, shift[:, :2], kernel="thin_plate_spline", smoothing=XY_SMOOTHING + SMOOTHING * (noise * width) ** 2)
+    smoothing = XY_SMOOTHING + SMOOTHING * (noise * face_width(face)) ** 2
+    xy = RBFInterpolator(points, shift[:, :2], kernel="thin_plate_spline", smoothing=smoothing)
     z = RBFInterpolator(points, shift[:, 2:], kernel="thin_plate_spline", smoothing=Z_SMOOTHING)
     return Warp3(xy, z)
 

@@ -39,7 +39,7 @@ from scipy.spatial import cKDTree
 
 from puppet.face.folder import TexturedFace
 from puppet.face.model import Face
-from puppet.photo.depth import PhotoCamera
+from puppet.photo.depth import PhotoCamera, face_width
 from puppet.runtime.normals import VertexNormals
 
 TEXTURE_MAX = 1024  # longest side of texture.png, pixels
@@ -258,7 +258,7 @@ def _skin_colors(face: Face, weight: np.ndarray, edge: np.ndarray, tone: np.ndar
     if free.any():
         A = laplacian[free][:, free].tocsc()
         base[free] = spla.spsolve(A, -laplacian[free][:, fixed] @ base[fixed]).reshape(-1, 3)
-    radius = TONE_RADIUS * float(np.ptp(face.vertices[face.contours["face_oval"], 0]))
+    radius = TONE_RADIUS * face_width(face)
     near = cKDTree(v).sparse_distance_matrix(cKDTree(v), 2.5 * radius, output_type="coo_matrix")
     kernel = sp.csr_matrix((np.exp(-(near.data / radius) ** 2), (near.row, near.col)), shape=near.shape)
     around = (kernel @ colors[skin]) / np.asarray(kernel.sum(axis=1))
