@@ -101,6 +101,25 @@ def test_look_at_from_behind(renderer: Renderer, sphere: trimesh.Trimesh) -> Non
     assert _is_grey(image[0, 0])
 
 
+def test_a_moved_camera_is_drawn_from_where_it_now_is(renderer: Renderer, sphere: trimesh.Trimesh) -> None:
+    """The camera's uniforms are written only when the camera changes: each frame after a move
+    (and after moving back) equals a fresh renderer's from that camera."""
+    front = renderer.camera
+    side = Renderer(sphere.faces, len(sphere.vertices), width=WIDTH, height=HEIGHT)
+    try:
+        images = []
+        for eye in (CENTRE + [4.0, 1.0, 3.0], front.eye):
+            renderer.look_at(eye, CENTRE, fov=front.fov)
+            side.look_at(eye, CENTRE, fov=front.fov)
+            images.append(renderer.render(sphere.vertices))
+            assert np.array_equal(images[-1], renderer.render(sphere.vertices))  # a frame with the camera held
+            assert np.array_equal(images[-1], side.render(sphere.vertices))
+        assert np.abs(images[0].astype(int) - images[1]).max() > 100
+    finally:
+        side.release()
+        renderer.camera = front
+
+
 def test_existing_context_is_used_and_kept(sphere: trimesh.Trimesh, egl_context) -> None:
     ctx = egl_context
     with Renderer(sphere.faces, len(sphere.vertices), width=64, height=64, ctx=ctx) as r:
