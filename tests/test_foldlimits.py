@@ -10,6 +10,8 @@ from importlib import resources
 import numpy as np
 import pytest
 
+import puppet
+
 from puppet.face.autorig import _lid_share
 from puppet.face.rig import load_rig, save_rig
 from puppet.fap.highlevel import high_level_faps
@@ -144,6 +146,19 @@ def test_a_full_blink_folds_no_eye_corner_and_still_closes(runtime, face, number
         lid = face.feature_vertices["3.1" if number == 19 else "3.2"]
         drop = face.vertices[lid, 1] - guarded[lid, 1]
         assert drop == pytest.approx(value * face.fapu["IRISD0"], abs=1e-9)
+
+
+def test_a_held_blink_reuses_the_sliver_guard_s_fix_and_shows_the_same_face(runtime, face):
+    """The fix is a function of the watched vertices' positions: frame after frame a runtime that
+    keeps it from the last frame (a blink held, then a brow moving under it, then the blink held
+    again) shows exactly what a runtime deforming each pose afresh shows."""
+    poses = [{19: 1024.0}, {19: 1024.0}, {19: 1024.0, 31: 80.0}, {19: 1024.0}, {19: 1024.0}, {19: 500.0}]
+    for pose in poses:
+        values = np.zeros(68)
+        for number, value in pose.items():
+            values[number - 1] = value
+        fresh = puppet.Runtime(face, dtype=np.float64)
+        np.testing.assert_array_equal(runtime.deform_faps(values), fresh.deform_faps(values))
 
 
 def _unguarded(runtime):
