@@ -228,6 +228,15 @@ def test_the_arkit_mappings_are_written_from_the_solved_vectors(tmp_path):
     assert mapping is not None and vectors["jawOpen"]["open_jaw"] > 0
 
 
+@pytest.mark.parametrize("name, bound", [("eyeLookInLeft", 0.36), ("eyeLookOutRight", 0.36), ("eyeLookUpLeft", 0.31)])
+def test_the_lids_follow_a_gaze_to_the_eye_corners(runtime, examples, name, bound):
+    """The gaze FAPs keep the lid motions calibration learned, corners included (the fold limits
+    fade every other FAP's there): the eye looks' fits leave 0.34 (in, out) and 0.30 (up) of the
+    artist's shapes, 0.40 and 0.32 with the gaze's lid motions faded too."""
+    shape = examples[name]
+    assert relative_residual(runtime, fit_faps(runtime, shape), shape) < bound
+
+
 @pytest.mark.slow
 def test_a_fit_keeps_within_the_fold_limits_so_the_face_shows_its_values(runtime, examples):
     """The shipped rig's fold limits (puppet.runtime.foldlimits) bound every fit: each FAP within its
