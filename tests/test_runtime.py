@@ -12,6 +12,7 @@ from puppet.face import rigid
 from puppet.face.default import load_default_rig
 from puppet.face.load import load_face
 from puppet.face.rig import load_rig, save_rig
+from puppet.runtime.musclesolver import folded_triangles
 from puppet.runtime.runtime import Runtime
 from puppet.runtime.sibson import sibson_coordinates
 
@@ -139,10 +140,23 @@ def test_pruning_moves_no_vertex_by_more_than_a_hair(face, runtime):
     assert runtime.B.nnz < 0.8 * exact.B.nnz
     rng = np.random.default_rng(1)
     d = rng.normal(scale=0.02, size=(len(runtime.control_points), 3))
-    pruned = copy.copy(runtime)
-    pruned._slivers = exact._slivers = None  # a random field squeezes the eye corners: the DFFD product alone
-    error = np.linalg.norm(pruned.deform(d) - exact.deform(d), axis=1).max()
+    error = np.linalg.norm(runtime.deform(d) - exact.deform(d), axis=1).max()
     assert error < 0.01 * np.abs(d).max()
+
+
+def test_control_point_motions_deform_as_given_and_a_pose_is_guarded(face, runtime):
+    """``deform`` is the DFFD product of the control points as given: a random field that
+    squeezes the eye corners stays as it is. A pose (``deform_faps``) gets the sliver guard: a
+    full blink, which deform leaves with its slivers, folds nothing."""
+    rng = np.random.default_rng(1)
+    d = rng.normal(scale=0.02, size=(len(runtime.control_points), 3))
+    unguarded = copy.copy(runtime)
+    unguarded._slivers = None
+    np.testing.assert_array_equal(runtime.deform(d), unguarded.deform(d))
+    controls, motions = runtime.fap_controls({"close_t_l_eyelid": 1024})
+    triangles = np.asarray(face.triangles)
+    assert folded_triangles(face.vertices, runtime.deform(controls, motions), triangles).sum() > 0
+    assert folded_triangles(face.vertices, runtime.deform_faps({"close_t_l_eyelid": 1024}), triangles).sum() == 0
 
 
 def test_rig_file_round_trip(runtime, tmp_path):

@@ -16,8 +16,12 @@ Per frame (``deform``):
    dropped, see ``_pruned``), so the skin costs a single sparse product written into the output
    (run over B's columns: ``_by_input``); in real-time mode each region applies
    its own coefficients and rebases them when a control point drifts farther than ``threshold``.
-5. The sliver guard (``puppet.runtime.sliverguard``) keeps the few triangles a closing lid turns
-   over at the eye corners from folding (it checks them every frame and acts at a full blink).
+5. On a pose (``deform_pose``, ``deform_faps``: FAPs, as a live face, a player or a fit deforms),
+   the sliver guard (``puppet.runtime.sliverguard``) keeps the few triangles a closing lid turns
+   over at the eye corners from folding (it checks them every frame and acts at a full blink), as
+   the FAP engine keeps each FAP within its fold limits: both are limits of a pose. ``deform``
+   itself moves the skin as the control points say (a random field of control-point motions
+   squeezes the eye corners, and the guard would pay for sweeps there every frame).
 6. Rigid regions (eyeballs, lower teeth, tongue) take their part's motion; then the whole head
    turns about 7.1, fading to nothing across the neck band so the bust base stays put.
 
@@ -272,8 +276,9 @@ class Runtime:
         return self._deform(displacements, self._checked(rigid), out, muscles, mode)
 
     def _deform(self, displacements: np.ndarray, rigid: dict[str, np.ndarray], out: np.ndarray | None,
-                muscles: Mapping[str, float] | None, mode: str) -> np.ndarray:
-        """``deform`` with the rigid motions checked (``_checked``)."""
+                muscles: Mapping[str, float] | None, mode: str, *, pose: bool = False) -> np.ndarray:
+        """``deform`` with the rigid motions checked (``_checked``); ``pose``: a pose's, with the
+        sliver guard (module docstring)."""
         contracting = self._contracting(muscles, mode)
         d = self._effective(np.asarray(displacements, dtype=float), rigid)
         share = None
@@ -299,7 +304,7 @@ class Runtime:
             self._guard_muscles(share[self._muscle_spread[0]], out)
         elif contracting:
             out += self._muscle_model(mode).displace(contracting).astype(self.dtype, copy=False)
-        if self._slivers is not None:
+        if pose and self._slivers is not None:
             self._slivers(out)
         for part in self._rigid_vertices:
             if part in rigid:
@@ -472,7 +477,9 @@ class Runtime:
         blends and muscle contractions (in ``mode``), written into ``out`` and ``normals_out``
         when given (what a live loop or a player does every frame)."""
         d, motions = self.fap_controls(pose.fap, viseme=pose.viseme, expression=pose.expression)
-        return self.deform_with_normals(d, motions, out=out, normals_out=normals_out, muscles=pose.muscles, mode=mode)
+        rigid = self._checked(motions)
+        vertices = self._deform(d, rigid, out, pose.muscles, mode, pose=True)
+        return vertices, self._normals(vertices, rigid, normals_out)
 
     def deform_faps(self, fap: Mapping[int | str, float] | np.ndarray | None = None, *,
              viseme: tuple | None = None, expression: tuple | None = None,
@@ -484,7 +491,7 @@ class Runtime:
         0..1, more for experiments) in ``mode`` (``MUSCLE_MODES``, module docstring). Unknown names
         name the closest FAP or muscle."""
         d, motions = self.fap_controls(fap, viseme=viseme, expression=expression)
-        return self.deform(d, motions, out=out, muscles=muscles, mode=mode)
+        return self._deform(d, self._checked(motions), out, muscles, mode, pose=True)
 
     def fap_controls(self, fap: Mapping[int | str, float] | np.ndarray | None = None, *,
                      viseme: tuple | None = None,
