@@ -175,7 +175,8 @@ def lid_faded(rig: Rig) -> dict[int, dict[str, np.ndarray]]:
     turn (``attach_weight``: 1 mid-lid, down to nearly 0 at the still eye corners), except the
     gaze FAPs' (``GAZE_FAPS``): the lids follow the eyeball to the corners."""
     share = {p.name: p.attach_weight for p in rig.control_points if p.attach in LID_PARTS}
-    return {number: motions if number in GAZE_FAPS else {name: m * share.get(name, 1.0) for name, m in motions.items()}
+    return {number: motions if number in GAZE_FAPS
+            else {name: m * share.get(name, 1.0) for name, m in motions.items()}
             for number, motions in rig.fap_motions.items()}
 
 
