@@ -65,10 +65,17 @@ class SimulatedSerialDevice(SerialDevice):
         return cls(name, _joystick(url, paced=True))
 
     def _open(self) -> None:
-        if not self._joystick_started:  # once: after that, unplug() and replug() are the test's
-            self.joystick.start()
-            self._joystick_started = True
+        """The first time: the pty, then the port, then the stream, so the port never opens in
+        the middle of a line the joystick is sending (a cut first line would count as a bad
+        frame). Later opens (after the joystick was unplugged and replugged) just reopen."""
+        if self._joystick_started:
+            super()._open()
+            return
+        if not self.joystick.plugged:
+            self.joystick.replug()
         super()._open()
+        self.joystick.start()
+        self._joystick_started = True
 
     def close(self, timeout: float = 2.0) -> None:
         super().close(timeout)
