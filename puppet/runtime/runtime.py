@@ -252,14 +252,20 @@ class Runtime:
         self._unturned = np.flatnonzero(self._neck_weight <= 0)
         self._neck_scale = np.repeat(self._neck_weight[:, None], 3, axis=1)  # (N, 3): no broadcast per frame
 
+    @functools.cached_property
+    def dffd_vertices(self) -> np.ndarray:
+        """Bool mask of the vertices DFFD moves (the skin regions'; not the rigid parts)."""
+        mask = np.zeros(len(self.rest), dtype=bool)
+        for region in self._regions:
+            mask[region.vertices] = True
+        mask.setflags(write=False)
+        return mask
+
     def _init_normals(self) -> None:
         """Normals are recomputed where the skin bends (DFFD regions and the neck band, with one
         ring of neighbours); rigid and still parts turn their rest normals instead."""
         tri = np.asarray(self.face.triangles, dtype=np.int64)
-        bends = np.zeros(len(self.rest), dtype=bool)
-        for region in self._regions:
-            bends[region.vertices] = True
-        bends |= (self._neck_weight > 0) & (self._neck_weight < 1)
+        bends = self.dffd_vertices | ((self._neck_weight > 0) & (self._neck_weight < 1))
         ring = np.zeros_like(bends)
         ring[tri[bends[tri].any(axis=1)].ravel()] = True
         self._bending = np.flatnonzero(ring | bends)
@@ -318,8 +324,15 @@ class Runtime:
                             muscles: Mapping[str, float] | None = None,
                             mode: str = "control") -> tuple[np.ndarray, np.ndarray]:
         """Positions and unit vertex normals for one frame."""
+        return self._deform_with_normals(displacements, rigid, out, normals_out, muscles, mode)
+
+    def _deform_with_normals(self, displacements: np.ndarray, rigid: Mapping[str, np.ndarray] | None,
+                             out: np.ndarray | None, normals_out: np.ndarray | None,
+                             muscles: Mapping[str, float] | None, mode: str, *,
+                             pose: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """``deform_with_normals``; ``pose`` as for ``_deform``."""
         rigid = self._checked(rigid)
-        vertices = self._deform(displacements, rigid, out, muscles, mode)
+        vertices = self._deform(displacements, rigid, out, muscles, mode, pose=pose)
         return vertices, self._normals(vertices, rigid, normals_out)
 
     # -- muscles ----------------------------------------------------------------------------
@@ -371,9 +384,7 @@ class Runtime:
         """(the guard's vertices, its edge constraints, the rows of ``_muscle_spread`` for them)."""
         spread = self._muscle_spread[1]
         reached = np.diff(spread.indptr) > 0
-        movable = np.zeros(len(self.rest), dtype=bool)
-        for region in self._regions:
-            movable[region.vertices] = True
+        movable = self.dffd_vertices
         tri = np.asarray(self.face.triangles, dtype=np.int64)
         watched = tri[reached[tri].any(axis=1) & movable[tri].any(axis=1)]
         vertices, local = np.unique(watched, return_inverse=True)
@@ -477,9 +488,7 @@ class Runtime:
         blends and muscle contractions (in ``mode``), written into ``out`` and ``normals_out``
         when given (what a live loop or a player does every frame)."""
         d, motions = self.fap_controls(pose.fap, viseme=pose.viseme, expression=pose.expression)
-        rigid = self._checked(motions)
-        vertices = self._deform(d, rigid, out, pose.muscles, mode, pose=True)
-        return vertices, self._normals(vertices, rigid, normals_out)
+        return self._deform_with_normals(d, motions, out, normals_out, pose.muscles, mode, pose=True)
 
     def deform_faps(self, fap: Mapping[int | str, float] | np.ndarray | None = None, *,
              viseme: tuple | None = None, expression: tuple | None = None,

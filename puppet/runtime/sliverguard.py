@@ -95,9 +95,6 @@ def sliver_guard(runtime) -> SliverGuard:
         values = np.zeros(N_FAPS)
         values[number - 1] = high[number - 1]
         probes.append(runtime.deform_faps(values).astype(float))
-    movable = np.zeros(len(runtime.rest), dtype=bool)
-    for region in runtime.rig.regions:
-        if region.kind == "dffd":
-            movable[region.vertices] = True
+    movable = runtime.dffd_vertices.copy()
     movable[list(runtime.face.feature_vertices.values())] = False
     return SliverGuard(runtime.face.vertices, runtime.face.triangles, movable, probes)
