@@ -44,7 +44,9 @@ def test_every_translational_fap_moves_its_point_by_value_times_fapu_along_its_d
                 f"FAP {f.number} {f.name}"  # across its axis, the calibration may move it (fapcalibration)
         checked += 1
     assert checked == 39  # 4-13, 16-18, 31-42, 51-64
-    assert len(capped) <= 6, capped  # squeezing the brows, flaring the nostrils: a few mm is all they do
+    # squeezing the brows, flaring the nostrils: a few mm is all they do; stretching the lip corners
+    # (inner and outer) past 145 MW, 7.6 mm on the default face
+    assert len(capped) <= 8, capped
 
 
 @pytest.mark.slow

@@ -67,3 +67,30 @@ def test_mouth_bag_never_comes_out_in_front_of_the_lips(face, runtime):
     for open_jaw in JAW_OPENINGS:
         v = runtime.deform_faps({"open_jaw": open_jaw})
         assert v[bag, 2].max() <= v[lips, 2].max() + 1e-9, open_jaw
+
+
+def _lower_lip_edge(face) -> list[int]:
+    """The mouth-opening loop's half through 2.3, from one corner (2.4) to the other (2.5)."""
+    loop = list(np.asarray(face.contours["mouth_opening"]))
+    fv = face.feature_vertices
+    start = loop.index(fv["2.4"])
+    turned = loop[start:] + loop[:start]
+    end = turned.index(fv["2.5"])
+    half = turned[:end + 1]
+    return half if fv["2.3"] in half else turned[:1] + turned[end:][::-1]
+
+
+@pytest.mark.parametrize("rig", ["auto", "shipped"])
+def test_the_lower_lip_parts_from_the_upper_all_the_way_to_the_corners(face, runtime, rig):
+    """As the jaw opens, the lower lip's inner edge drops more the further it is from the corners,
+    on both sides: the lips part evenly into each corner. Split from the upper lip at the mid-line's
+    height, the edge beside each corner (which rises toward it) went with the upper lip and held
+    there, 1 mm of drop where its neighbour 5 mm in dropped 3.4: a web of lip across the opened
+    mouth's corners."""
+    posed = runtime if rig == "auto" else puppet.Runtime(face)
+    lower = _lower_lip_edge(face)
+    middle = lower.index(face.feature_vertices["2.3"])
+    for open_jaw in (400.0, 900.0):
+        drop = face.vertices[lower, 1] - posed.deform_faps({"open_jaw": open_jaw})[lower, 1]
+        for half in (drop[:middle + 1], drop[middle:][::-1]):  # corner to 2.3
+            assert np.all(np.diff(half) >= -0.05 * drop.max()), (open_jaw, np.round(half, 3))

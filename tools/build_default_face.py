@@ -44,7 +44,7 @@ What it does, in order (each step is a function below):
    overlapping by ``LIP_SEAL`` (``close_lips``): a ray through the slit stops on the wet inner
    lip. The meeting line itself, the feature points and so the FAPU are base.obj's; the lips
    part as before when the jaw opens (the upper wall stays with the upper lip, the lower one
-   goes with the lower). ``source_index`` still names the base vertex of those 38 vertices;
+   goes with the lower). ``source_index`` still names the base vertex of those 34 vertices;
    the JSON lists them (``lips_closed``).
 6. Vertex albedo (skin, lips, brows, lash line, mouth interior, teeth, gums, tongue, eyes). The
    mouth's occlusion is baked in: the bag darkens fast along its surface behind the lips, the
@@ -160,15 +160,12 @@ LIP_SEAL = 0.0005  # dm: how far the closed lips' inner walls overlap across the
 # -- triangulation -------------------------------------------------------------------------------
 TURNED_QUADS = (  # mirror pairs: the face's right side, then its left
     (498, 414, 427, 499), (7247, 7248, 7187, 7174),  # inner lip, 5 mm from the corners
-    (535, 552, 553, 536), (7280, 7281, 7296, 7295),  # inner lip, 13 mm in from the corners
-    (694, 677, 681, 698), (7419, 7423, 7408, 7404),  # mouth bag, 8 cm behind the corners
-    (3738, 3739, 712, 379), (10406, 7139, 7435, 10407),  # skin 3 mm outside the corners
     (5145, 5149, 5155, 5144), (11759, 11758, 11769, 11763),  # skin 8 mm outside and above the corners
 )
 """Body quads (base.obj vertices in the face's own order a b c d) split b c d / b d a instead of
 a b c / a c d. The rule that chose them, on the default face and its shipped rig: MakeHuman's
 split folds a triangle of the quad (its normal turns against its rest normal) at some FAP's
-range end, in practice open_jaw's (from 400 to 912 MNS), while the other split folds under none;
+range end, in practice open_jaw's at its reach (about 930 MNS), while the other split folds under none;
 each quad with its mirror twin. No rule on the rest shape alone picks them: the shorter
 diagonal, or the split with the larger smallest angle, would turn 2,128 or 1,436 quads and
 move the auto-rig's region borders (tests/test_foldlimits.py checks the rule on the shipped face)."""
@@ -828,7 +825,9 @@ def close_lips(V: np.ndarray, T: np.ndarray, skin_mask: np.ndarray, mouth) -> tu
     """(V with the lips closed at rest, {"upper": ..., "lower": ...} the vertices moved of each
     lip's wall): every mouth-bag vertex next to the
     upper (lower) half of the lips' meeting line ``mouth`` moved in y to the line's middle at its
-    |x|, less (plus) ``LIP_SEAL``; those next to both halves (at the corners) stay."""
+    |x|, less (plus) ``LIP_SEAL``; those next to both halves or to a corner stay (where the halves
+    meet there is no slit to seal, and a corner's wall moved onto the line crossed the lip edge
+    beside it: a sliver that folded as soon as the upper lip pushed forward)."""
     graph = skin_graph(V, T, skin_mask)
     top = int(np.argmax(np.where(skin_mask, V[:, 1], -np.inf)))
     loop = np.asarray(mouth)
@@ -846,9 +845,10 @@ def close_lips(V: np.ndarray, T: np.ndarray, skin_mask: np.ndarray, mouth) -> tu
         return {int(w) for v in arc for w in graph[v].indices if bag[w]}
 
     up, down = next_to(upper), next_to(lower)
+    corners = next_to(loop[ends])
     out = V.copy()
     moved = {}
-    for name, wall, sign in (("upper", up - down, -1.0), ("lower", down - up, 1.0)):
+    for name, wall, sign in (("upper", up - down - corners, -1.0), ("lower", down - up - corners, 1.0)):
         side = np.array(sorted(wall), dtype=np.int64)
         x = V[side, 0]
         out[side, 1] = (line(upper, x) + line(lower, x)) / 2 + sign * LIP_SEAL
@@ -1397,8 +1397,8 @@ The build is deterministic: the same source gives byte-identical files.
   `helper-tongue` (its vertices and faces; reshaped, below).
 - Dropped: the rest of the body, the eyelash, hair, clothing and genital helpers, the joint
   marker cubes, and the helper eyes and teeth (replaced, below).
-- Faces are kept when all their vertices are; quads are split a-b-c / a-c-d, except the ten listed
-  in `default_face.json` (`triangulation`), split b-c-d / b-d-a: MakeHuman's split folds them as
+- Faces are kept when all their vertices are; quads are split a-b-c / a-c-d, except the
+  {len(doc["triangulation"]["turned_quads"])} listed in `default_face.json` (`triangulation`), split b-c-d / b-d-a: MakeHuman's split folds them as
   the jaw opens wide (beside the lip corners), the other folds at no FAP's range end; MakeHuman's
   UVs are kept per triangle corner. Kept vertices are in ascending base order; `source_index` gives each
   one's base.obj index (-1 for generated vertices).

@@ -11,16 +11,17 @@ Regions (Zhang & Chen's functional regions), decided per skin vertex, first rule
   skin outside the face oval below the jaw angles' height, within ``JAW_BAND`` of the jaw line
   along the skin (under the chin, the throat's top, under the ears); it joins the regions below.
 * ``upper_mouth`` / ``lower_mouth``: the mouth bag (the skin reached from the lips' meeting line
-  without crossing it) split at the lip line; the skin between the nose base and the lip line,
-  and between the lip line and the chin/throat, inside the nasolabial and chin lines.
+  without crossing it) split by distance along it to the line's two halves; the skin between the
+  nose base and the meeting line (``_lip_line``: it rises to the corners), and between that line
+  and the chin/throat, inside the nasolabial and chin lines.
 * ``nose``: between the nasion and the nose base, inside a width growing from the nasal bone to
   the alae.
 * ``forehead``: above the lower eyelids: brows, lids, glabella, forehead.
 * ``cheek_l`` / ``cheek_r``: the rest of the front, split at the mid-line; it reaches down over the
   jaw line to the neck so that the jaw drags it smoothly.
 * Parts other than the skin: an ``attached`` part (lashes, tear lines) takes the region of the
-  skin vertex nearest to each of its vertices; a ``mouth`` part (socket, gums) splits at the lip
-  line like the mouth bag.
+  skin vertex nearest to each of its vertices; a ``mouth`` part (socket, gums) splits at the
+  meeting line.
 * Parts: eyeballs rigid about their centres, lower teeth rigid with the jaw, the tongue rigid
   on the jaw (its own motion in the jaw's frame), upper teeth still. The four lids are rigid parts too, but of control points only: their margin points
   turn about the eyeball centre and the lid skin follows by DFFD (the paper's hybrid eyelids);
@@ -74,6 +75,8 @@ BAG_FREE_DEPTH = 0.3  # mouth-bag skin this close to the lips' meeting line foll
 BAG_SPACING = 0.12  # spacing of the mouth bag's anchors (fractions of the eye separation)
 GRID_SPACING = {"forehead": 0.055, "nose": 0.055, "cheek_l": 0.055, "cheek_r": 0.055,
                 "upper_mouth": 0.045, "lower_mouth": 0.045}  # as BORDER_SPACING
+CORNER_EASE = 0.3  # beside the lip corners, over this share of the mouth's half-width the lower mouth's
+# grid points ease from the jaw's whole motion to the cheek's share at their height
 JAW_BAND = 1.2  # how far below and behind the jaw line the jaw's pull reaches (eye separations)
 JAW_BAND_RISE = 0.5  # ... and how far below the jaw angles' height (fraction of angle to chin height)
 
@@ -198,10 +201,11 @@ class _Builder:
         # the mouth, even when the nostril points sit wide (else a box cut through the cheeks
         # that the lips' motion lifts as a block: a raised rectangle on smiling).
         upper_w = (1 - s) * min(1.25 * fp["9.1"][0], mouth_w) + s * 1.3 * mouth_w
-        label[front & (y < nose_base) & (y >= lip_y) & (ax < upper_w)] = "upper_mouth"
+        above = y >= self._lip_line(x)
+        label[front & (y < nose_base) & above & (ax < upper_w)] = "upper_mouth"
         r = np.clip((lip_y - y) / (lip_y - chin), 0, 1)
         lower_w = (1 - r) * 1.3 * mouth_w + r * 1.2 * fp["2.11"][0]
-        label[front & (y < lip_y) & (ax < lower_w)] = "lower_mouth"
+        label[front & ~above & (ax < lower_w)] = "lower_mouth"
         bag = self._mouth_bag(skin)
         self.bag = skin[bag]
         label[bag] = np.where(self._bag_upper(self.bag), "upper_mouth", "lower_mouth")
@@ -212,11 +216,31 @@ class _Builder:
                 self.region_of[self.face.parts[part]] = region
         if "mouth" in self.face.parts:
             m = self.face.parts["mouth"]
-            self.region_of[m] = np.where(v[m, 1] >= lip_y, "upper_mouth", "lower_mouth")
+            self.region_of[m] = np.where(v[m, 1] >= self._lip_line(v[m, 0]), "upper_mouth", "lower_mouth")
         if "attached" in self.face.parts:  # lashes, tear lines...: they follow the skin under them
             a = self.face.parts["attached"]
             nearest = cKDTree(v[skin]).query(v[a])[1]
             self.region_of[a] = label[nearest]
+
+    def _lip_line(self, x: np.ndarray) -> np.ndarray:
+        """The height of the lips' meeting line at each x, which splits the skin between the two
+        mouth regions: midway between the halves of the mouth-opening loop (2.5 to 2.4 through 2.2,
+        and through 2.3), level with the corners beyond them; without the loop, level with the
+        middle of 2.2 and 2.3. The line rises to the corners: split at the mid-line's height, the
+        lower lip's inner edge beside the corners went with the upper lip and, as the jaw opened,
+        held the lip corner up as a web across the opened mouth."""
+        fp, fv = self.fp, self.fv
+        lip_y = (fp["2.2"][1] + fp["2.3"][1]) / 2
+        loop = list(np.asarray(self.face.contours.get("mouth_opening", [])))
+        if not all(fv.get(k) in loop for k in ("2.2", "2.3", "2.4", "2.5")):
+            return np.full(np.shape(x), lip_y)
+        a, b = loop.index(fv["2.5"]), loop.index(fv["2.4"])
+        halves = []
+        for mid in ("2.2", "2.3"):
+            half = self.v[_loop_path_via(loop, a, b, fv[mid])]
+            order = np.argsort(half[:, 0])
+            halves.append(np.interp(x, half[order, 0], half[order, 1]))
+        return (halves[0] + halves[1]) / 2
 
     def _jaw_band_share(self) -> np.ndarray:
         """How much of the jaw's motion each skin vertex below and behind the jaw line takes (NaN
@@ -370,6 +394,8 @@ class _Builder:
         chin). No FAP moves them until a calibration (``puppet.runtime.fapcalibration``) says how; until
         then they hold the skin like anchors. Under the mouth corners they ride on the jaw, fully
         on the chin and fading out up the cheeks, so an opening jaw stretches the cheek evenly;
+        beside the corners the lower mouth's ease into the cheeks' share (``CORNER_EASE``): at the
+        corners' height, taken fully, they dropped past the cheek skin below them and folded it;
         below and behind the jaw line they take the jaw band's share (``_jaw_band_share``), fading
         down the throat into the still neck."""
         skin = np.zeros(len(self.v), dtype=bool)
@@ -379,10 +405,11 @@ class _Builder:
         corner_y = self.fp["8.3"][1]
         jaw_y = (self.fp["2.13"][1] + self.fp["2.1"][1]) / 2
         up_cheek = np.clip((corner_y - self.v[:, 1]) / (corner_y - jaw_y), 0, 1)
+        beside = np.clip((np.abs(self.v[:, 0]) / self.fp["8.3"][0] - 1) / CORNER_EASE, 0, 1)
         for region, spacing in GRID_SPACING.items():
             verts = np.flatnonzero((self.region_of == region) & skin)
             taken = [positions[n] for n in self.members.get(region, [])]
-            on_face = 1.0 if region == "lower_mouth" else up_cheek
+            on_face = (1 - beside) + beside * up_cheek if region == "lower_mouth" else up_cheek
             shares = np.where(self.in_jaw_band, self.jaw_share, on_face)
             for vertex in _spread_out(self.v, verts, taken, self._scale(spacing)):
                 share = float(shares[vertex])
@@ -466,16 +493,31 @@ class _Builder:
         """Fixed points on the mouth bag away from the lips: on the lower half they ride on the
         jaw, on the upper half they stay. Without them DFFD extrapolates the deep bag from the
         lip points alone, and an opening jaw rolls the bag's floor forward out of the mouth
-        instead of carrying it down with the teeth and tongue."""
+        instead of carrying it down with the teeth and tongue. Above the jaw's hinge the lower
+        half's share of the jaw fades to nothing at its top, where it meets the still upper half:
+        there the jaw's turn swings the back wall up and forward, into the upper half (it folded
+        the bag's back wall with the jaw wide open)."""
         opening = self.v[np.asarray(self.face.contours["mouth_opening"])]
         bag = self.bag[cKDTree(opening).query(self.v[self.bag])[0] > self._scale(BAG_FREE_DEPTH)]
         spacing = self._scale(BAG_SPACING)
-        for region, attach in (("upper_mouth", None), ("lower_mouth", "jaw")):
+        share = self._lower_bag_share()
+        for region in ("upper_mouth", "lower_mouth"):
             verts = bag[self.region_of[bag] == region]
             positions = {p.name: p.position for p in self.points}
             taken = [positions[n] for n in self.members.get(region, [])]
             for vertex in _spread_out(self.v, verts, taken, spacing):
-                self._add(region, f"{region}_bag_{vertex}", "fixed", vertex=int(vertex), attach=attach)
+                carried = {"attach": "jaw", "attach_weight": float(share[vertex])} \
+                    if region == "lower_mouth" and share[vertex] > 0 else {}
+                self._add(region, f"{region}_bag_{vertex}", "fixed", vertex=int(vertex), **carried)
+
+    def _lower_bag_share(self) -> np.ndarray:
+        """Per vertex, the jaw's share for a lower mouth-bag anchor there: 1 up to the jaw hinge's
+        height, fading to 0 at the top of the lower half of the bag."""
+        lower = self.bag[self.region_of[self.bag] == "lower_mouth"]
+        if not len(lower):
+            return np.ones(len(self.v))
+        hinge, top = self._jaw_hinge()[1], self.v[lower, 1].max()
+        return np.clip((top - self.v[:, 1]) / max(top - hinge, 1e-12), 0, 1)
 
     def _lip_points(self, name: str, contour: str, keys: list[str], region: str) -> list[str]:
         """One interpolated point on the contour midway between each pair of consecutive keys."""

@@ -172,8 +172,9 @@ def solve(runtime: Runtime, examples: Mapping[str, np.ndarray], *, held_out: tup
 def fit_faps(runtime: Runtime, displacement: np.ndarray, *, refine: int = 2, where: str = "skin",
              held: tuple[int, ...] = ()) -> np.ndarray:
     """The 68 FAP values (within their ranges) whose pose best reproduces ``displacement`` (N, 3):
-    bounded least squares linearised at neutral, then ``refine`` Gauss-Newton steps on the real
-    rig; over the whole skin (``where="skin"``: motion where the shape has none costs too) or only
+    bounded least squares linearised at neutral, then up to ``refine`` Gauss-Newton steps on the
+    real rig, stopping at one that would fit worse (a blink's fit had stepped to opened lids);
+    over the whole skin (``where="skin"``: motion where the shape has none costs too) or only
     the vertices it moves (``"moved"``, the measure of the rig's issue 11 baseline). The FAPs
     numbered in ``held`` stay at 0 (an expression's eyeballs, or the lips it leaves to the visemes)."""
     skin = _skin(runtime.face, runtime.rig)
@@ -185,10 +186,15 @@ def fit_faps(runtime: Runtime, displacement: np.ndarray, *, refine: int = 2, whe
     target = model.rows(displacement)
     values = np.zeros(N_FAPS)
     rest = model.runtime.deform_faps(values)
+    now = np.zeros_like(target)
     for step in range(refine + 1):
         J = model.response(values) if step else model.J0
-        now = model.rows(model.runtime.deform_faps(values) - rest)
-        values[model.columns] = _bounded(J, target - now + J @ values[model.columns], model.bounds, model.differences)
+        trial = values.copy()
+        trial[model.columns] = _bounded(J, target - now + J @ values[model.columns], model.bounds, model.differences)
+        shown = model.rows(model.runtime.deform_faps(trial) - rest)
+        if step and np.linalg.norm(shown - target) >= np.linalg.norm(now - target):
+            break  # the rig is not linear (lids turn, guards act): a step that fits worse is not taken
+        values, now = trial, shown
     return values
 
 

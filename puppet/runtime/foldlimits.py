@@ -21,10 +21,10 @@ a file or a device gives are never changed, only what the face shows.
   pulled 4 cm into the eye, a jaw shifted 5 cm). Except toward the high end of the ``NEEDED``
   FAPs (open_jaw, the upper lids closing), which go as far as the artist's shapes take them
   (``needed_reach``): the slivers a closing lid folds at the eye corners are kept from folding
-  by the runtime's sliver guard (``puppet.runtime.sliverguard``); four beside the lip corners
-  still fold with open_jaw wide (two in the sealed lip slit past about 400 MNS, two below the
-  corners past about 900; ten more folded before their quads were split along the other
-  diagonal, ``tools/build_default_face.py``'s ``TURNED_QUADS``).
+  by the runtime's sliver guard (``puppet.runtime.sliverguard``); two on the chin still fold
+  with open_jaw at its reach (past about 915 MNS, one a side; four quads beside the lip corners
+  folded until they were split along the other diagonal, ``tools/build_default_face.py``'s
+  ``TURNED_QUADS``).
 
 Fits see both limits (``puppet.runtime.fapcalibration``: each fit keeps within the reach, and within
 the follow ranges as linear constraints, so the values it finds are what the face shows).
@@ -64,9 +64,8 @@ REACH_MARGIN = 0.98  # a little inside the fold-free value: float32 and float64 
 LID_PARTS = frozenset(part for part, _, _ in LID_FAPS.values())
 NEEDED = (3, 19, 20)
 """FAPs whose reach goes toward their high end as far as the artist's shapes take them (the
-fits of the examples), though the FAP alone folds a few slivers there: open_jaw (past about 400
-MNS two slivers in the sealed lip slit beside the corners turn over, past 900 two more below them;
-jawOpen opens to about 900) and close_t_l/r_eyelid
+fits of the examples), though the FAP alone folds a few slivers there: open_jaw (past about 915
+MNS two triangles on the chin turn over; jawOpen opens to about 930) and close_t_l/r_eyelid
 (past about 645 IRISD the tiny triangles at the eye corners would, but the sliver guard keeps
 them; a blink closes at 1024). Capped fold-free, the face could neither blink nor open its mouth
 wide."""
