@@ -25,19 +25,9 @@ def _folds(face, vertices) -> int:
     return int(folded_triangles(face.vertices, vertices, np.asarray(face.triangles)).sum())
 
 
-NEEDED_ENDS = {(3, 1080.0): "open_jaw (930 MNS shown) folds 2 triangles on the chin past about 915 MNS, one a "
-                            "side, where the calibrated grid points of the lower mouth drop 3 mm further than the "
-                            "cheek's beside them (the artist's jawOpen moves both alike)"}
-"""Range ends that still fold: the NEEDED FAPs (puppet.runtime.foldlimits), whose reach goes as far as
-the artist's shapes (jawOpen) take them. Strict: move a case out once it folds nothing (the lids
-fold nothing since the sliver guard, puppet.runtime.sliverguard)."""
-
-
-def _range_ends() -> list:
+def _range_ends() -> list[tuple[int, float]]:
     low, high = clamp_ranges()
-    ends = [(n, float(end)) for n in range(3, 69) for end in (low[n - 1], high[n - 1]) if np.isfinite(end) and end]
-    return [pytest.param(n, end, marks=pytest.mark.xfail(strict=True, reason=NEEDED_ENDS[(n, end)]))
-            if (n, end) in NEEDED_ENDS else (n, end) for n, end in ends]
+    return [(n, float(end)) for n in range(3, 69) for end in (low[n - 1], high[n - 1]) if np.isfinite(end) and end]
 
 
 @pytest.mark.parametrize("number, end", _range_ends())
@@ -172,7 +162,7 @@ def _unguarded(runtime):
 def test_the_turned_quads_fold_split_makehuman_s_way_and_not_as_turned(runtime, face):
     """tools/build_default_face.py splits the ``triangulation`` quads beside the lip corners along
     their other diagonal: of each mirror pair, MakeHuman's split folds a triangle with the jaw open
-    wide (at its reach, about 930 MNS), and the turned split folds none (nor at any other range end:
+    wide (at its reach, 911 MNS), and the turned split folds none (nor at any other range end:
     ``test_no_fap_folds_...``)."""
     quads = json.loads((resources.files("puppet.data") / "default_face.json").read_text())["triangulation"]["turned_quads"]
     vertex_of = {int(s): v for v, s in enumerate(face.source_index) if s >= 0}

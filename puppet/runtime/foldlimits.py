@@ -21,10 +21,10 @@ a file or a device gives are never changed, only what the face shows.
   pulled 4 cm into the eye, a jaw shifted 5 cm). Except toward the high end of the ``NEEDED``
   FAPs (open_jaw, the upper lids closing), which go as far as the artist's shapes take them
   (``needed_reach``): the slivers a closing lid folds at the eye corners are kept from folding
-  by the runtime's sliver guard (``puppet.runtime.sliverguard``); two on the chin still fold
-  with open_jaw at its reach (past about 915 MNS, one a side; four quads beside the lip corners
-  folded until they were split along the other diagonal, ``tools/build_default_face.py``'s
-  ``TURNED_QUADS``).
+  by the runtime's sliver guard (``puppet.runtime.sliverguard``); open_jaw goes as far as the
+  examples' fits go within the other limits (``within_limits``), short of the chin's fold (four
+  quads beside the lip corners folded until they were split along the other diagonal,
+  ``tools/build_default_face.py``'s ``TURNED_QUADS``).
 
 Fits see both limits (``puppet.runtime.fapcalibration``: each fit keeps within the reach, and within
 the follow ranges as linear constraints, so the values it finds are what the face shows).
@@ -64,11 +64,11 @@ REACH_MARGIN = 0.98  # a little inside the fold-free value: float32 and float64 
 LID_PARTS = frozenset(part for part, _, _ in LID_FAPS.values())
 NEEDED = (3, 19, 20)
 """FAPs whose reach goes toward their high end as far as the artist's shapes take them (the
-fits of the examples), though the FAP alone folds a few slivers there: open_jaw (past about 915
-MNS two triangles on the chin turn over; jawOpen opens to about 930) and close_t_l/r_eyelid
-(past about 645 IRISD the tiny triangles at the eye corners would, but the sliver guard keeps
-them; a blink closes at 1024). Capped fold-free, the face could neither blink nor open its mouth
-wide."""
+fits of the examples within the other limits, ``within_limits``), whether or not the FAP alone
+folds there: open_jaw (jawOpen opens it to 911 MNS; its fold-free reach is 894, 2% inside the
+913 where two triangles on the chin turn over) and close_t_l/r_eyelid (past about 645 IRISD the
+tiny triangles at the eye corners would turn over, but the sliver guard keeps them; a blink
+closes at 1024). Capped fold-free, the face could not blink."""
 LIP_PAIRS = tuple((n, n + 47) for n in range(4, 14))
 """(inner lip FAP, outer lip FAP): the FAPs 4-13 move the inner lip points 2.x, 51-60 the outer
 ones 8.x beside them, along the same axes and in the same units."""
@@ -145,28 +145,38 @@ def fold_safe_calibration(face, examples, *, rig: Rig | None = None, held_out: t
 
 def within_limits(face, calibration: Calibration, examples) -> Calibration:
     """The calibration's rig made ``fold_safe``, the reach of the ``NEEDED`` FAPs opened to what
-    the examples use, and every example fitted on it within its limits (``weights``: what the
-    face shows for it)."""
+    the examples use within the other limits, and every example fitted on it within its limits
+    (``weights``: what the face shows for it).
+
+    What an example uses is measured twice: fitted with the ``NEEDED`` FAPs unlimited, then
+    within the reach that gives. The second fits use less where the other limits bind (the
+    jawOpen fit opens the jaw 930 MNS unlimited, 911 within the lids' and lips' limits), and
+    the reach keeps only that: past it open_jaw folds the chin (from 913 MNS), and no example
+    goes there."""
     safe = fold_safe(Runtime(face, calibration.rig))
-    safe.fap_reach = needed_reach(face, safe, examples)
-    runtime = Runtime(face, safe, dtype=np.float64)
-    weights = {name: fit_faps(runtime, D) for name, D in examples.items() if np.any(D)}
+    fold_free = dict(safe.fap_reach)
+    safe.fap_reach = {n: r for n, r in fold_free.items() if n not in NEEDED}
+    for _ in range(2):  # the NEEDED FAPs unlimited, then within the reach that gave
+        safe.fap_reach = needed_reach(face, safe, examples, fold_free)
+    weights = _fits(Runtime(face, safe, dtype=np.float64), examples)
     return dataclasses.replace(calibration, rig=safe, weights=weights)
 
 
-def needed_reach(face, rig: Rig, examples) -> dict[int, tuple[float, float]]:
-    """The rig's ``fap_reach`` with each ``NEEDED`` FAP's high end raised to the largest value a
-    fit of the examples gives it (or its mirror) when that FAP is not limited."""
-    free = copy.copy(rig)
-    free.fap_reach = {n: r for n, r in rig.fap_reach.items() if n not in NEEDED}
-    runtime = Runtime(face, free, dtype=np.float64)
-    used = np.max([fit_faps(runtime, D) for D in examples.values() if np.any(D)], axis=0)
-    reach = dict(rig.fap_reach)
+def needed_reach(face, rig: Rig, examples, fold_free: dict[int, tuple[float, float]]) -> dict[int, tuple[float, float]]:
+    """``fold_free`` with each ``NEEDED`` FAP's high end raised to the largest value a fit of the
+    examples on ``rig`` gives it (or its mirror)."""
+    used = np.max(list(_fits(Runtime(face, rig, dtype=np.float64), examples).values()), axis=0)
+    reach = dict(fold_free)
     for number in NEEDED:
         low, high = reach.get(number, (-np.inf, np.inf))
         both = [number] + ([mirror(number)] if mirror(number) else [])
         reach[number] = (low, max(high, *(float(used[n - 1]) for n in both)))
     return reach
+
+
+def _fits(runtime: Runtime, examples) -> dict[str, np.ndarray]:
+    """Each non-zero example's ``fit_faps`` on ``runtime``."""
+    return {name: fit_faps(runtime, D) for name, D in examples.items() if np.any(D)}
 
 
 def lid_faded(rig: Rig) -> dict[int, dict[str, np.ndarray]]:
