@@ -85,8 +85,8 @@ def test_the_lower_lip_parts_from_the_upper_all_the_way_to_the_corners(face, run
     """As the jaw opens, the lower lip's inner edge drops more the further it is from the corners,
     on both sides: the lips part evenly into each corner. Split from the upper lip at the mid-line's
     height, the edge beside each corner (which rises toward it) went with the upper lip and held
-    there, 1 mm of drop where its neighbour 5 mm in dropped 3.4: a web of lip across the opened
-    mouth's corners."""
+    there (open_jaw 1080: 8 mm of drop where its neighbour 5 mm in dropped 34): a web of lip
+    across the opened mouth's corners."""
     posed = runtime if rig == "auto" else puppet.Runtime(face)
     lower = _lower_lip_edge(face)
     middle = lower.index(face.feature_vertices["2.3"])
