@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import puppet
-from puppet.face.autorig import build_rig
+from puppet.face.autorig import _loop_path_via, build_rig
 from puppet.view.mouthcheck import mouth_pixels
 
 JAW_OPENINGS = np.arange(0.0, 1081.0, 120.0)
@@ -69,17 +69,6 @@ def test_mouth_bag_never_comes_out_in_front_of_the_lips(face, runtime):
         assert v[bag, 2].max() <= v[lips, 2].max() + 1e-9, open_jaw
 
 
-def _lower_lip_edge(face) -> list[int]:
-    """The mouth-opening loop's half through 2.3, from one corner (2.4) to the other (2.5)."""
-    loop = list(np.asarray(face.contours["mouth_opening"]))
-    fv = face.feature_vertices
-    start = loop.index(fv["2.4"])
-    turned = loop[start:] + loop[:start]
-    end = turned.index(fv["2.5"])
-    half = turned[:end + 1]
-    return half if fv["2.3"] in half else turned[:1] + turned[end:][::-1]
-
-
 @pytest.mark.parametrize("rig", ["auto", "shipped"])
 def test_the_lower_lip_parts_from_the_upper_all_the_way_to_the_corners(face, runtime, rig):
     """As the jaw opens, the lower lip's inner edge drops more the further it is from the corners,
@@ -88,8 +77,9 @@ def test_the_lower_lip_parts_from_the_upper_all_the_way_to_the_corners(face, run
     there (open_jaw 1080: 8 mm of drop where its neighbour 5 mm in dropped 34): a web of lip
     across the opened mouth's corners."""
     posed = runtime if rig == "auto" else puppet.Runtime(face)
-    lower = _lower_lip_edge(face)
-    middle = lower.index(face.feature_vertices["2.3"])
+    loop, fv = list(np.asarray(face.contours["mouth_opening"])), face.feature_vertices
+    lower = _loop_path_via(loop, loop.index(fv["2.4"]), loop.index(fv["2.5"]), fv["2.3"])
+    middle = lower.index(fv["2.3"])
     for open_jaw in (400.0, 900.0):
         drop = face.vertices[lower, 1] - posed.deform_faps({"open_jaw": open_jaw})[lower, 1]
         for half in (drop[:middle + 1], drop[middle:][::-1]):  # corner to 2.3

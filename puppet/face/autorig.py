@@ -229,18 +229,24 @@ class _Builder:
         middle of 2.2 and 2.3. The line rises to the corners: split at the mid-line's height, the
         lower lip's inner edge beside the corners went with the upper lip and, as the jaw opened,
         held the lip corner up as a web across the opened mouth."""
-        fp, fv = self.fp, self.fv
-        lip_y = (fp["2.2"][1] + fp["2.3"][1]) / 2
+        halves = self._lip_halves()
+        if halves is None:
+            return np.full(np.shape(x), (self.fp["2.2"][1] + self.fp["2.3"][1]) / 2)
+        heights = []
+        for half in halves:
+            p = self.v[half]
+            order = np.argsort(p[:, 0])
+            heights.append(np.interp(x, p[order, 0], p[order, 1]))
+        return (heights[0] + heights[1]) / 2
+
+    def _lip_halves(self) -> list[list[int]] | None:
+        """The mouth-opening loop's two halves, each from corner 2.5 to corner 2.4, through 2.2
+        (upper) and through 2.3 (lower); None when the face has no such loop."""
         loop = list(np.asarray(self.face.contours.get("mouth_opening", [])))
-        if not all(fv.get(k) in loop for k in ("2.2", "2.3", "2.4", "2.5")):
-            return np.full(np.shape(x), lip_y)
-        a, b = loop.index(fv["2.5"]), loop.index(fv["2.4"])
-        halves = []
-        for mid in ("2.2", "2.3"):
-            half = self.v[_loop_path_via(loop, a, b, fv[mid])]
-            order = np.argsort(half[:, 0])
-            halves.append(np.interp(x, half[order, 0], half[order, 1]))
-        return (halves[0] + halves[1]) / 2
+        if not all(self.fv.get(k) in loop for k in ("2.2", "2.3", "2.4", "2.5")):
+            return None
+        a, b = loop.index(self.fv["2.5"]), loop.index(self.fv["2.4"])
+        return [_loop_path_via(loop, a, b, self.fv[mid]) for mid in ("2.2", "2.3")]
 
     def _jaw_band_share(self) -> np.ndarray:
         """How much of the jaw's motion each skin vertex below and behind the jaw line takes (NaN
@@ -300,17 +306,15 @@ class _Builder:
         to the upper half of the lips' meeting line than to its lower half. Behind closed lips
         the bag starts as a flat tube at the lips' height, so height alone does not split it:
         its lower rim would hang from the upper lip and curtain the opened mouth."""
-        loop = list(np.asarray(self.face.contours["mouth_opening"]))
-        a, b = loop.index(self.fv["2.5"]), loop.index(self.fv["2.4"])
+        halves = self._lip_halves()
         inside = np.zeros(len(self.v), dtype=bool)
-        inside[bag] = inside[loop] = True
+        inside[bag] = inside[np.concatenate(halves)] = True
         tri = np.asarray(self.face.triangles)
         e = np.vstack([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
         e = e[inside[e].all(axis=1)]
         w = np.linalg.norm(self.v[e[:, 0]] - self.v[e[:, 1]], axis=1)
         graph = sp.coo_matrix((w, (e[:, 0], e[:, 1])), shape=(len(self.v),) * 2).tocsr()
-        d_up, d_lo = (dijkstra(graph, directed=False, min_only=True,
-                               indices=_loop_path_via(loop, a, b, self.fv[mid])[1:-1]) for mid in ("2.2", "2.3"))
+        d_up, d_lo = (dijkstra(graph, directed=False, min_only=True, indices=half[1:-1]) for half in halves)
         return d_up[bag] <= d_lo[bag]
 
     def _regions_with_points(self) -> list[Region]:
