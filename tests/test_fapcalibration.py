@@ -18,6 +18,7 @@ from puppet.face.examples import ExampleError, load_examples, read_target
 from puppet.face.rig import load_rig, save_rig
 from puppet.face.subdivide import subdivide
 from puppet.fap.table import clamp_ranges, fap
+from puppet.runtime import follow
 from puppet.runtime.fapcalibration import calibrate, capacity, fit_faps, fold_free_reach, mirror_fap, relative_residual
 from puppet.runtime.musclesolver import folded_triangles
 
@@ -251,8 +252,9 @@ def test_a_fit_keeps_within_the_fold_limits_so_the_face_shows_its_values(runtime
     for name in ("mouthSmileLeft", "mouthPucker", "jawOpen", "mouthRollUpper"):
         values = fit_faps(runtime, examples[name])
         assert np.all((values >= reach[0] - 1e-9) & (values <= reach[1] + 1e-9)), name
-        for (a, b), (low, high) in runtime.rig.fap_follow.items():
-            assert low - 1e-5 <= values[a - 1] - values[b - 1] <= high + 1e-5, (name, a, b)
+        for (a, b), ranges in runtime.rig.fap_follow.items():
+            rows = follow.rows(*ranges)
+            assert np.all(rows[:, :2] @ values[[a - 1, b - 1]] - rows[:, 2] <= 1e-5), (name, a, b)
         np.testing.assert_allclose(runtime.faps.shown(values), values, atol=1e-5, err_msg=name)
 
 
@@ -268,13 +270,37 @@ def test_a_bounded_fit_holds_a_pair_that_crossed_its_range_at_the_limit_it_cross
     b = rng.normal(size=200)
     box = (np.full(6, -5.0), np.full(6, 5.0))
     free = lsq_linear(J, b, bounds=box, method="bvls").x
-    np.testing.assert_allclose(_bounded(J, b, box, [(0, 1, -10.0, 10.0)]), free, atol=1e-9)
+    np.testing.assert_allclose(_bounded(J, b, box, [(0, 1, follow.rows(-10.0, 10.0))]), free, atol=1e-9)
     gap = free[0] - free[1]
     low, high = (gap - 1.0, gap - 0.5) if gap > 0 else (gap + 0.5, gap + 1.0)
-    x = _bounded(J, b, box, [(0, 1, low, high)])
+    x = _bounded(J, b, box, [(0, 1, follow.rows(low, high))])
     assert low - 1e-9 <= x[0] - x[1] <= high + 1e-9
     best = min(np.linalg.norm(J @ _tied(J, b, box, limit) - b) for limit in (low, high))
     assert np.linalg.norm(J @ x - b) == pytest.approx(best, rel=1e-9)
+
+
+def test_a_bounded_fit_keeps_a_pair_within_a_range_that_narrows_as_the_pair_moves_together():
+    """``_bounded`` with a follow range that narrows to nothing at the pair's common reach
+    (puppet.runtime.follow): the fit ends inside every half-plane, no worse than any fit tied on
+    one of the range's edges or pinned at one of its corners, and untouched where it does not bind."""
+    from puppet.runtime.fapcalibration import _bounded
+
+    rng = np.random.default_rng(5)
+    for trial in range(20):
+        J = rng.normal(size=(120, 4))
+        b = J @ rng.uniform(-3, 3, 4) + 0.1 * rng.normal(size=120)
+        box = (np.full(4, -5.0), np.full(4, 5.0))
+        rows = follow.rows(-0.5, 1.0, -2.0, 2.5)
+        x = _bounded(J, b, box, [(0, 1, rows)])
+        assert np.all(rows[:, :2] @ x[:2] - rows[:, 2] <= 1e-6), trial
+        residual = np.linalg.norm(J @ x - b)
+        for a in np.linspace(-2.5, 2.5, 101):  # the range's inside and edges, coarsely
+            for c in np.linspace(-2.5, 2.5, 21):
+                if np.all(rows[:, :2] @ [a, c] - rows[:, 2] <= 0):
+                    rest = J[:, 2:]
+                    y = np.linalg.lstsq(rest, b - J[:, :2] @ [a, c], rcond=None)[0]
+                    if np.all(np.abs(y) <= 5):
+                        assert residual <= np.linalg.norm(J[:, :2] @ [a, c] + rest @ y - b) + 1e-6, trial
 
 
 def _tied(J, b, box, limit):

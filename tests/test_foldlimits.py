@@ -86,7 +86,7 @@ def test_the_leading_lip_fap_moves_its_point_exactly_and_the_other_follows(runti
     """Each inner lip FAP and its outer twin (2.x / 8.x): the one with the larger value moves its
     own point by exactly value x FAPU, the other goes along just enough that their difference
     stays in the range that folds nothing; the encoder reads back what the face shows."""
-    low, high = runtime.rig.fap_follow[(inner, outer)]
+    low, high, _, _ = runtime.rig.fap_follow[(inner, outer)]
     reach = runtime.faps.reach
     a, b = fap(inner), fap(outer)
     for lead, follower, value in ((a, b, min(2 * high, 0.9 * reach[1, inner - 1])),
@@ -115,9 +115,34 @@ def test_lid_margins_turn_less_toward_the_still_eye_corners(runtime):
 
 def test_a_rig_file_keeps_its_follow_pairs(tmp_path, runtime):
     rig = copy.deepcopy(runtime.rig)
-    rig.fap_follow = {(6, 53): (-40.5, 10.0), (12, 59): (-47.0, 42.0)}
+    rig.fap_follow = {(6, 53): (-40.5, 10.0, -np.inf, np.inf), (12, 59): (-47.0, 42.0, -400.0, 700.0)}
     save_rig(rig, tmp_path / "face.rig")
     assert load_rig(tmp_path / "face.rig").fap_follow == rig.fap_follow
+
+
+def test_a_rig_file_from_before_the_common_reach_loads_with_ranges_that_do_not_narrow(tmp_path, runtime):
+    save_rig(runtime.rig, tmp_path / "face.rig")
+    data = json.loads((tmp_path / "face.rig").read_text())
+    data["fap_follow"] = {"12,59": [-47.0, 42.0]}
+    (tmp_path / "face.rig").write_text(json.dumps(data))
+    assert load_rig(tmp_path / "face.rig").fap_follow == {(12, 59): (-47.0, 42.0, -np.inf, np.inf)}
+
+
+def test_the_lip_corner_alone_goes_as_far_as_a_smile_takes_it_and_folds_nothing(runtime, face):
+    """Raised alone, the lip corner (2.4 / 2.5) used to fold the skin beside it from about
+    490 MNS with its outer twin 145 MNS behind; the pair's range now narrows as the two rise together
+    (puppet.runtime.follow), so the outer corner comes along and the corner reaches the end of its
+    coding range (600 MNS, where the artist's smile fits put it), its own point moved exactly."""
+    for number in (12, 13):
+        values = np.zeros(68)
+        values[number - 1] = 600.0
+        shown = runtime.faps.shown(values)
+        assert shown[number - 1] == 600.0
+        assert 600.0 - shown[number + 46] < 60  # the outer corner came along
+        moved = runtime.deform_faps(values) - face.vertices
+        point = fap(number).feature_points[0]
+        assert moved[face.feature_vertices[point]] @ fap(number).axis == pytest.approx(600.0 * face.fapu[fap(number).unit], abs=1e-9)
+        assert _folds(face, runtime.deform_faps(values)) == 0
 
 
 @pytest.mark.parametrize("number", [19, 20])
@@ -162,7 +187,7 @@ def _unguarded(runtime):
 def test_the_turned_quads_fold_split_makehuman_s_way_and_not_as_turned(runtime, face):
     """tools/build_default_face.py splits the ``triangulation`` quads beside the lip corners along
     their other diagonal: of each mirror pair, MakeHuman's split folds a triangle with the jaw open
-    wide (at its reach, 911 MNS), and the turned split folds none (nor at any other range end:
+    wide (at its reach, 912 MNS), and the turned split folds none (nor at any other range end:
     ``test_no_fap_folds_...``)."""
     quads = json.loads((resources.files("puppet.data") / "default_face.json").read_text())["triangulation"]["turned_quads"]
     vertex_of = {int(s): v for v, s in enumerate(face.source_index) if s >= 0}

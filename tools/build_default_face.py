@@ -165,7 +165,7 @@ TURNED_QUADS = (  # mirror pairs: the face's right side, then its left
 """Body quads (base.obj vertices in the face's own order a b c d) split b c d / b d a instead of
 a b c / a c d. The rule that chose them, on the default face and its shipped rig: MakeHuman's
 split folds a triangle of the quad (its normal turns against its rest normal) at some FAP's
-range end, in practice open_jaw's at its reach (911 MNS), while the other split folds under none;
+range end, in practice open_jaw's at its reach (912 MNS), while the other split folds under none;
 each quad with its mirror twin. No rule on the rest shape alone picks them: the shorter
 diagonal, or the split with the larger smallest angle, would turn 2,128 or 1,436 quads and
 move the auto-rig's region borders (tests/test_foldlimits.py checks the rule on the shipped face)."""

@@ -58,6 +58,7 @@ from scipy.spatial import cKDTree
 from puppet.face.autorig import build_rig
 from puppet.face.rig import Rig
 from puppet.fap.table import N_FAPS, clamp_ranges, fap, faps
+from puppet.runtime import follow
 from puppet.runtime.fapengine import LID_FAPS
 from puppet.runtime.musclesolver import folded_triangles
 from puppet.runtime.runtime import Runtime
@@ -212,7 +213,7 @@ def fold_free_reach(runtime: Runtime, *, steps: int = 12, numbers=None) -> dict[
     for f in faps():
         if f.number < 3 or (numbers is not None and f.number not in numbers):
             continue
-        ends = [_reach(runtime, triangles, f.number, 2 * end, steps) if np.isfinite(end) and end else None
+        ends = [_reach(runtime, triangles, [f.number], 2 * end, steps) if np.isfinite(end) and end else None
                 for end in (lo[f.number - 1], hi[f.number - 1])]
         if any(e is not None for e in ends):
             low, high = (e if e is not None else np.inf * sign for e, sign in zip(ends, (-1, 1)))
@@ -220,11 +221,27 @@ def fold_free_reach(runtime: Runtime, *, steps: int = 12, numbers=None) -> dict[
     return out
 
 
-def _reach(runtime: Runtime, triangles: np.ndarray, number: int, end: float, steps: int) -> float | None:
-    """The largest fold-free value between 0 and ``end`` (None when ``end`` folds nothing)."""
+def common_reach(runtime: Runtime, numbers: list[int], *, steps: int = 12) -> tuple[float, float]:
+    """The values (low, high) that the FAPs ``numbers`` moved together to the same value can take
+    without folding a triangle, toward each end of the narrowest of their ranges (twice it, as in
+    ``fold_free_reach``); infinite toward an end where nothing folds. The runtime's own limits
+    apply (pass one without them for the rig's response)."""
+    triangles = np.asarray(runtime.face.triangles)
+    lo, hi = clamp_ranges()
+    index = np.asarray(numbers) - 1
+    out = []
+    for end, unlimited in ((np.max(lo[index]), -np.inf), (np.min(hi[index]), np.inf)):
+        reach = _reach(runtime, triangles, numbers, 2 * end, steps) if np.isfinite(end) and end else None
+        out.append(unlimited if reach is None else float(reach))
+    return out[0], out[1]
+
+
+def _reach(runtime: Runtime, triangles: np.ndarray, numbers: list[int], end: float, steps: int) -> float | None:
+    """The largest fold-free value between 0 and ``end`` of the FAPs ``numbers`` together (None
+    when ``end`` folds nothing)."""
     def folds(value: float) -> bool:
         values = np.zeros(N_FAPS)
-        values[number - 1] = value
+        values[np.asarray(numbers) - 1] = value
         return bool(folded_triangles(runtime.rest, runtime.deform_faps(values), triangles).any())
 
     if not folds(end):
@@ -271,20 +288,37 @@ def _skin(face, rig: Rig) -> np.ndarray:
 
 
 def _bounded(J: np.ndarray, b: np.ndarray, bounds: tuple[np.ndarray, np.ndarray],
-             differences: list[tuple[int, int, float, float]] = ()) -> np.ndarray:
-    """argmin |J x - b| with x within ``bounds`` and, for each (i, j, low, high) of
-    ``differences``, low <= x_i - x_j <= high (the rig's follow pairs: within them the face shows
-    the values as they are, so the fit is what the face does). A pair found outside its range is
-    held at the limit it crossed (x_i = x_j + limit, one unknown fewer) and the rest solved again,
-    until every pair is in range."""
-    held: dict[int, tuple[int, float]] = {}
+             differences: list[tuple[int, int, np.ndarray]] = ()) -> np.ndarray:
+    """argmin |J x - b| with x within ``bounds`` and, for each (i, j, rows) of ``differences``,
+    (x_i, x_j) within the half-planes ``rows`` (the rig's follow pairs, ``puppet.runtime.follow``:
+    within them the face shows the values as they are, so the fit is what the face does). A pair
+    found outside is held on the half-plane it crossed most (x_i = alpha x_j + c, one unknown
+    fewer) and the rest solved again, until every pair is inside; a held pair that ends past
+    another of its half-planes is pinned where the two edges meet (the corner of its range)."""
+    held: dict[int, tuple[int, float, float, float | None]] = {}
     while True:
         x = _held(J, b, bounds, held)
-        crossed = {i: (j, low if x[i] - x[j] < low else high) for i, j, low, high in differences
-                   if i not in held and not low - DIFFERENCE_TOLERANCE <= x[i] - x[j] <= high + DIFFERENCE_TOLERANCE}
+        crossed = {}
+        for i, j, rows in differences:
+            outside = rows[:, 0] * x[i] + rows[:, 1] * x[j] - rows[:, 2]
+            k = int(np.argmax(outside))
+            if outside[k] <= DIFFERENCE_TOLERANCE or (i in held and held[i][3] is not None):
+                continue
+            if i not in held:
+                crossed[i] = (j, *_edge(rows[k]), None)
+            else:
+                on = int(np.argmin(np.abs(outside)))
+                corner = np.linalg.solve(rows[[on, k], :2], rows[[on, k], 2])
+                crossed[i] = (j, 0.0, float(corner[0]), float(corner[1]))
         if not crossed:
             return x
         held |= crossed
+
+
+def _edge(row: np.ndarray) -> tuple[float, float]:
+    """(alpha, c) of the half-plane's edge p x_i + q x_j = r as x_i = alpha x_j + c."""
+    p, q, r = row
+    return float(-q / p), float(r / p)
 
 
 DIFFERENCE_TOLERANCE = 1e-6
@@ -293,21 +327,27 @@ by as little)."""
 
 
 def _held(J: np.ndarray, b: np.ndarray, bounds: tuple[np.ndarray, np.ndarray],
-          held: dict[int, tuple[int, float]]) -> np.ndarray:
-    """Bounded least squares with each x_i of ``held`` = x_j + c ({i: (j, c)}): x_i's column
-    joins x_j's, and x_j keeps within both boxes."""
+          held: dict[int, tuple[int, float, float, float | None]]) -> np.ndarray:
+    """Bounded least squares with each x_i of ``held`` = alpha x_j + c ({i: (j, alpha, c, pin)}):
+    x_i's column joins x_j's, and x_j keeps within both boxes; or, with a ``pin``, x_j = pin and
+    x_i = c, both out of the solve."""
     low, high = (np.array(bound, dtype=float) for bound in bounds)
     K, rhs = J.copy(), b.copy()
-    for i, (j, c) in held.items():
-        K[:, j] += J[:, i]
-        rhs -= J[:, i] * c
-        low[j], high[j] = max(low[j], low[i] - c), min(high[j], high[i] - c)
-        high[j] = max(high[j], low[j])
-    free = np.array([k for k in range(J.shape[1]) if k not in held], dtype=np.int64)
     x = np.zeros(J.shape[1])
+    for i, (j, alpha, c, pin) in held.items():
+        if pin is not None:
+            x[j] = pin
+            rhs -= J[:, j] * pin
+        K[:, j] += alpha * J[:, i]
+        rhs -= J[:, i] * c
+        ends = sorted(((low[i] - c) / alpha, (high[i] - c) / alpha)) if alpha else (-np.inf, np.inf)
+        low[j], high[j] = max(low[j], ends[0]), min(high[j], ends[1])
+        high[j] = max(high[j], low[j])
+    pinned = {j for j, _, _, pin in held.values() if pin is not None}
+    free = np.array([k for k in range(J.shape[1]) if k not in held and k not in pinned], dtype=np.int64)
     x[free] = lsq_linear(K[:, free], rhs, bounds=(low[free], high[free]), method="bvls", lsmr_tol="auto").x
-    for i, (j, c) in held.items():
-        x[i] = x[j] + c
+    for i, (j, alpha, c, _) in held.items():
+        x[i] = alpha * x[j] + c
     return x
 
 
@@ -337,7 +377,7 @@ class _LinearModel:
                           np.minimum(limits.reach[1], limits.skin_reach[1])])[:, self.columns]
         self.bounds = (np.maximum(lo[self.columns], reach[0]), np.minimum(hi[self.columns], reach[1]))
         index = {number: j for j, number in enumerate(self.fitted)}
-        self.differences = [(index[a], index[b], low, high) for (a, b), (low, high) in sorted(runtime.rig.fap_follow.items())
+        self.differences = [(index[a], index[b], follow.rows(*ranges)) for (a, b), ranges in sorted(runtime.rig.fap_follow.items())
                             if a in index and b in index]
 
     @functools.cached_property

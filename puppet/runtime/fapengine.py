@@ -35,7 +35,8 @@ file; index 0 = FAP 1) into the runtime's inputs: control point displacements an
     itself turns as far as asked, as eyes do past the point where the lids stop following;
   - then the rig's ``fap_follow``: of two FAPs whose feature points lie a hair's breadth apart
     (an inner and an outer lip point), the one with the larger value leads and the other follows just
-    enough that the inner lip never slides through the outer one.
+    enough that the inner lip never slides through the outer one (their range of difference narrows
+    as the two move together: ``puppet.runtime.follow``).
 
   ``shown(values)`` gives the values the face then shows, which is what ``encode`` measures back;
   within these limits they are the values themselves (``puppet.runtime.foldlimits`` finds reach and follow).
@@ -65,6 +66,7 @@ from scipy.sparse import _sparsetools
 from puppet.face import rigid
 from puppet.fap.highlevel import expand
 from puppet.fap.table import N_FAPS, fap, faps
+from puppet.runtime import follow
 from puppet.runtime.lastmade import LastMade
 
 JAW_FAPS = (3, 14, 15)
@@ -102,7 +104,9 @@ class FapEngine:
             limits = self.skin_reach if number in GAZE_FAPS else self.reach
             limits[0, number - 1] = max(limits[0, number - 1], low)
             limits[1, number - 1] = min(limits[1, number - 1], high)
-        self.follow = [(a - 1, b - 1, low, high) for (a, b), (low, high) in sorted(self.rig.fap_follow.items())]
+        pairs = sorted(self.rig.fap_follow.items())
+        self._follow_a, self._follow_b = (np.array([pair[k] - 1 for pair, _ in pairs], dtype=np.int64) for k in (0, 1))
+        self._follow_rows = np.array([follow.rows(*ranges) for _, ranges in pairs]).reshape(len(pairs), 4, 3)
 
     def _face_limits(self) -> np.ndarray:
         """(2, 68) low / high: what this face can follow at all (see the module docstring)."""
@@ -129,14 +133,10 @@ class FapEngine:
             if excess > 0:
                 closing = np.maximum(v[[upper - 1, lower - 1]], 0.0)
                 v[[upper - 1, lower - 1]] -= excess * closing / closing.sum()
-        for a, b, low, high in self.follow:
-            gap = v[a] - v[b]
-            if gap > high or gap < low:
-                limit = high if gap > high else low
-                if abs(v[a]) >= abs(v[b]):
-                    v[b] = v[a] - limit
-                else:
-                    v[a] = v[b] + limit
+        a, b, rows = self._follow_a, self._follow_b, self._follow_rows
+        outside = rows[:, :, 0] * v[a, None] + rows[:, :, 1] * v[b, None] - rows[:, :, 2]
+        for k in np.flatnonzero(outside.max(axis=1, initial=0.0) > 0):  # the pairs share no FAP
+            v[a[k]], v[b[k]] = follow.follower(rows[k], v[a[k]], v[b[k]])
         return v
 
     # -- decoding ------------------------------------------------------------------------

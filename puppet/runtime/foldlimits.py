@@ -14,7 +14,11 @@ a file or a device gives are never changed, only what the face shows.
   folded at 20 MW, raise_b_midlip 5 alone at -480 MNS). Their difference is kept within the range
   that folds nothing: the FAP with the larger value leads and moves its own point by exactly
   value x FAPU; the other follows just enough. The visemes and expressions mostly move both
-  together and are not touched.
+  together and are not touched. Where the pair moved together goes further than the nearer of
+  the two alone, the range narrows toward that common reach (``puppet.runtime.follow``): the lip
+  corner raised alone folded the skin beside it from 490 MNS with its outer twin 145 MNS behind,
+  while the two together go to 705, so the outer corner now comes along and the corner reaches
+  691 (a smile's fit puts it at 600, the end of its coding range; it was capped at 480).
 * **Reach** (``fold_free_reach``, with follow in place): each FAP alone is limited to the values
   it can take without a fold, toward each end of its range, the same on both sides of the face
   (the tighter of a FAP's and its mirror's) and 2% inside. It caps what no face does (a brow
@@ -54,7 +58,7 @@ import numpy as np
 
 from puppet.face.rig import Rig
 from puppet.fap.table import fap
-from puppet.runtime.fapcalibration import Calibration, calibrate, fit_faps, fold_free_reach
+from puppet.runtime.fapcalibration import Calibration, calibrate, common_reach, fit_faps, fold_free_reach
 from puppet.runtime.fapengine import GAZE_FAPS, LID_FAPS
 from puppet.runtime.runtime import Runtime
 
@@ -64,19 +68,23 @@ REACH_MARGIN = 0.98  # a little inside the fold-free value: float32 and float64 
 LID_PARTS = frozenset(part for part, _, _ in LID_FAPS.values())
 NEEDED = (3, 19, 20)
 """FAPs whose reach goes toward their high end as far as the artist's shapes take them (the
-fits of the examples within the other limits, ``within_limits``), whether or not the FAP alone
-folds there: open_jaw (jawOpen opens it to 911 MNS; its fold-free reach is 894, 2% inside the
-913 where two triangles on the chin turn over) and close_t_l/r_eyelid (past about 645 IRISD the
-tiny triangles at the eye corners would turn over, but the sliver guard keeps them; a blink
-closes at 1024). Capped fold-free, the face could not blink."""
+fits of the examples within the other limits, ``within_limits``): open_jaw up to where it folds
+(jawOpen would open it to 916 MNS; two triangles on the chin turn over from 913, so it stops
+there, not at the fold-free reach 2% inside) and close_t_l/r_eyelid whether or not they fold (past
+about 645 IRISD the tiny triangles at the eye corners would turn over, but the sliver guard
+keeps them: ``GUARDED``; a blink closes at 1024). Capped fold-free, the face could not blink."""
+GUARDED = (19, 20)
+"""``NEEDED`` FAPs whose folds the sliver guard holds: their reach is not capped at the fold."""
 LIP_PAIRS = tuple((n, n + 47) for n in range(4, 14))
 """(inner lip FAP, outer lip FAP): the FAPs 4-13 move the inner lip points 2.x, 51-60 the outer
 ones 8.x beside them, along the same axes and in the same units."""
 
 
-def follow_ranges(runtime, pairs=LIP_PAIRS, share: float = FOLLOW_SHARE) -> dict[tuple[int, int], tuple[float, float]]:
-    """Per pair (a, b), the range (low, high) of value_a - value_b that folds nothing: the tighter
-    of each FAP's own fold-free reach (a alone at d, or b alone at -d), found with no follow."""
+def follow_ranges(runtime, pairs=LIP_PAIRS, share: float = FOLLOW_SHARE) -> dict[tuple[int, int], tuple[float, ...]]:
+    """Per pair (a, b), the range (low, high) of value_a - value_b that folds nothing at rest: the
+    tighter of each FAP's own fold-free reach (a alone at d, or b alone at -d), and the pair's
+    common reach (m_low, m_high): where both moved together fold (``puppet.runtime.follow``: the
+    range narrows to nothing there). Found with no follow."""
     free = _with(runtime, fap_follow={}, fap_reach={})
     numbers = sorted({n for pair in pairs for n in pair})
     alone = fold_free_reach(free, numbers=numbers)
@@ -86,15 +94,28 @@ def follow_ranges(runtime, pairs=LIP_PAIRS, share: float = FOLLOW_SHARE) -> dict
         (a_low, a_high), (b_low, b_high) = alone.get(a, unlimited), alone.get(b, unlimited)
         low, high = max(a_low, -b_high), min(a_high, -b_low)
         if np.isfinite(low) or np.isfinite(high):
-            out[(a, b)] = (float(max(share * low, -1e9)), float(min(share * high, 1e9)))
+            out[(a, b)] = (float(max(share * low, -1e9)), float(min(share * high, 1e9)), *common_reach(free, [a, b]))
     return out
 
 
-def fold_limits(runtime) -> tuple[dict[tuple[int, int], tuple[float, float]], dict[int, tuple[float, float]]]:
+def fold_limits(runtime) -> tuple[dict[tuple[int, int], tuple[float, ...]], dict[int, tuple[float, float]]]:
     """(fap_follow, fap_reach) for the runtime's face and rig: follow first, then each FAP's
-    fold-free reach with that follow in place."""
-    follow = _symmetric(follow_ranges(runtime), _mirror_pair)
+    fold-free reach with that follow in place. A pair's range narrows toward its common reach
+    only on a side where the pair together goes further than the nearer of its two FAPs does
+    alone within the rest range (``_narrowed``: the lip corner); elsewhere it stays as at rest."""
+    ranges = _symmetric(follow_ranges(runtime), _mirror_pair)
+    at_rest = {pair: (low, high, -np.inf, np.inf) for pair, (low, high, _, _) in ranges.items()}
+    alone = _reach(_with(runtime, fap_follow=at_rest, fap_reach={}))
+    follow = {pair: _narrowed(pair, r, alone) for pair, r in ranges.items()}
     return follow, _reach(_with(runtime, fap_follow=follow, fap_reach={}))
+
+
+def _narrowed(pair: tuple[int, int], ranges: tuple[float, ...], reach: dict[int, tuple[float, float]]) -> tuple[float, ...]:
+    """A pair's (low, high, m_low, m_high) keeping a common reach only on a side where it passes
+    the nearer of the two FAPs' ``reach`` (the other side's is made infinite: no narrowing)."""
+    low, high, m_low, m_high = ranges
+    a, b = (reach.get(n, (-np.inf, np.inf)) for n in pair)
+    return (low, high, m_low if m_low < max(a[0], b[0]) else -np.inf, m_high if m_high > min(a[1], b[1]) else np.inf)
 
 
 def _reach(runtime) -> dict[int, tuple[float, float]]:
@@ -117,15 +138,16 @@ def _mirror_pair(pair: tuple[int, int]) -> tuple[int, int] | None:
 
 
 def _symmetric(limits: dict, other_side) -> dict:
-    """Limits that hold on both sides: each key's range and its mirror's, intersected, so that a
-    symmetric expression stays symmetric (the mesh is not quite, and each side folds at its own
-    value)."""
+    """Limits that hold on both sides: each key's and its mirror's intersected (the larger of their
+    lower ends, the smaller of their upper ends: (low, high) or follow's (low, high, m_low, m_high)),
+    so that a symmetric expression stays symmetric (the mesh is not quite, and each side folds at
+    its own value)."""
     out = dict(limits)
-    for key, (low, high) in limits.items():
+    for key, ends in limits.items():
         other = other_side(key)
         if other is not None:
-            o_low, o_high = limits.get(other, (-np.inf, np.inf))
-            out[key] = out[other] = (max(low, o_low), min(high, o_high))
+            mirrored = limits.get(other, (-np.inf, np.inf) * (len(ends) // 2))
+            out[key] = out[other] = tuple((max if k % 2 == 0 else min)(end, o) for k, (end, o) in enumerate(zip(ends, mirrored)))
     return out
 
 
@@ -150,9 +172,9 @@ def within_limits(face, calibration: Calibration, examples) -> Calibration:
 
     What an example uses is measured twice: fitted with the ``NEEDED`` FAPs unlimited, then
     within the reach that gives. The second fits use less where the other limits bind (the
-    jawOpen fit opens the jaw 930 MNS unlimited, 911 within the lids' and lips' limits), and
-    the reach keeps only that: past it open_jaw folds the chin (from 913 MNS), and no example
-    goes there."""
+    jawOpen fit opens the jaw 930 MNS unlimited, 916 within the lids' and lips' limits), and
+    the reach keeps only that, short of where the FAP alone folds unless the sliver guard holds
+    it (open_jaw folds the chin from 913 MNS and stops there)."""
     safe = fold_safe(Runtime(face, calibration.rig))
     fold_free = dict(safe.fap_reach)
     safe.fap_reach = {n: r for n, r in fold_free.items() if n not in NEEDED}
@@ -164,13 +186,14 @@ def within_limits(face, calibration: Calibration, examples) -> Calibration:
 
 def needed_reach(face, rig: Rig, examples, fold_free: dict[int, tuple[float, float]]) -> dict[int, tuple[float, float]]:
     """``fold_free`` with each ``NEEDED`` FAP's high end raised to the largest value a fit of the
-    examples on ``rig`` gives it (or its mirror)."""
+    examples on ``rig`` gives it (or its mirror), short of where it folds unless ``GUARDED``."""
     used = np.max(list(_fits(Runtime(face, rig, dtype=np.float64), examples).values()), axis=0)
     reach = dict(fold_free)
     for number in NEEDED:
         low, high = reach.get(number, (-np.inf, np.inf))
         both = [number] + ([mirror(number)] if mirror(number) else [])
-        reach[number] = (low, max(high, *(float(used[n - 1]) for n in both)))
+        wanted = max(high, *(float(used[n - 1]) for n in both))
+        reach[number] = (low, wanted if number in GUARDED else min(wanted, high / REACH_MARGIN))
     return reach
 
 
