@@ -207,25 +207,21 @@ def fold_free_reach(runtime: Runtime, *, steps: int = 12, numbers=None) -> dict[
     free = copy.copy(runtime.rig)
     free.fap_reach = {}
     runtime = Runtime(runtime.face, free, dtype=runtime.dtype)
-    triangles = np.asarray(runtime.face.triangles)
-    lo, hi = clamp_ranges()
     out = {}
     for f in faps():
         if f.number < 3 or (numbers is not None and f.number not in numbers):
             continue
-        ends = [_reach(runtime, triangles, [f.number], 2 * end, steps) if np.isfinite(end) and end else None
-                for end in (lo[f.number - 1], hi[f.number - 1])]
-        if any(e is not None for e in ends):
-            low, high = (e if e is not None else np.inf * sign for e, sign in zip(ends, (-1, 1)))
-            out[f.number] = (float(low), float(high))
+        low, high = common_reach(runtime, [f.number], steps=steps)
+        if np.isfinite(low) or np.isfinite(high):
+            out[f.number] = (low, high)
     return out
 
 
 def common_reach(runtime: Runtime, numbers: list[int], *, steps: int = 12) -> tuple[float, float]:
     """The values (low, high) that the FAPs ``numbers`` moved together to the same value can take
     without folding a triangle, toward each end of the narrowest of their ranges (twice it, as in
-    ``fold_free_reach``); infinite toward an end where nothing folds. The runtime's own limits
-    apply (pass one without them for the rig's response)."""
+    ``fold_free_reach``, which is this for one FAP); infinite toward an end where nothing folds.
+    The runtime's own limits apply (pass one without them for the rig's response)."""
     triangles = np.asarray(runtime.face.triangles)
     lo, hi = clamp_ranges()
     index = np.asarray(numbers) - 1
