@@ -17,7 +17,7 @@ from puppet.face.rig import load_rig, save_rig
 from puppet.fap.highlevel import high_level_faps
 from puppet.fap.table import clamp_ranges, fap
 from puppet.io.fapfile import read_fap, write_fap
-from puppet.runtime.foldlimits import LIP_PAIRS
+from puppet.runtime.foldlimits import LID_PARTS, LIP_PAIRS, lid_faded
 from puppet.runtime.musclesolver import folded_triangles
 
 
@@ -111,6 +111,18 @@ def test_lid_margins_turn_less_toward_the_still_eye_corners(runtime):
     share = _lid_share(path)
     assert share[0] == 0 and share[-1] == 0 and np.all(share[4:13] == 1)
     assert np.all(np.diff(share[:5]) > 0) and np.allclose(share, share[::-1])
+
+
+@pytest.mark.parametrize(("number", "faded"), [(19, True), (20, True), (31, True), (21, False), (22, False), (25, False)])
+def test_lid_margin_motions_fade_toward_the_corners_for_the_upper_lids_and_brows_not_the_lower_lids_or_gaze(
+        runtime, number, faded):
+    share = {p.name: p.attach_weight for p in runtime.rig.control_points if p.attach in LID_PARTS}
+    motions = runtime.rig.fap_motions[number]
+    corner = [name for name in motions if share.get(name, 1.0) < 0.5 and np.any(motions[name])]
+    assert corner  # the FAP moves lid margin points near a corner
+    after = lid_faded(runtime.rig)[number]
+    for name in corner:
+        np.testing.assert_allclose(after[name], motions[name] * (share[name] if faded else 1.0))
 
 
 def test_a_rig_file_keeps_its_follow_pairs(tmp_path, runtime):

@@ -64,7 +64,7 @@ ACROSS = (15, 64)
 """shift_jaw and bend_nose: a symmetric shape has none (their mirror is their negative)."""
 SMALLEST = 5
 """FAPU: smaller values are left out of the table."""
-EASE = 0.8
+EASE = 0.9
 """The share of its value a FAP pair keeps at each easing step (``unfolded``)."""
 
 

@@ -11,10 +11,11 @@ a file or a device gives are never changed, only what the face shows.
   (8.1-8.8) are one edge of the lip, 1-3 mm apart, each moved by its own FAP (``LIP_PAIRS``:
   lower_t_midlip 4 and lower_t_midlip_o 51, ..., raise_r_cornerlip 13 and raise_r_cornerlip_o 60).
   One moved alone slides through the other within a few millimetres (stretch_l_cornerlip 6 alone
-  folded at 20 MW, raise_b_midlip 5 alone at -480 MNS). Their difference is kept within the range
-  that folds nothing: the FAP with the larger value leads and moves its own point by exactly
-  value x FAPU; the other follows just enough. The visemes and expressions mostly move both
-  together and are not touched. Where the pair moved together goes further than the nearer of
+  folded at 20 MW, raise_b_midlip 5 alone at -480 MNS). Their difference is kept within three
+  quarters of the range that folds nothing (``FOLLOW_SHARE``; half for the lip stretch, ``STRETCH``):
+  the FAP with the larger value leads and moves its own point by exactly value x FAPU; the other
+  follows just enough. The visemes and expressions mostly move both together and are not
+  touched. Where the pair moved together goes further than the nearer of
   the two alone, the range narrows toward that common reach (``puppet.runtime.follow``): the lip
   corner raised alone folded the skin beside it from 490 MNS with its outer twin 145 MNS behind,
   while the two together go to 705, so the outer corner now comes along and the corner reaches
@@ -41,10 +42,12 @@ Before the limits, ``fold_safe`` fades the calibrated motions of the lid margin 
 the eye corners as their lid's turn fades (``autorig``'s ``attach_weight`` there): the corners
 stay put, and a margin vertex a fraction of a millimetre from one, moved by a brow or cheek
 FAP's motion, folded the skin between them in the sad, fearful and surprised faces (and the
-closing lids' own motions, unfaded, fold 9 triangles a side at a full blink that the sliver guard
-cannot hold). The gaze FAPs' motions are not faded: they fold nothing at any range end, in any
-expression or viseme, and faded they cost the eye-look shapes their lids' follow near the corners
-(eyeLookIn/Out 0.34 -> 0.40 relative residual, eyeLookUp/Down 0.30 -> 0.31-0.32).
+upper lids' own closing motions, unfaded, fold 9 triangles a side from 900 IRISD that the sliver
+guard cannot hold; faded less, by the square root of the share or at the corners only, still
+8-9). The gaze FAPs' and the lower lids' motions are not faded (``UNFADED``): they fold nothing
+at any range end, in any expression or viseme, and faded they cost the eye-look shapes their
+lids' follow near the corners (eyeLookIn/Out 0.34 -> 0.40 relative residual, eyeLookUp/Down
+0.30 -> 0.31-0.32; the lower lids' alone, eyeLookUp 0.296 -> 0.304).
 
 The README's realism section lists what the limits cap on the default face.
 """
@@ -62,10 +65,19 @@ from puppet.runtime.fapcalibration import Calibration, calibrate, common_reach, 
 from puppet.runtime.fapengine import GAZE_FAPS, LID_FAPS
 from puppet.runtime.runtime import Runtime
 
-FOLLOW_SHARE = 0.5  # follow keeps a pair within half its fold-free difference: at a large common
-# motion the lip folds sooner than at rest (at the whole difference, FAP 6 folded at 49 MW)
+FOLLOW_SHARE = 0.75  # follow keeps a pair within three quarters of its fold-free difference: at a
+# large common motion the lip folds sooner than at rest (at the whole difference, FAP 6 folded at
+# 49 MW); at half, jawRight and mouthRight lost their lower lip's roll (held-out relative residual
+# 0.291 and 0.290 at three quarters, 0.304 and 0.301 at half)
+STRETCH = (6, 7)
+STRETCH_SHARE = 2 / 3  # of FOLLOW_SHARE for the stretch pairs (6 / 53, 7 / 54): at three quarters
+# viseme 12 (jaw 140 MNS, lips stretched 190 MW, corners raised 70) folded the upper lip's middle
 REACH_MARGIN = 0.98  # a little inside the fold-free value: float32 and float64 runtimes agree there
 LID_PARTS = frozenset(part for part, _, _ in LID_FAPS.values())
+UNFADED = (*GAZE_FAPS, 21, 22)
+"""FAPs whose motions ``lid_faded`` leaves as calibrated: the gaze (the lids follow the eyeball)
+and close_b_l/r_eyelid (the lower lids: unfaded they fold nothing, and faded they cost eyeLookUp
+its lower lid, 0.304 -> 0.296 relative residual held out); the upper lids' closing stays faded."""
 NEEDED = (3, 19, 20)
 """FAPs whose reach goes toward their high end as far as the artist's shapes take them (the
 fits of the examples within the other limits, ``within_limits``): open_jaw up to where it folds
@@ -94,7 +106,8 @@ def follow_ranges(runtime, pairs=LIP_PAIRS, share: float = FOLLOW_SHARE) -> dict
         (a_low, a_high), (b_low, b_high) = alone.get(a, unlimited), alone.get(b, unlimited)
         low, high = max(a_low, -b_high), min(a_high, -b_low)
         if np.isfinite(low) or np.isfinite(high):
-            out[(a, b)] = (float(max(share * low, -1e9)), float(min(share * high, 1e9)), *common_reach(free, [a, b]))
+            kept = share * STRETCH_SHARE if a in STRETCH else share
+            out[(a, b)] = (float(max(kept * low, -1e9)), float(min(kept * high, 1e9)), *common_reach(free, [a, b]))
     return out
 
 
@@ -205,9 +218,10 @@ def _fits(runtime: Runtime, examples) -> dict[str, np.ndarray]:
 def lid_faded(rig: Rig) -> dict[int, dict[str, np.ndarray]]:
     """The rig's FAP motions with each lid-carried point's motion scaled by its share of the lid's
     turn (``attach_weight``: 1 mid-lid, down to nearly 0 at the still eye corners), except the
-    gaze FAPs' (``GAZE_FAPS``): the lids follow the eyeball to the corners."""
+    ``UNFADED`` FAPs': the lids follow the eyeball to the corners, and the lower lids' own motions
+    fold nothing at any range end."""
     share = {p.name: p.attach_weight for p in rig.control_points if p.attach in LID_PARTS}
-    return {number: motions if number in GAZE_FAPS
+    return {number: motions if number in UNFADED
             else {name: m * share.get(name, 1.0) for name, m in motions.items()}
             for number, motions in rig.fap_motions.items()}
 
