@@ -153,13 +153,16 @@ class ControlPointMuscles:
 
     def displace(self, contractions: Mapping[str, float], out: np.ndarray | None = None) -> np.ndarray:
         """Displacements (n, 3) for contractions {name: c}, added to ``out`` when given."""
-        c = self.contractions(contractions)
-        travel = repelled_travel(c[self._muscle] * self._travel, self._dist)
-        moved = self._sum @ (travel[:, None] * self._direction)
+        moved = self.displaced(self.contractions(contractions))
         if out is None:
             return moved
         out += moved
         return out
+
+    def displaced(self, c: np.ndarray) -> np.ndarray:
+        """Displacements (n, 3) for one contraction per muscle, in order (``contractions``)."""
+        travel = repelled_travel(c[self._muscle] * self._travel, self._dist)
+        return self._sum @ (travel[:, None] * self._direction)
 
 
 def _contracting(muscles: Sequence[Muscle], contractions: Mapping[str, float]) -> list[Muscle]:

@@ -289,7 +289,7 @@ class Runtime:
         d = self._effective(np.asarray(displacements, dtype=float), rigid)
         share = None
         if contracting and mode == "control":  # the muscles' share, attached points carried as the FAPs'
-            share = self._carried(self._control_muscles.displace(contracting), rigid)
+            share = self._muscle_share(contracting, rigid)
         if out is None:
             out = np.empty_like(self.rest)
         elif out.shape != self.rest.shape or out.dtype != self.dtype or not out.flags.c_contiguous:
@@ -415,6 +415,15 @@ class Runtime:
     @functools.cached_property
     def _last_guarded(self) -> LastMade:
         return LastMade()
+
+    def _muscle_share(self, contracting: Mapping[str, float], rigid: Mapping[str, np.ndarray]) -> np.ndarray:
+        """The muscles' share of the inputs (control-point mode: their displacements of the active
+        points, carried by the parts as the FAPs' are), made again only when a contraction or a
+        carrying part's motion changes: held sliders and a held jaw cost no muscle work."""
+        muscles = self._control_muscles
+        c = muscles.contractions(contracting)
+        key = c.tobytes() + b"".join(part.encode() + rigid[part].tobytes() for part in self._carry if part in rigid)
+        return self._last_guarded.get("muscles", key, lambda: self._carried(muscles.displaced(c), rigid))
 
     def _guarded(self, moving: np.ndarray) -> np.ndarray:
         """The fold guard's triangles that the muscles' share can squeeze when it moves the inputs
