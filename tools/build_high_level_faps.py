@@ -6,7 +6,7 @@ Each recipe is a weighted sum of the artist's ARKit shapes of the default face
 shipped rig (``fit_faps`` over the whole skin, within the face's limits; the eyeballs held still,
 and the lips' mid-line where the jaw does not drop, and in joy the upper lip beside the corners:
 ``MIDLIP``, ``UPPER_LIP_SIDES``), made left/right symmetric, rounded to whole FAPU, and then eased where the sum folds the skin:
-while a triangle is turned over, the FAP pair (a FAP and its mirror) whose easing to 80% unfolds
+while a triangle is turned over, the FAP pair (a FAP and its mirror) whose easing to 90% unfolds
 most is eased (the artist's joy itself folds a few triangles where cheek and smile meet). What is
 written is what the face shows (``FapEngine.shown``: an eased lip FAP's twin follows it).
 
