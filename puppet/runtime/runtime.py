@@ -397,7 +397,7 @@ class Runtime:
         added to ``out`` (which already holds the share as DFFD spreads it). The correction is a
         function of the share alone, so a held pose reuses the last frame's."""
         share = np.ascontiguousarray(share, dtype=float)
-        rows, correction = self._last_guarded.get("share", share.tobytes(), lambda: self._guard_correction(share))
+        rows, correction = self._last_muscles.get("correction", share.tobytes(), lambda: self._guard_correction(share))
         out[rows] += correction
 
     def _guard_correction(self, share: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -413,7 +413,7 @@ class Runtime:
         return vertices[changed], (fixed[changed] - moved[changed]).astype(self.dtype)
 
     @functools.cached_property
-    def _last_guarded(self) -> LastMade:
+    def _last_muscles(self) -> LastMade:
         return LastMade()
 
     def _muscle_share(self, contracting: Mapping[str, float], rigid: Mapping[str, np.ndarray]) -> np.ndarray:
@@ -423,7 +423,7 @@ class Runtime:
         muscles = self._control_muscles
         c = muscles.contractions(contracting)
         key = c.tobytes() + b"".join(part.encode() + rigid[part].tobytes() for part in self._carry if part in rigid)
-        return self._last_guarded.get("muscles", key, lambda: self._carried(muscles.displaced(c), rigid))
+        return self._last_muscles.get("share", key, lambda: self._carried(muscles.displaced(c), rigid))
 
     def _guarded(self, moving: np.ndarray) -> np.ndarray:
         """The fold guard's triangles that the muscles' share can squeeze when it moves the inputs
