@@ -217,6 +217,18 @@ def _calibrate_arguments(calibrate: argparse.ArgumentParser) -> None:
                            help="seconds of sweep to record (default 8)")
 
 
+def _calibrate_face_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--examples", required=True,
+                        help="a folder of example shapes of the face: .obj meshes of its own vertices in new shapes, "
+                             "or MakeHuman .target files for a face cut from MakeHuman's mesh (the embedded one)")
+    parser.add_argument("--face", default=None, help=FACE_HELP)
+    parser.add_argument("-o", "--output", required=True,
+                        help="the face folder to write (the face with its calibrated rig; it may be --face's own), "
+                             "or a .rig file")
+    parser.add_argument("--hold-out", nargs="+", default=[], metavar="NAME",
+                        help="examples the calibration does not learn from; their fit is reported apart")
+
+
 def _bench_arguments(bench: argparse.ArgumentParser) -> None:
     bench.add_argument("--json", action="store_true", help="print the results as JSON")
     bench.add_argument("--frames", type=_positive, default=300, help="frames per measurement")
@@ -454,6 +466,71 @@ def _calibrate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _calibrate_face(args: argparse.Namespace) -> int:
+    """``puppet calibrate-face``: how each FAP moves this face's skin, learnt from example shapes and
+    made fold-safe (``puppet.runtime.foldlimits.fold_safe_calibration``, as the embedded face's rig
+    is made), written as a face folder or a rig file, with the fit on the examples (the held-out
+    ones apart: what the calibration does on shapes it never saw)."""
+    import shutil
+    import time
+
+    from puppet.face.autorig import rig_for_face
+    from puppet.face.examples import ExampleError, load_examples
+    from puppet.face.folder import FACE_RIG, write_rigged_folder
+    from puppet.face.load import load_face
+    from puppet.face.rig import save_rig
+    from puppet.io.outputs import writable
+    from puppet.runtime.foldlimits import fold_safe_calibration
+
+    rig_file = Path(args.output).suffix.lower() in (".rig", ".json")
+    output = writable(args.output, "rig file") if rig_file else _folder_output(args.output)
+    face = _face(args.face) or load_face()
+    examples = load_examples(face, args.examples)
+    unknown = sorted(set(args.hold_out) - set(examples))
+    if unknown:
+        raise ExampleError(f"--hold-out {', '.join(unknown)}: no such shape in {args.examples} "
+                           f"(it has {', '.join(examples)})")
+    start = time.perf_counter()
+    result = fold_safe_calibration(face, examples, rig=rig_for_face(face), held_out=tuple(args.hold_out))
+    seconds = time.perf_counter() - start
+    if rig_file:
+        save_rig(result.rig, output)
+    elif args.face is not None and Path(args.face).is_dir():
+        if output.resolve() != Path(args.face).resolve():
+            shutil.copytree(args.face, output, dirs_exist_ok=True)
+        save_rig(result.rig, output / FACE_RIG)
+    else:
+        write_rigged_folder(face, result.rig, output, source_mesh=args.face or "the embedded default face")
+    print(f"calibrated {face.name} from {len(result.weights) - len(result.held_out)} example shapes in "
+          f"{seconds:.0f} s -> {args.output}")
+    for line in _fit_lines(face, result, examples):
+        print(f"  {line}")
+    if not rig_file:
+        print(f"  use it with --face {args.output}")
+    return 0
+
+
+def _fit_lines(face, result, examples) -> list[str]:
+    """The calibration's fit of its examples (learnt from, held out), within the fold limits."""
+    import numpy as np
+
+    from puppet.runtime.fapcalibration import relative_residual
+    from puppet.runtime.runtime import Runtime
+
+    runtime = Runtime(face, result.rig, dtype=np.float64)
+    residual = {name: relative_residual(runtime, values, examples[name]) for name, values in result.weights.items()}
+    lines = ["fit, relative residual |V(f) - V0 - D| / |D| over the vertices a shape moves, within the fold limits:"]
+    for label, names in (("learnt from", [n for n in residual if n not in result.held_out]),
+                         ("held out", list(result.held_out))):
+        if names:
+            worst = max(names, key=residual.get)
+            lines.append(f"{label + ':':13} median {np.median([residual[n] for n in names]):.3f}, "
+                         f"worst {residual[worst]:.3f} ({worst}), {len(names)} shapes")
+    lines.append(f"fold limits: {len(result.rig.fap_reach)} FAPs capped, {len(result.rig.fap_follow)} lip pairs "
+                 "following each other")
+    return lines
+
+
 def _face_from_photo(args: argparse.Namespace) -> int:
     """``puppet face-from-photo``: a face folder from a photo and its landmarks."""
     from puppet.photo.build import build_face_folder
@@ -568,6 +645,8 @@ COMMANDS: dict[str, Command] = {
                          _calibrate),
     "bench": Command("measure Sibson precompute, rig load and per-frame deform", _bench_arguments, _bench),
     "rig": Command("rig a face mesh from its landmarks into a face folder for --face", _rig_arguments, _rig),
+    "calibrate-face": Command("learn how the FAPs move a face's skin from example shapes of it",
+                              _calibrate_face_arguments, _calibrate_face),
     "face-from-photo": Command("build a rigged, textured face from one frontal photo", _face_from_photo_arguments,
                                _face_from_photo),
     "pick-landmarks": Command("click a photo's landmarks in a web page on 127.0.0.1", _pick_landmarks_arguments,

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from puppet.cli import main
+from puppet.face.folder import load_folder_rig
 from puppet.face.load import load_face
 from puppet.io.fapfile import write_fap
 from puppet.runtime.runtime import Runtime
@@ -38,8 +39,9 @@ def test_the_folder_holds_mesh_feature_points_and_rig_and_loads_with_its_own_rig
     assert {p.name for p in folder.iterdir()} == {"face.obj", "face.json", "face.rig"}
     face = load_face(folder)
     assert set(face.feature_points) == set(load_face().feature_points)
+    assert load_folder_rig(folder).face_hash == face.content_hash  # the folder reads back the mesh its rig is for
     runtime = Runtime(face)
-    assert runtime.rig.face_hash == face.content_hash  # the saved rig, not a new one
+    assert runtime.rig.face_hash == face.content_hash
     moved = runtime.deform_faps({"open_jaw": 300}) - face.vertices
     assert np.abs(moved).max() > 0
 

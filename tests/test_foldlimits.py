@@ -17,7 +17,7 @@ from puppet.face.rig import load_rig, save_rig
 from puppet.fap.highlevel import high_level_faps
 from puppet.fap.table import clamp_ranges, fap
 from puppet.io.fapfile import read_fap, write_fap
-from puppet.runtime.foldlimits import LID_PARTS, LIP_PAIRS, lid_faded
+from puppet.runtime.foldlimits import LID_PARTS, LIP_PAIRS, lid_faded, lid_unfaded
 from puppet.runtime.musclesolver import folded_triangles
 
 
@@ -123,6 +123,15 @@ def test_lid_margin_motions_fade_toward_the_corners_for_the_upper_lids_and_brows
     after = lid_faded(runtime.rig)[number]
     for name in corner:
         np.testing.assert_allclose(after[name], motions[name] * (share[name] if faded else 1.0))
+
+
+def test_unfading_undoes_the_fading_so_a_rig_calibrated_again_fades_its_lids_once(runtime):
+    faded = copy.copy(runtime.rig)
+    faded.fap_motions = lid_faded(runtime.rig)
+    back = lid_unfaded(faded)
+    for number, motions in runtime.rig.fap_motions.items():
+        for name, motion in motions.items():
+            np.testing.assert_allclose(back[number][name], motion, rtol=1e-12)
 
 
 def test_a_rig_file_keeps_its_follow_pairs(tmp_path, runtime):

@@ -100,11 +100,12 @@ REQUIRED = sorted(set(FOREHEAD_ACTIVE + FOREHEAD_FIXED + NOSE_ACTIVE + NOSE_FIXE
 
 
 def rig_for_face(face) -> Rig:
-    """The shipped rig when ``face`` is the default face (same mesh hash), the rig saved beside a
-    face folder's mesh (``face.rig_file``) when it was made for this mesh, else a rig generated
-    from the face's feature points."""
+    """The rig saved beside a face folder's mesh (``face.rig_file``) when it was made for this mesh
+    (a folder's own rig wins: ``puppet calibrate-face`` writes the default face's mesh with a rig
+    of its own), else the shipped rig when ``face`` is the default face (same mesh hash), else a
+    rig generated from the face's feature points."""
     saved = getattr(face, "rig_file", None)
-    for rig in (load_default_rig(), load_rig(saved) if saved is not None else None):
+    for rig in (load_rig(saved) if saved is not None else None, load_default_rig()):
         if rig is not None and rig.face_hash == face.content_hash:
             return rig
     return build_rig(face)

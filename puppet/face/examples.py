@@ -8,8 +8,14 @@ applies to it directly: ``load_examples`` returns one (N, 3) displacement per fi
 target moves nothing or the vertex is generated. The default face is in the base mesh's own frame
 and units (``puppet/data/PROVENANCE.md``), so no transform is needed.
 
+A studio's shapes of any other face come as meshes: an ``.obj`` with the face's own vertices in
+the face's order and units, in a new shape (a blendshape exported from the mesh the face was
+rigged from); its displacement is its vertices less the face's rest ones. A folder may hold both
+kinds; each name (the file's stem) once.
+
 ``../shared/assets/makehuman/faceunits_arkit/`` holds 52 such targets named after ARKit's
-blendshapes; ``puppet.runtime.fapcalibration`` calibrates the rig's FAPs from them and measures the fit.
+blendshapes; ``puppet.runtime.fapcalibration`` calibrates the rig's FAPs from them and measures the
+fit, and ``puppet calibrate-face`` does it for any face folder.
 """
 
 from __future__ import annotations
@@ -20,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from puppet.errors import PuppetError
+from puppet.face.meshfile import read_obj
 
 
 class ExampleError(PuppetError, ValueError):
@@ -27,19 +34,44 @@ class ExampleError(PuppetError, ValueError):
 
 
 def load_examples(face, folder: str | os.PathLike) -> dict[str, np.ndarray]:
-    """{target name: (N, 3) displacement of the face's vertices} for every ``*.target`` in
-    ``folder``, sorted by name."""
+    """{name: (N, 3) displacement of the face's vertices} for every ``*.target`` and ``*.obj`` in
+    ``folder``, sorted by name (module docstring)."""
     folder = Path(folder)
-    files = sorted(folder.glob("*.target"))
+    if not folder.is_dir():
+        raise ExampleError(f"{folder}: not a folder of example shapes")
+    files = sorted(folder.glob("*.target")) + sorted(folder.glob("*.obj"))
     if not files:
-        raise ExampleError(f"{folder}: no .target files")
+        raise ExampleError(f"{folder}: no example shapes (.target or .obj files)")
+    twice = sorted({p.stem for p in files if sum(q.stem == p.stem for q in files) > 1})
+    if twice:
+        raise ExampleError(f"{folder}: {', '.join(twice)}: one shape per name (found a .target and an .obj)")
+    shapes = {path.stem: _shape_mesh(path, face) for path in files if path.suffix == ".obj"}
+    targets = [path for path in files if path.suffix == ".target"]
+    if targets:
+        lookup = _source_lookup(face, targets[0])
+        shapes |= {path.stem: _displacement(path, lookup, len(face.vertices)) for path in targets}
+    return dict(sorted(shapes.items()))
+
+
+def _source_lookup(face, first: Path) -> np.ndarray:
+    """Face vertex per source-mesh vertex (-1: not on the face), for ``.target`` files."""
     if face.source_index is None:
-        raise ExampleError(f"face {face.name!r} keeps no source vertex indices: targets cannot apply to it")
+        raise ExampleError(f"{first}: face {face.name!r} keeps no source vertex indices, so a .target cannot "
+                           "apply to it; give its shapes as .obj meshes of the face")
     source = np.asarray(face.source_index, dtype=np.int64)
     lookup = np.full(int(source.max(initial=-1)) + 1, -1, dtype=np.int64)
     kept = np.flatnonzero(source >= 0)
     lookup[source[kept]] = kept
-    return {path.stem: _displacement(path, lookup, len(face.vertices)) for path in files}
+    return lookup
+
+
+def _shape_mesh(path: Path, face) -> np.ndarray:
+    """The displacement an example ``.obj`` (the face's vertices, in a new shape) makes."""
+    positions = read_obj(path).positions
+    if positions.shape != face.vertices.shape:
+        raise ExampleError(f"{path}: {len(positions)} vertices, but face {face.name!r} has {len(face.vertices)}: "
+                           "an example mesh is the face's own mesh in a new shape, vertex for vertex")
+    return positions - np.asarray(face.vertices, dtype=float)
 
 
 def _displacement(path: Path, lookup: np.ndarray, n: int) -> np.ndarray:

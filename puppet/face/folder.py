@@ -92,16 +92,18 @@ def _meta(face: Face, **extra) -> dict:
 
 def _obj_text(face: Face, title: str) -> str:
     """The OBJ file: header, then coloured vertices and triangles; with a texture, the material,
-    per-vertex uv and v/vt triangles."""
+    per-vertex uv and v/vt triangles. Positions are written to the last bit (``%.17g``), so the
+    folder reads back the very mesh its rig was made for (``Rig.face_hash``): rounded, the saved
+    rig was passed over and a new one built at every load."""
     textured = getattr(face, "texture", None) is not None
     out = io.StringIO()
     out.write(f"# facepuppet face folder: {title}\n")
     if textured:
         out.write(f"mtllib {FACE_MTL}\nusemtl face\n")
     if face.colors is not None:
-        np.savetxt(out, np.c_[face.vertices, face.colors], fmt="v %.7f %.7f %.7f %.4f %.4f %.4f")
+        np.savetxt(out, np.c_[face.vertices, face.colors], fmt="v %.17g %.17g %.17g %.4f %.4f %.4f")
     else:
-        np.savetxt(out, face.vertices, fmt="v %.7f %.7f %.7f")
+        np.savetxt(out, face.vertices, fmt="v %.17g %.17g %.17g")
     t = np.asarray(face.triangles, dtype=np.int64) + 1
     if textured:
         np.savetxt(out, face.uv, fmt="vt %.6f %.6f")

@@ -10,7 +10,10 @@ of the FAP. ``calibrate`` learns them from example shapes (``puppet.face.example
   the DFFD columns of the grid points and E their motion per unit of each FAP.
 * **Prior.** E starts from the coarse rig's motion (``build_rig(grid=False)``: feature points,
   lip lines and borders only, what the rig did before it had a grid), sampled at the grid points:
-  a FAP that no example shows moves the skin as it always did.
+  a FAP that no example shows moves the skin as it always did. A rig that is calibrated already
+  (the embedded face's, or a face's that ``puppet rig`` carried the calibration over to) starts
+  from its own motions instead: a few examples of a new face refine them (``puppet
+  calibrate-face``), and a FAP none of them shows keeps what it had.
 * **Alternating least squares.** With E fixed, each example gets the FAP vector that reproduces
   it best within the FAPs' ranges (bounded least squares over every skin vertex, so motion where
   the example has none costs too). With those vectors fixed, E is the ridge solution pulled toward
@@ -129,10 +132,10 @@ def calibrate(face, examples: Mapping[str, np.ndarray], *, held_out: tuple[str, 
     ``fold_free_reach`` in the rig, so that the runtime limits it there (off by default: limits
     found one FAP at a time also cap the FAPs that move together, and halve a smile)."""
     rig = copy.deepcopy(rig) if rig is not None else build_rig(face, calibrated=False)
-    rig.fap_motions = {}
+    given, rig.fap_motions = rig.fap_motions, {}
     runtime = Runtime(face, rig, dtype=np.float64)
     model, E, history = solve(runtime, examples, held_out=held_out, iterations=iterations, ridge=ridge,
-                              mirror=mirror)
+                              mirror=mirror, prior_motions=given)
     rig.fap_motions = model.motions(E)
     rig.fap_reach = fold_free_reach(Runtime(face, rig)) if limit_folds else {}
     calibrated = Runtime(face, rig, dtype=np.float64)
@@ -141,10 +144,13 @@ def calibrate(face, examples: Mapping[str, np.ndarray], *, held_out: tuple[str, 
 
 
 def solve(runtime: Runtime, examples: Mapping[str, np.ndarray], *, held_out: tuple[str, ...] = (),
-          iterations: int = 4, ridge: float = RIDGE,
-          mirror: bool = True) -> tuple[_LinearModel, list[np.ndarray], list[float]]:
+          iterations: int = 4, ridge: float = RIDGE, mirror: bool = True,
+          prior_motions: Mapping[int, Mapping[str, np.ndarray]] | None = None
+          ) -> tuple[_LinearModel, list[np.ndarray], list[float]]:
     """The linear model of ``runtime``'s rig (no motions yet) on the skin, the motions E it learns
-    from ``examples`` less ``held_out``, and the relative residual after each iteration. With
+    from ``examples`` less ``held_out``, and the relative residual after each iteration. The prior
+    is the coarse rig's motion, or for the FAPs ``prior_motions`` (a rig's ``fap_motions``) move,
+    those: a calibrated rig is refined, not started again. With
     ``mirror`` (and a face symmetric about x = 0) each example also teaches its mirror image and
     E is kept symmetric: a FAP moves the skin as its mirror FAP does, mirrored. Each example
     weighs in the motion solve by its relative residual (a wink's few millimetres count as much
@@ -157,6 +163,8 @@ def solve(runtime: Runtime, examples: Mapping[str, np.ndarray], *, held_out: tup
     if symmetry is not None:
         shapes += [symmetry.field(D) for D in shapes]
     D = np.stack([model.rows(shape) for shape in shapes], axis=1)
+    if prior_motions:
+        model.prior_E = model.given(prior_motions)
     prior = model.prior_E
     E = prior
     history = []
@@ -418,6 +426,20 @@ class _LinearModel:
             for j, c in enumerate(self.columns):
                 if int(c) + 1 in GAZE:
                     E[:, j] = self._gaze(int(c) + 1, positions[self.free[a]])[:, a]
+            out.append(E)
+        return out
+
+    def given(self, motions: Mapping[int, Mapping[str, np.ndarray]]) -> list[np.ndarray]:
+        """``prior_E`` with the columns of the FAPs that ``motions`` (a rig's ``fap_motions``, in
+        FAPU as ``motions`` writes them) move taken from them."""
+        names = self.runtime.control_points
+        out = []
+        for a in range(3):
+            E = self.prior_E[a].copy()
+            for j, number in enumerate(self.fitted):
+                table = motions.get(number)
+                if table:
+                    E[:, j] = [table[names[i]][a] if names[i] in table else 0.0 for i in self.free[a]]
             out.append(E)
         return out
 

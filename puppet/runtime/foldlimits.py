@@ -174,7 +174,12 @@ def fold_safe(runtime) -> Rig:
 
 
 def fold_safe_calibration(face, examples, *, rig: Rig | None = None, held_out: tuple[str, ...] = ()) -> Calibration:
-    """``calibrate`` (``puppet.runtime.fapcalibration``) made fold-safe (``within_limits``)."""
+    """``calibrate`` (``puppet.runtime.fapcalibration``) made fold-safe (``within_limits``). A rig
+    that is calibrated already is the calibration's prior with its lid margin motions unfaded
+    first (``lid_unfaded``): calibrated again, a rig's lids are faded once, not once more."""
+    if rig is not None and rig.fap_motions:
+        rig = copy.copy(rig)
+        rig.fap_motions = lid_unfaded(rig)
     return within_limits(face, calibrate(face, examples, rig=rig, held_out=held_out), examples)
 
 
@@ -223,6 +228,15 @@ def lid_faded(rig: Rig) -> dict[int, dict[str, np.ndarray]]:
     share = {p.name: p.attach_weight for p in rig.control_points if p.attach in LID_PARTS}
     return {number: motions if number in UNFADED
             else {name: m * share.get(name, 1.0) for name, m in motions.items()}
+            for number, motions in rig.fap_motions.items()}
+
+
+def lid_unfaded(rig: Rig) -> dict[int, dict[str, np.ndarray]]:
+    """``lid_faded`` undone: each lid-carried point's motion divided by its share of the lid's turn
+    (a share of 0 leaves the motion as it is), except the ``UNFADED`` FAPs'."""
+    share = {p.name: p.attach_weight for p in rig.control_points if p.attach in LID_PARTS}
+    return {number: motions if number in UNFADED
+            else {name: m / share.get(name, 1.0) if share.get(name, 1.0) > 0 else m for name, m in motions.items()}
             for number, motions in rig.fap_motions.items()}
 
 
