@@ -501,7 +501,7 @@ def _calibrate_face(args: argparse.Namespace) -> int:
         save_rig(result.rig, output / FACE_RIG)
     else:
         write_rigged_folder(face, result.rig, output, source_mesh=args.face or "the embedded default face")
-    print(f"calibrated {face.name} from {len(result.weights) - len(result.held_out)} example shapes in "
+    print(f"calibrated {face.name} from {_count(len(result.weights) - len(result.held_out), 'example shape')} in "
           f"{seconds:.0f} s -> {args.output}")
     for line in _fit_lines(face, result, examples):
         print(f"  {line}")
@@ -525,10 +525,15 @@ def _fit_lines(face, result, examples) -> list[str]:
         if names:
             worst = max(names, key=residual.get)
             lines.append(f"{label + ':':13} median {np.median([residual[n] for n in names]):.3f}, "
-                         f"worst {residual[worst]:.3f} ({worst}), {len(names)} shapes")
+                         f"worst {residual[worst]:.3f} ({worst}), {_count(len(names), 'shape')}")
     lines.append(f"fold limits: {len(result.rig.fap_reach)} FAPs capped, {len(result.rig.fap_follow)} lip pairs "
                  "following each other")
     return lines
+
+
+def _count(n: int, noun: str) -> str:
+    """``n`` and the noun, plural unless one."""
+    return f"{n} {noun}{'' if n == 1 else 's'}"
 
 
 def _face_from_photo(args: argparse.Namespace) -> int:
