@@ -312,6 +312,7 @@ def _rig(args: argparse.Namespace) -> int:
     from puppet.face.load import load_face
     from puppet.face.rig import save_rig
     from puppet.io.outputs import writable
+    from puppet.runtime.foldlimits import fold_limited
 
     rig_file = Path(args.output).suffix.lower() in (".rig", ".json")
     output = writable(args.output, "rig file") if rig_file else _folder_output(args.output)
@@ -319,6 +320,9 @@ def _rig(args: argparse.Namespace) -> int:
     face = load_face(args.mesh, landmarks=args.landmarks)
     rig = build_rig(face)
     seconds = time.perf_counter() - start
+    start = time.perf_counter()
+    rig = fold_limited(face, rig)
+    limits = time.perf_counter() - start
     if rig_file:
         save_rig(rig, output)
     else:
@@ -328,6 +332,8 @@ def _rig(args: argparse.Namespace) -> int:
     print(f"  regions: {', '.join(f'{r.name} ({len(r.vertices)})' for r in rig.regions)}")
     print(f"  control points: {len(rig.control_points)} ({', '.join(f'{n} {k}' for k, n in counts.items())})")
     print(f"  muscles: {len(getattr(rig, 'muscles', []))}")
+    print(f"  fold limits: {len(rig.fap_reach)} FAPs capped, {len(rig.fap_follow)} lip pairs following each other "
+          f"(found in {limits:.0f} s)")
     if not rig_file:
         print(f"  use it with --face {args.output} (play, render, replay, live, export)")
     return 0

@@ -12,6 +12,7 @@ from puppet.cli import main
 from puppet.face.folder import load_folder_rig
 from puppet.face.load import load_face
 from puppet.io.fapfile import write_fap
+from puppet.runtime.musclesolver import folded_triangles
 from puppet.runtime.runtime import Runtime
 
 
@@ -44,6 +45,16 @@ def test_the_folder_holds_mesh_feature_points_and_rig_and_loads_with_its_own_rig
     assert runtime.rig.face_hash == face.content_hash
     moved = runtime.deform_faps({"open_jaw": 300}) - face.vertices
     assert np.abs(moved).max() > 0
+
+
+def test_a_rigged_face_has_fold_limits_of_its_own_and_its_lids_still_close(rigged):
+    """Rigged from a bare mesh, the default face folded from open_jaw 385 MNS; its rig now caps
+    each FAP where it folds (at pose time) but leaves the upper lids' closing open."""
+    face = load_face(rigged / "head")
+    runtime = Runtime(face)
+    assert runtime.rig.fap_reach[3][1] < 1080 and runtime.rig.fap_reach[19][1] == np.inf
+    wide = runtime.deform_faps({"open_jaw": 1080})
+    assert not folded_triangles(face.vertices, wide, face.triangles).any()
 
 
 def test_render_and_export_take_the_folder(rigged, capsys, egl):

@@ -27,9 +27,10 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from puppet.bench.assets import shared_assets
-from puppet.face.autorig import build_rig
+from puppet.face.autorig import build_rig, rig_for_face
 from puppet.face.load import load_face
 from puppet.face.model import Face
+from puppet.runtime.foldlimits import fold_limited
 from puppet.runtime.runtime import Runtime
 from puppet.view.renderer import SKIN_SRGB, Renderer, save_png, texture_kwargs
 
@@ -125,9 +126,9 @@ def _cross2(u: np.ndarray, w: np.ndarray) -> np.ndarray:
     return u[..., 0] * w[..., 1] - u[..., 1] * w[..., 0]
 
 
-def expression_row(face: Face, size: int) -> np.ndarray:
+def expression_row(face: Face, rig, size: int) -> np.ndarray:
     """Neutral and the six expressions side by side, framed on the face's deforming regions."""
-    runtime = Runtime(face, build_rig(face), cache=False)
+    runtime = Runtime(face, rig, cache=False)
     front = np.concatenate([r.vertices for r in runtime.rig.regions if r.kind == "dffd"])
     poses = [runtime.deform_faps()] + [runtime.deform_faps(expression=(k, 63, 0, 0)) for k in range(1, 7)]
     with Renderer(drawn_triangles(face), len(face.vertices), vertex_colors(face), width=size, height=size,
@@ -142,7 +143,8 @@ def main() -> None:
     parser.add_argument("--size", type=int, default=240, help="tile size in pixels")
     args = parser.parse_args()
     assets = shared_assets()
-    rows = [("default", load_face())]
+    default = load_face()
+    rows = [("default", default, rig_for_face(default))]
     for name, inputs in (("ict", ict_inputs(assets)), ("mediapipe", mediapipe_inputs(assets))):
         if inputs is None:
             print(f"{name}: assets not found under {assets}, skipped")
@@ -153,11 +155,11 @@ def main() -> None:
         print(f"{name}: {len(face.vertices)} vertices, {len(rig.regions)} regions, "
               f"{len(rig.control_points)} control points, {len(getattr(rig, 'muscles', []))} muscles; "
               f"rig time (read + landmarks + rig, median of 3) {rig_time(mesh, landmarks):.2f} s")
-        rows.append((name, face))
-    sheet = np.vstack([expression_row(face, args.size) for _, face in rows])
+        rows.append((name, face, fold_limited(face, rig)))  # as `puppet rig` gives it
+    sheet = np.vstack([expression_row(face, rig, args.size) for _, face, rig in rows])
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     save_png(sheet, args.out)
-    print(f"contact sheet: {args.out} (rows {', '.join(n for n, _ in rows)}; columns neutral, "
+    print(f"contact sheet: {args.out} (rows {', '.join(n for n, _, _ in rows)}; columns neutral, "
           f"{', '.join(EXPRESSIONS)})")
 
 

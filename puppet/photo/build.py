@@ -601,13 +601,14 @@ def read_photo(path: str | os.PathLike) -> np.ndarray:
 def build_face_folder(photo_path: str | os.PathLike, landmarks_path: str | os.PathLike | None,
                       out: str | os.PathLike) -> Path:
     """``puppet face-from-photo``: fit, texture, write ``out`` (``puppet.face.folder``) and rig the
-    written face (rigged from what was written, so the rig matches the face as loaded). With no
+    written face with its fold limits (``fold_limited``). With no
     ``landmarks_path`` the landmarks are detected (``puppet.photo.detect``); the camera's focal
     length comes from the photo's EXIF where it says it (``puppet.photo.depth.focal_from_exif``)."""
     from puppet.face.autorig import build_rig
     from puppet.face.folder import FACE_RIG, load_face_folder, write_face_folder
     from puppet.face.rig import save_rig
     from puppet.photo.detect import detect_landmarks
+    from puppet.runtime.foldlimits import fold_limited
 
     photo = read_photo(photo_path)
     if landmarks_path is None:
@@ -616,5 +617,6 @@ def build_face_folder(photo_path: str | os.PathLike, landmarks_path: str | os.Pa
         landmarks = read_landmarks(landmarks_path)
     face, report = face_from_photo(photo, landmarks, Path(photo_path).stem, focal=focal_from_exif(photo_path))
     folder = write_face_folder(face, out, source_photo=str(photo_path), report=report)
-    save_rig(build_rig(load_face_folder(folder)), folder / FACE_RIG)
+    written = load_face_folder(folder)
+    save_rig(fold_limited(written, build_rig(written)), folder / FACE_RIG)
     return folder
