@@ -311,11 +311,9 @@ def _rig(args: argparse.Namespace) -> int:
     from puppet.face.folder import write_rigged_folder
     from puppet.face.load import load_face
     from puppet.face.rig import save_rig
-    from puppet.io.outputs import writable
     from puppet.runtime.foldlimits import fold_limited
 
-    rig_file = Path(args.output).suffix.lower() in (".rig", ".json")
-    output = writable(args.output, "rig file") if rig_file else _folder_output(args.output)
+    output, rig_file = _rig_output(args.output)
     start = time.perf_counter()
     face = load_face(args.mesh, landmarks=args.landmarks)
     rig = build_rig(face)
@@ -332,11 +330,20 @@ def _rig(args: argparse.Namespace) -> int:
     print(f"  regions: {', '.join(f'{r.name} ({len(r.vertices)})' for r in rig.regions)}")
     print(f"  control points: {len(rig.control_points)} ({', '.join(f'{n} {k}' for k, n in counts.items())})")
     print(f"  muscles: {len(getattr(rig, 'muscles', []))}")
-    print(f"  fold limits: {len(rig.fap_reach)} FAPs capped, {len(rig.fap_follow)} lip pairs following each other "
-          f"(found in {limits:.0f} s)")
+    print(f"  {_fold_limits_line(rig)} (found in {limits:.0f} s)")
     if not rig_file:
         print(f"  use it with --face {args.output} (play, render, replay, live, export)")
     return 0
+
+
+def _rig_output(path: str) -> tuple[Path, bool]:
+    """Where ``-o`` writes a rig, and whether alone: a name ending .rig (or .json) is the rig file,
+    anything else a face folder (``_folder_output``)."""
+    from puppet.io.outputs import writable
+
+    if Path(path).suffix.lower() in (".rig", ".json"):
+        return writable(path, "rig file"), True
+    return _folder_output(path), False
 
 
 def _folder_output(path: str) -> Path:
@@ -485,11 +492,9 @@ def _calibrate_face(args: argparse.Namespace) -> int:
     from puppet.face.folder import FACE_RIG, write_rigged_folder
     from puppet.face.load import load_face
     from puppet.face.rig import save_rig
-    from puppet.io.outputs import writable
     from puppet.runtime.foldlimits import fold_safe_calibration
 
-    rig_file = Path(args.output).suffix.lower() in (".rig", ".json")
-    output = writable(args.output, "rig file") if rig_file else _folder_output(args.output)
+    output, rig_file = _rig_output(args.output)
     face = _face(args.face) or load_face()
     examples = load_examples(face, args.examples)
     unknown = sorted(set(args.hold_out) - set(examples))
@@ -532,9 +537,13 @@ def _fit_lines(face, result, examples) -> list[str]:
             worst = max(names, key=residual.get)
             lines.append(f"{label + ':':13} median {np.median([residual[n] for n in names]):.3f}, "
                          f"worst {residual[worst]:.3f} ({worst}), {_count(len(names), 'shape')}")
-    lines.append(f"fold limits: {len(result.rig.fap_reach)} FAPs capped, {len(result.rig.fap_follow)} lip pairs "
-                 "following each other")
+    lines.append(_fold_limits_line(result.rig))
     return lines
+
+
+def _fold_limits_line(rig) -> str:
+    """What a rig's fold limits hold (``puppet.runtime.foldlimits``)."""
+    return f"fold limits: {len(rig.fap_reach)} FAPs capped, {len(rig.fap_follow)} lip pairs following each other"
 
 
 def _count(n: int, noun: str) -> str:

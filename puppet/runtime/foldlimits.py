@@ -238,18 +238,21 @@ def lid_faded(rig: Rig) -> dict[int, dict[str, np.ndarray]]:
     turn (``attach_weight``: 1 mid-lid, down to nearly 0 at the still eye corners), except the
     ``UNFADED`` FAPs': the lids follow the eyeball to the corners, and the lower lids' own motions
     fold nothing at any range end."""
-    share = {p.name: p.attach_weight for p in rig.control_points if p.attach in LID_PARTS}
-    return {number: motions if number in UNFADED
-            else {name: m * share.get(name, 1.0) for name, m in motions.items()}
-            for number, motions in rig.fap_motions.items()}
+    return _by_lid_share(rig, lambda motion, share: motion * share)
 
 
 def lid_unfaded(rig: Rig) -> dict[int, dict[str, np.ndarray]]:
     """``lid_faded`` undone: each lid-carried point's motion divided by its share of the lid's turn
     (a share of 0 leaves the motion as it is), except the ``UNFADED`` FAPs'."""
+    return _by_lid_share(rig, lambda motion, share: motion / share if share > 0 else motion)
+
+
+def _by_lid_share(rig: Rig, scaled) -> dict[int, dict[str, np.ndarray]]:
+    """The rig's FAP motions, each point's as ``scaled(motion, share)`` with its share of its lid's
+    turn (1 off the lids), except the ``UNFADED`` FAPs', kept as they are."""
     share = {p.name: p.attach_weight for p in rig.control_points if p.attach in LID_PARTS}
     return {number: motions if number in UNFADED
-            else {name: m / share.get(name, 1.0) if share.get(name, 1.0) > 0 else m for name, m in motions.items()}
+            else {name: scaled(m, share.get(name, 1.0)) for name, m in motions.items()}
             for number, motions in rig.fap_motions.items()}
 
 
