@@ -134,8 +134,9 @@ def test_no_muscle_folds_the_skin_at_contraction_10(runtime, face, name, mode):
                          + [dict.fromkeys(MUSCLE_NAMES, 0.5)], ids=lambda p: "all_0.5" if len(p) > 1 else
                          "-".join(f"{k}={v}" for k, v in p.items()))
 def test_normal_contractions_fold_nothing(runtime, face, pose):
-    """On the skin grid a few muscles squeeze a triangle at contraction 0.5-1 (the lids' and the
-    inner frontalis'); the fold guard takes those back, so the face shows no fold."""
+    """A few muscles squeeze a triangle at contraction 1 (the risorius' at the lip corner, the
+    orbicularis oculi's at the outer eye corner), all of them at 0.5 the lip corners'; the fold
+    guard takes those back, so the face shows no fold."""
     assert not folded_triangles(face.vertices, runtime.deform_faps(muscles=pose), _skin_triangles(face)).any()
 
 
@@ -143,6 +144,18 @@ def test_the_fold_guard_costs_nothing_at_ordinary_contraction(runtime, face):
     calm = runtime.deform_faps(muscles={"zygomatic_major_l": 1.0})
     assert not runtime._fold_guard.squeezed(calm[runtime._guard_vertices])  # so the guard left this frame as DFFD made it
     assert not folded_triangles(face.vertices, calm, _skin_triangles(face)).any()
+
+
+@pytest.mark.parametrize("name", MUSCLE_NAMES)
+def test_no_muscle_at_half_squeezes_the_skin_before_the_guard(runtime, name):
+    """Spread by DFFD alone, each muscle at 0.5 leaves every guarded corner above its floor: the
+    lid margin's points near the still eye corners take their share of the lid's turn (moved in
+    full, the orbicularis oculi turned the skin at the corners inside out, and every frame of a
+    moving squint paid for the guard's sweeps)."""
+    active = np.array([runtime.rig.point(n).position for n in runtime.control_points])
+    share = control_point_displacements(runtime.rig.muscles, {name: 0.5}, active, runtime.muscle_shares)
+    spread = runtime.deform(share)  # DFFD alone: the guard acts in deform_faps
+    assert not runtime._fold_guard.squeezed(spread[runtime._guard_vertices].astype(float))
 
 
 
@@ -156,7 +169,7 @@ def test_the_guarded_muscles_are_the_fold_guard_of_their_share_on_the_whole_skin
     muscles = dict.fromkeys(runtime.muscle_names, contraction)
     k = len(runtime.control_points)
     active = np.array([runtime.rig.point(n).position for n in runtime.control_points])
-    share = control_point_displacements(runtime.rig.muscles, muscles, active)
+    share = control_point_displacements(runtime.rig.muscles, muscles, active, runtime.muscle_shares)
     spread = runtime.B[:, :k].astype(float).tocsr()
     reached = np.diff(spread[:, np.flatnonzero(np.any(share != 0, axis=1))].tocsr().indptr) > 0
     movable = np.zeros(len(face.vertices), bool)

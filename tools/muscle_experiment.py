@@ -97,7 +97,7 @@ def face_cases(runtime: Runtime, muscle: str = FACE_MUSCLE,
     for c in contractions:
         for mode, runtime_mode in RUNTIME_MODES.items():
             out[mode][c] = runtime.deform_faps(muscles={muscle: c}, mode=runtime_mode)
-        unguarded = control_point_displacements(runtime.rig.muscles, {muscle: c}, points)
+        unguarded = control_point_displacements(runtime.rig.muscles, {muscle: c}, points, runtime.muscle_shares)
         out["control-point, no guard"][c] = runtime.deform(unguarded)
     return out
 

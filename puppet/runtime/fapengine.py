@@ -72,6 +72,7 @@ from puppet.runtime.lastmade import LastMade
 JAW_FAPS = (3, 14, 15)
 LID_FAPS = {19: ("upper_lid_l", "3.1", 1), 20: ("upper_lid_r", "3.2", 1),  # +: the point drops
             21: ("lower_lid_l", "3.3", -1), 22: ("lower_lid_r", "3.4", -1)}  # +: the point rises
+LID_PARTS = frozenset(part for part, _, _ in LID_FAPS.values())
 EYE_FAPS = {"eye_l": (23, 25, 27), "eye_r": (24, 26, 28)}
 GAZE_FAPS = (23, 24, 25, 26)
 HEAD_FAPS = (48, 49, 50)
@@ -83,6 +84,14 @@ TRANSLATION_LIMIT = 2048.0
 HALF_TURN = math.pi / 1e-5
 EYE_TURN = math.radians(50) / 1e-5
 LIDS_MEET = 1024.0
+
+
+def lid_shares(rig) -> dict[str, float]:
+    """Each lid-carried control point's share of its lid's turn (``attach_weight``: 1 mid-lid, down
+    to nearly 0 at the eye corners, which the canthal tendons hold still): how much of any motion of
+    the lid margin it takes, a lid FAP's (``foldlimits.lid_faded``) or a muscle's (the runtime's
+    control-point muscles)."""
+    return {p.name: p.attach_weight for p in rig.control_points if p.attach in LID_PARTS}
 
 
 class FapEngine:

@@ -62,7 +62,7 @@ import numpy as np
 from puppet.face.rig import Rig
 from puppet.fap.table import fap
 from puppet.runtime.fapcalibration import Calibration, calibrate, common_reach, fit_faps, fold_free_reach
-from puppet.runtime.fapengine import GAZE_FAPS, LID_FAPS
+from puppet.runtime.fapengine import GAZE_FAPS, lid_shares
 from puppet.runtime.runtime import Runtime
 
 FOLLOW_SHARE = 0.75  # follow keeps a pair within three quarters of its fold-free difference: at a
@@ -73,7 +73,6 @@ STRETCH = (6, 7)
 STRETCH_SHARE = 2 / 3  # of FOLLOW_SHARE for the stretch pairs (6 / 53, 7 / 54): at three quarters
 # viseme 12 (jaw 140 MNS, lips stretched 190 MW, corners raised 70) folded the upper lip's middle
 REACH_MARGIN = 0.98  # a little inside the fold-free value: float32 and float64 runtimes agree there
-LID_PARTS = frozenset(part for part, _, _ in LID_FAPS.values())
 UNFADED = (*GAZE_FAPS, 21, 22)
 """FAPs whose motions ``lid_faded`` leaves as calibrated: the gaze (the lids follow the eyeball)
 and close_b_l/r_eyelid (the lower lids: unfaded they fold nothing, and faded they cost eyeLookUp
@@ -250,7 +249,7 @@ def lid_unfaded(rig: Rig) -> dict[int, dict[str, np.ndarray]]:
 def _by_lid_share(rig: Rig, scaled) -> dict[int, dict[str, np.ndarray]]:
     """The rig's FAP motions, each point's as ``scaled(motion, share)`` with its share of its lid's
     turn (1 off the lids), except the ``UNFADED`` FAPs', kept as they are."""
-    share = {p.name: p.attach_weight for p in rig.control_points if p.attach in LID_PARTS}
+    share = lid_shares(rig)
     return {number: motions if number in UNFADED
             else {name: scaled(m, share.get(name, 1.0)) for name, m in motions.items()}
             for number, motions in rig.fap_motions.items()}

@@ -41,8 +41,11 @@ Three ways to apply them:
   That alone does not keep the skin from folding at large contraction (tools/muscle_experiment.py:
   the zone squeezed toward the bone flips spread triangles on a grid at c = 5 and 10, and on the
   default face DFFD folds the rig's region borders next to the moving lip corner from c = 3);
-  ``EdgeConstraints`` run on the spread displacement removes those folds. The default muscles are
-  tuned so that none folds the skin alone at c <= 1, nor all of them at 0.5, without that guard.
+  ``EdgeConstraints`` run on the spread displacement removes those folds. Without that guard no
+  default muscle alone squeezes the skin at c <= 0.5 (the lid margin's points near the still eye
+  corners take their share of the lid's turn: ``ControlPointMuscles``); at 1 the risorius and the
+  orbicularis oculi fold a triangle each, at the lip and outer eye corners, and all of them at 0.5
+  the two lip corners': the guard's work in a moving frame.
 """
 
 from __future__ import annotations
@@ -110,20 +113,27 @@ def repelled_travel(travel: np.ndarray, dist: np.ndarray) -> np.ndarray:
 
 
 def control_point_displacements(muscles: Sequence[Muscle], contractions: Mapping[str, float],
-                                points: np.ndarray) -> np.ndarray:
+                                points: np.ndarray, shares: np.ndarray | None = None) -> np.ndarray:
     """Displacements (n, 3) of control points (n, 3) for muscle contractions {name: c}: each muscle
-    moves the points inside its zone by the improved law (no point crosses its fixed end); the
-    caller spreads them over the skin (DFFD, ``Runtime.deform``)."""
-    return ControlPointMuscles(muscles, points).displace(contractions)
+    moves the points inside its zone by the improved law (no point crosses its fixed end), each
+    point by its share (``ControlPointMuscles``); the caller spreads them over the skin (DFFD,
+    ``Runtime.deform``)."""
+    return ControlPointMuscles(muscles, points, shares).displace(contractions)
 
 
 class ControlPointMuscles:
     """``control_point_displacements`` for one fixed set of points, their fields computed once
     (the runtime's control-point mode). Every (muscle, point in its zone) pair is one entry of
     flat arrays, summed per point by one sparse product: a frame is a handful of whole-array
-    steps however many muscles contract."""
+    steps however many muscles contract.
 
-    def __init__(self, muscles: Sequence[Muscle], points: np.ndarray) -> None:
+    ``shares`` (n, default all 1): the part of a muscle's motion each point takes. The runtime
+    gives the lid margin's points their share of the lid's turn (``fapengine.lid_shares``), as
+    the lid FAPs move them: near the eye corners, which the canthal tendons hold still, a point
+    moved in full beside a still corner vertex turned the skin between them inside out (the
+    orbicularis oculi from contraction 0.5)."""
+
+    def __init__(self, muscles: Sequence[Muscle], points: np.ndarray, shares: np.ndarray | None = None) -> None:
         self.muscles = list(muscles)
         self.points = np.asarray(points, dtype=float)
         self._column = {m.name: j for j, m in enumerate(self.muscles)}
@@ -133,7 +143,8 @@ class ControlPointMuscles:
         self._direction = np.concatenate([np.zeros((0, 3)), *(f[1] for f in fields)])
         self._travel = np.concatenate([np.zeros(0), *(f[2] for f in fields)])
         self._dist = np.concatenate([np.zeros(0), *(f[3] for f in fields)])
-        self._sum = sp.csr_matrix((np.ones(len(self._rows)), (self._rows, np.arange(len(self._rows)))),
+        share = np.ones(len(self.points)) if shares is None else np.asarray(shares, dtype=float)
+        self._sum = sp.csr_matrix((share[self._rows], (self._rows, np.arange(len(self._rows)))),
                                   shape=(len(self.points), len(self._rows)))
 
     def moved(self) -> np.ndarray:

@@ -87,6 +87,7 @@ from puppet.face.rigid import compose
 from puppet.fap.pose import Pose
 from puppet.runtime import coefcache
 from puppet.runtime.dffd import DffdError, RegionDeformer
+from puppet.runtime.fapengine import FapEngine, lid_shares
 from puppet.runtime.lastmade import LastMade
 from puppet.runtime.musclesolver import ControlPointMuscles, EdgeConstraints, MuscleModel
 from puppet.runtime.normals import VertexNormals
@@ -357,8 +358,17 @@ class Runtime:
 
     @functools.cached_property
     def _control_muscles(self) -> ControlPointMuscles:
-        """The muscles on the active control points' rest positions (control-point mode)."""
-        return ControlPointMuscles(self.rig.muscles, self._p0[self._inputs[: len(self.control_points)]])
+        """The muscles on the active control points' rest positions (control-point mode), the lid
+        margin's points taking their share of the lid's turn."""
+        return ControlPointMuscles(self.rig.muscles, self._p0[self._inputs[: len(self.control_points)]],
+                                   self.muscle_shares)
+
+    @functools.cached_property
+    def muscle_shares(self) -> np.ndarray:
+        """The part of a muscle's motion each active control point takes, in ``control_points``
+        order: 1, except on the lid margins (``fapengine.lid_shares``)."""
+        shares = lid_shares(self.rig)
+        return np.array([shares.get(name, 1.0) for name in self.control_points])
 
     @functools.cached_property
     def _muscle_spread(self) -> tuple[np.ndarray, sp.csr_matrix]:
@@ -485,10 +495,8 @@ class Runtime:
         return out
 
     @functools.cached_property
-    def faps(self):
+    def faps(self) -> FapEngine:
         """This face's FAP engine (``puppet.runtime.fapengine.FapEngine``), made on first use."""
-        from puppet.runtime.fapengine import FapEngine
-
         return FapEngine(self)
 
     def deform_pose(self, pose: Pose, *, out: np.ndarray | None = None, normals_out: np.ndarray | None = None,
