@@ -11,7 +11,6 @@ import numpy as np
 import pytest
 
 import puppet
-
 from puppet.face.autorig import _lid_share
 from puppet.face.rig import load_rig, save_rig
 from puppet.fap.highlevel import high_level_faps

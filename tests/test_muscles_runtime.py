@@ -158,7 +158,6 @@ def test_no_muscle_at_half_squeezes_the_skin_before_the_guard(runtime, name):
     assert not runtime._fold_guard.squeezed(spread[runtime._guard_vertices].astype(float))
 
 
-
 @pytest.mark.parametrize("contraction", [0.5, 1.0, 3.0, 10.0])
 def test_the_guarded_muscles_are_the_fold_guard_of_their_share_on_the_whole_skin(runtime, face, contraction):
     """The runtime spreads the FAPs' and the muscles' shares in one product and runs the fold guard

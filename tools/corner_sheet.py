@@ -61,7 +61,7 @@ def tiles(corner: str) -> list[np.ndarray]:
                 if pose.get("muscles") == EVERY_MUSCLE:
                     pose = {"muscles": dict.fromkeys(runtime.muscle_names, 0.5)}
                 vertices = runtime.deform_faps(**pose)
-                rigid = runtime.fap_controls(**{k: v for k, v in pose.items() if k == "fap"})[1]
+                rigid = runtime.fap_controls(pose.get("fap"))[1]
                 image = renderer.render(vertices, runtime.normals(vertices, rigid)).copy()
                 folded = np.unique(triangles[folded_triangles(face.vertices, vertices, triangles)])
                 for x, y in renderer.project(vertices[folded]):
