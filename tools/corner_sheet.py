@@ -6,9 +6,12 @@ each view's row of the other checkout above this one's, folded triangles marked 
   900 MNS), three-quarter (rows 1-2) and front (rows 3-4);
 * ``--corner eye`` (``docs/eye_corners.png``): the right eye, both its corners, as its orbicularis
   oculi squints it (0, 0.5, 1) and with every muscle at 0.5, front (rows 1-2) and three-quarter
-  (rows 3-4).
+  (rows 3-4);
+* ``--corner blink`` (``docs/blink_corners.png``): the same eye closing (close_t_r_eyelid 700,
+  840, 860, 1024 IRISD: where the sliver guard's fallback took over, 850, is between the middle
+  two).
 
-    PYTHONPATH=. .venv/bin/python tools/corner_sheet.py --before DIR [--corner mouth|eye] [--out PNG]
+    PYTHONPATH=. .venv/bin/python tools/corner_sheet.py --before DIR [--corner mouth|eye|blink] [--out PNG]
 
 ``--before`` is a checkout of the project (e.g. ``git worktree add /tmp/before REV``); its tiles
 are rendered by running this script there (``--tiles``), with its own face, rig and renderer.
@@ -37,6 +40,9 @@ CORNERS = {
             "views": ((0.0, 0.0, 0.9), (-0.5, 0.0, 0.75)),  # front, three-quarter from the right
             "poses": [{"muscles": {"orbicularis_oculi_r": c}} for c in (0.0, 0.5, 1.0)]
             + [{"muscles": EVERY_MUSCLE}]},
+    "blink": {"out": "blink_corners.png", "centre": ("3.8", "3.12"), "shift": (0.0, 0.0, 0.0),
+              "views": ((0.0, 0.0, 0.9), (-0.5, 0.0, 0.75)),
+              "poses": [{"fap": {"close_t_r_eyelid": value}} for value in (700.0, 840.0, 860.0, 1024.0)]},
 }
 """Per corner: the sheet's file in docs/, the feature points whose middle (shifted) the camera
 looks at, the views and the poses (``Runtime.deform_faps`` arguments)."""

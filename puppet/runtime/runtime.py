@@ -312,7 +312,7 @@ class Runtime:
         elif contracting:
             out += self._muscle_model(mode).displace(contracting).astype(self.dtype, copy=False)
         if pose and self._slivers is not None:
-            self._slivers(out)
+            self._slivers(out, rigid)
         for part in self._rigid_vertices:
             if part in rigid:
                 self._move_part(part, self.rest, out, rigid[part][:, :3], rigid[part][:, 3])
