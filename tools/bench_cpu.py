@@ -4,7 +4,8 @@ right on a quiet one).
 
 * frame work on the default face, median CPU ms of this thread: a FAP frame (controls + deform),
   every muscle at 0.5 (controls + deform; then + normals), every muscle swinging 0.45-0.55 with
-  the jaw working (+ normals), the zygomatic pair at 3;
+  the jaw working (+ normals), the zygomatic pair at 3, both upper lids blinking (496-1024 IRISD:
+  the sliver guard's range);
 * deform and deform + normals of the smooth take ``puppet bench`` uses, on the default face and
   it subdivided once and twice (10k, 23k, 75k vertices; ``--no-subdivided`` skips those).
 
@@ -51,6 +52,11 @@ def frame_work(frames: int) -> None:
         muscles = dict.fromkeys(runtime.muscle_names, 0.5 + 0.05 * swing)
         runtime.deform_with_normals(*runtime.fap_controls(values), muscles=muscles, out=out, normals_out=normals)
 
+    def blinking(i: int) -> None:
+        values = np.zeros(68)
+        values[[18, 19]] = 760 + 264 * np.sin(i / 10)
+        runtime.deform_faps(values, out=out)
+
     cases = {
         "FAP frame: controls + deform": lambda i: runtime.deform(*runtime.fap_controls(fap), out=out),
         "every muscle 0.5: controls + deform": lambda i: runtime.deform_faps(fap, muscles=every, out=out),
@@ -59,6 +65,7 @@ def frame_work(frames: int) -> None:
         "every muscle 0.45-0.55 moving, jaw working: + normals": moving,
         "zygomatic pair at 3: controls + deform": lambda i: runtime.deform_faps(
             fap, muscles={"zygomatic_major_l": 3.0, "zygomatic_major_r": 3.0}, out=out),
+        "a blink swinging 496-1024 IRISD: controls + deform": blinking,
     }
     for name, frame in cases.items():
         print(f"{name:55s} {cpu_ms(frame, frames):7.3f} ms CPU")
