@@ -201,7 +201,7 @@ def test_a_held_blink_reuses_the_sliver_guard_s_fix_and_shows_the_same_face(runt
 BLINK = np.arange(600.0, 1081.0, 2.0)  # both upper lids, IRISD: past where the corners start to squeeze, to the range end
 
 
-def _blink(runtime, value: float) -> np.ndarray:
+def _blink(value: float) -> np.ndarray:
     values = np.zeros(68)
     values[[18, 19]] = value
     return values
@@ -213,7 +213,7 @@ def test_a_moving_blink_is_foreseen_by_the_corrective_shapes(runtime):
     the sweeps and their fallback)."""
     guard = runtime._slivers
     for value in BLINK:
-        controls, rigid = runtime.fap_controls(_blink(runtime, value))
+        controls, rigid = runtime.fap_controls(_blink(value))
         out = runtime.deform(controls, rigid)
         guard._last = type(guard._last)()  # no fix kept from the frame before
         assert not guard(out, rigid), value
@@ -223,7 +223,7 @@ def test_the_eye_corners_follow_a_blink_smoothly(runtime, face):
     """Step by 2 IRISD, no watched vertex moves much farther than the lid's own steps take the skin
     (fixed frame by frame, the corner jumped 0.9 mm, 50 times a step, where the fallback took
     over), and the blink folds nothing anywhere."""
-    frames = [runtime.deform_faps(_blink(runtime, value)) for value in BLINK]
+    frames = [runtime.deform_faps(_blink(value)) for value in BLINK]
     steps = np.linalg.norm(np.diff(np.array(frames), axis=0), axis=2).max(axis=1)
     assert steps.max() < 3.0 * np.median(steps), (steps.max(), np.median(steps), BLINK[1:][steps.argmax()])
     assert all(_folds(face, frame) == 0 for frame in frames[::10])

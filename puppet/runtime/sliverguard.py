@@ -176,8 +176,7 @@ def _corrective(runtime, guard: SliverGuard, number: int, high: float) -> Correc
         guard.constraints.guard(fixed)
         angles.append(turn_about(motion, axis))
         fixes.append(fixed - watched)
-    fixes[0][:] = 0.0  # the squeeze starts just past the onset: the shape starts from nothing
-    angles = np.array(angles)
+    angles = np.array(angles)  # the first fix is nothing: at the onset no watched corner is squeezed
     turning = np.concatenate([[True], np.abs(angles[1:] - angles[0]) > np.abs(angles[:-1] - angles[0])])
     if turning.sum() < 2:  # the lid does not turn past its onset
         return None
