@@ -311,7 +311,8 @@ class EdgeConstraints:
         area, perp2 = self._area_perp2(rest, self._all)
         height = np.abs(area) / np.sqrt(np.maximum(perp2, 1e-300))
         self.floor = np.ascontiguousarray(EDGE_MIN_HEIGHT * height.T)  # (T, 3): corner k's floor
-        self._floor2 = np.ascontiguousarray((self.floor * self.floor).T)  # (3, T)
+        self._floor_t = np.ascontiguousarray(self.floor.T)  # (3, T)
+        self._floor2 = self._floor_t * self._floor_t
         self.inv_mass = (movable & reached).astype(float)  # only reached vertices move: their triangles are all watched
         flat = tri.ravel()
         order = np.argsort(flat, kind="stable")
@@ -322,24 +323,20 @@ class EdgeConstraints:
 
     # -- geometry ----------------------------------------------------------------------------
 
+    def _edges(self, x: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, ...]:
+        """For triangles ``idx`` of positions ``x``: their edges p1 - p0, p2 - p0, p2 - p1 and
+        rest normals, coordinates as rows (x, y, z) of contiguous (3, len(idx)) arrays."""
+        full = idx is self._all
+        xt = np.ascontiguousarray(np.asarray(x, dtype=float).T)
+        p0, p1, p2 = (np.take(xt, c if full else c[idx], axis=1) for c in self._corners)
+        n = self._normal_t if full else np.take(self._normal_t, idx, axis=1)
+        return p1 - p0, p2 - p0, p2 - p1, n
+
     def _area_perp2(self, x: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """For triangles ``idx`` of positions ``x``: twice the area projected along the rest normal
         (negative: folded) and, per corner (rows 0, 1, 2), the squared length of the opposite edge
-        in the plane normal to it. The corner's height is the first over the root of the second.
-        Coordinates as rows (x, y, z) of contiguous arrays: a few dozen cheap whole-array steps."""
-        full = idx is self._all
-        xt = np.ascontiguousarray(np.asarray(x, dtype=float).T)
-        p0, p1, p2 = (xt[:, c if full else c[idx]] for c in self._corners)
-        n = self._normal_t if full else self._normal_t[:, idx]
-        u, v, w = p1 - p0, p2 - p0, p2 - p1
-        area = (u[1] * v[2] - u[2] * v[1]) * n[0]
-        area += (u[2] * v[0] - u[0] * v[2]) * n[1]
-        area += (u[0] * v[1] - u[1] * v[0]) * n[2]
-        perp2 = np.empty((3, len(idx)))
-        for k, edge in enumerate((w, v, u)):  # opposite corner 0, 1, 2 (the sign does not matter)
-            along = edge[0] * n[0] + edge[1] * n[1] + edge[2] * n[2]
-            perp2[k] = edge[0] * edge[0] + edge[1] * edge[1] + edge[2] * edge[2] - along * along
-        return area, perp2
+        in the plane normal to it. The corner's height is the first over the root of the second."""
+        return _measured(*self._edges(x, idx))[:2]
 
     def _squeezed(self, x: np.ndarray, idx: np.ndarray) -> np.ndarray:
         """Mask over triangles ``idx``: some corner of positions ``x`` is below its floor."""
@@ -358,22 +355,18 @@ class EdgeConstraints:
         (|1 - t| + |t|) r, so the height stays at least h (1 - 2r / L) - (1 + |1 - t| + |t|) r:
         above the floor f while r <= (h - f) / (2h / L + 1 + |1 - t| + |t|). A squeezed triangle
         may move no distance (its reach is -inf: it is checked whenever asked)."""
-        x = self.rest + displacement
-        area, perp2 = self._area_perp2(x, self._all)
+        u, v, w, n = self._edges(self.rest + displacement, self._all)
+        area, perp2, (wn, vn, un) = _measured(u, v, w, n)
         squeezed = (area < 0) | (area * area < (perp2 * self._floor2).max(axis=0))
-        xt = np.ascontiguousarray(x.T)
-        p = [xt[:, c] for c in self._corners]
-        n = self._normal_t
-        reach = np.empty((3, len(self.triangles)))
-        for k, (a, b) in enumerate(((1, 2), (0, 2), (0, 1))):  # corner k and its opposite edge
-            edge, rel = p[b] - p[a], p[k] - p[a]
-            along = (rel * edge).sum(axis=0) - (rel * n).sum(axis=0) * (edge * n).sum(axis=0)  # in the plane
-            length2 = np.maximum(perp2[k], 1e-300)
-            t = along / length2
-            length = np.sqrt(length2)
-            h = area / length
-            reach[k] = (h - self.floor[:, k]) / (2 * h / length + 1 + np.abs(1 - t) + np.abs(t))
-        reach = reach.min(axis=0)
+        along = np.empty_like(perp2)  # each corner's foot along its edge, times the edge's length squared
+        along[0] = un * wn - _dot(u, w)  # corner 0 over p1 -> p2, from p1: (p0 - p1) . w in the plane
+        along[1] = _dot(u, v) - un * vn  # corner 1 over p0 -> p2, and corner 2 over p0 -> p1: u . v
+        along[2] = along[1]
+        length2 = np.maximum(perp2, 1e-300)
+        t = along / length2
+        length = np.sqrt(length2)
+        h = area / length
+        reach = ((h - self._floor_t) / (2 * h / length + 1 + np.abs(1 - t) + np.abs(t))).min(axis=0)
         return squeezed, np.where(squeezed | (reach <= 0), -np.inf, SAFE_MARGIN * reach)
 
     def _bad(self, displacement: np.ndarray, idx: np.ndarray) -> np.ndarray:
@@ -501,6 +494,28 @@ class EdgeConstraints:
             displacement[verts] = scale[verts, None] * start[verts]
             near = self._touching(verts)
             bad = near[self._squeezed(self.rest + displacement, near)]
+
+
+def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Column-wise dot products of coordinate-row arrays (3, T)."""
+    return np.einsum("ij,ij->j", a, b)
+
+
+def _measured(u: np.ndarray, v: np.ndarray, w: np.ndarray,
+              n: np.ndarray) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, ...]]:
+    """For triangles with edges u = p1 - p0, v = p2 - p0, w = p2 - p1 and rest normals n (each
+    (3, T)): twice the area along n, the squared in-plane lengths of the edges opposite corners
+    0, 1, 2 (w, v, u; rows of a (3, T) array) and those edges' components along n."""
+    area = (u[1] * v[2] - u[2] * v[1]) * n[0]
+    area += (u[2] * v[0] - u[0] * v[2]) * n[1]
+    area += (u[0] * v[1] - u[1] * v[0]) * n[2]
+    perp2 = np.empty((3, area.shape[0]))
+    normal = []
+    for k, edge in enumerate((w, v, u)):  # opposite corner 0, 1, 2 (the sign does not matter)
+        along = _dot(edge, n)
+        perp2[k] = _dot(edge, edge) - along * along
+        normal.append(along)
+    return area, perp2, tuple(normal)
 
 
 class _SweepPlan:
