@@ -12,7 +12,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from puppet.face import rigid
-from puppet.runtime.sliverguard import Corrective, SliverGuard, _corrective, turn_about
+from puppet.runtime.sliverguard import Corrective, Frown, SliverGuard, TurnShape, _corrective, turn_about
 
 AXES = st.tuples(*[st.floats(-1.0, 1.0)] * 3).filter(lambda v: np.linalg.norm(v) > 0.1)
 
@@ -29,7 +29,7 @@ def test_a_turn_about_an_axis_is_read_back_from_its_motion(axis, angle, pivot):
 def test_a_corrective_shape_is_nothing_before_its_onset_blended_between_and_held_beyond(sign):
     axis = np.array([1.0, 0.0, 0.0])
     fixes = np.array([np.zeros((2, 3)), np.full((2, 3), 1.0), np.full((2, 3), 3.0)])
-    shape = Corrective("upper_lid_l", axis, sign * np.array([0.2, 0.3, 0.5]), fixes)
+    shape = TurnShape(axis, sign * np.array([0.2, 0.3, 0.5]), fixes)
 
     def at(angle):
         return shape.at(rigid.about(np.zeros(3), rigid.rotation(axis, sign * angle)))
@@ -39,6 +39,51 @@ def test_a_corrective_shape_is_nothing_before_its_onset_blended_between_and_held
     np.testing.assert_allclose(at(0.4), 2.0)
     np.testing.assert_allclose(at(0.5), 3.0)
     np.testing.assert_allclose(at(0.9), 3.0)
+
+
+def test_a_turn_shape_that_squeezes_from_open_holds_its_first_fix_before_it():
+    """Where something else (a deep frown) squeezes the corner with the lid open, the shape's first
+    fix is not nothing: it holds below its first turn rather than jumping in at it."""
+    axis = np.array([1.0, 0.0, 0.0])
+    shape = TurnShape(axis, np.array([0.0, 0.4]), np.stack([np.full((1, 3), 2.0), np.full((1, 3), 4.0)]))
+    for angle, fix in ((-0.2, 2.0), (0.0, 2.0), (0.2, 3.0), (0.6, 4.0)):
+        np.testing.assert_allclose(shape.at(rigid.about(np.zeros(3), rigid.rotation(axis, angle))), fix)
+
+
+@pytest.mark.parametrize(("lid", "depth"), [(0.0, 0.0), (1024.0, 0.0), (600.0, 0.4), (1080.0, 1.0), (300.0, 1.7),
+                                            (800.0, -0.5)])
+def test_a_frown_is_read_as_its_share_of_the_full_frown_whatever_the_lids_do(runtime, lid, depth):
+    """The left lid's shapes read how far the left brows are lowered toward their reach (capped at
+    it, brows raised reading none), however the lids move: an artist's blink moves some of the same
+    control points."""
+    shape = next(shape for shape in runtime._slivers.shapes if shape.part == "upper_lid_l")
+    values = np.zeros(68)
+    values[[18, 19, 20, 21]] = lid, lid, lid / 20, lid / 20
+    brows = [30, 32, 34]  # raise_l_i/m/o_eyebrow
+    values[brows] = depth * runtime.faps.reach[0][brows]
+    controls = runtime.fap_controls(values)[0]
+    assert shape.frown.depth(controls) == pytest.approx(min(max(depth, 0.0), 1.0), abs=1e-9)
+
+
+def test_a_corrective_shape_blends_the_frowns_it_was_sampled_at():
+    """Between the lid alone and the full frown the fixes blend by the frown's depth; a frown that
+    starts to squeeze sooner than the lid alone blends with nothing there."""
+    axis = np.array([1.0, 0.0, 0.0])
+    alone = TurnShape(axis, np.array([0.3, 0.4]), np.stack([np.zeros((1, 3)), np.full((1, 3), 1.0)]))
+    frowned = TurnShape(axis, np.array([0.2, 0.4]), np.stack([np.zeros((1, 3)), np.full((1, 3), 3.0)]))
+    frown = Frown(np.array([0]), np.array([[0.0, -1.0, 0.0]]))  # the full frown: the point 1 down
+    shape = Corrective("upper_lid_l", [alone, frowned], np.array([0.0, 1.0]), frown)
+
+    def at(angle, lowered=None):
+        motion = rigid.about(np.zeros(3), rigid.rotation(axis, angle))
+        return shape.at(motion, None if lowered is None else np.array([[0.0, -lowered, 0.0]]))
+
+    np.testing.assert_allclose(at(0.4, 0.25), 1.5)
+    np.testing.assert_allclose(at(0.4, 2.0), 3.0)  # beyond the full frown: held
+    np.testing.assert_allclose(at(0.4, -0.5), 1.0)  # brows raised: the lid alone
+    np.testing.assert_allclose(at(0.4), 1.0)  # no frown given
+    np.testing.assert_allclose(at(0.3, 0.5), 0.5 * 1.5)  # the lid alone not yet squeezing
+    assert at(0.2, 0.5) is None and at(0.1, 1.0) is None
 
 
 def test_a_lid_that_squeezes_no_watched_corner_gets_no_shape(runtime, face):

@@ -9,9 +9,12 @@ each view's row of the other checkout above this one's, folded triangles marked 
   (rows 3-4);
 * ``--corner blink`` (``docs/blink_corners.png``): the same eye closing (close_t_r_eyelid 700,
   840, 860, 1024 IRISD: where the sliver guard's fallback took over, 850, is between the middle
-  two).
+  two);
+* ``--corner frown`` (``docs/frown_blink_corners.png``): the same eye closing under a frown (the
+  right brows lowered as far as the face takes them; 700, 1002, 1004, 1024 IRISD: with shapes
+  sampled for the lid alone, the outer corner jumped 2.5 mm between the middle two).
 
-    PYTHONPATH=. .venv/bin/python tools/corner_sheet.py --before DIR [--corner mouth|eye|blink] [--out PNG]
+    PYTHONPATH=. .venv/bin/python tools/corner_sheet.py --before DIR [--corner mouth|eye|blink|frown] [--out PNG]
 
 ``--before`` is a checkout of the project (e.g. ``git worktree add /tmp/before REV``); its tiles
 are rendered by running this script there (``--tiles``), with its own face, rig and renderer.
@@ -32,6 +35,8 @@ from PIL import Image
 SIZE = 320
 RED = (230, 20, 20)
 EVERY_MUSCLE = "every"  # stands for every muscle of the face at 0.5
+FROWN = {"raise_r_i_eyebrow": -220.0, "raise_r_m_eyebrow": -180.0, "raise_r_o_eyebrow": -140.0}
+"""The slider box's right brow slider at the bottom of its travel (the face caps it at its reach)."""
 CORNERS = {
     "mouth": {"out": "mouth_corner.png", "centre": ("8.3",), "shift": (0.0, -0.15, 0.0),
               "views": ((0.6, 0.0, 1.2), (0.0, 0.0, 1.5)),  # camera offsets, dm: three-quarter, front
@@ -43,6 +48,9 @@ CORNERS = {
     "blink": {"out": "blink_corners.png", "centre": ("3.8", "3.12"), "shift": (0.0, 0.0, 0.0),
               "views": ((0.0, 0.0, 0.9), (-0.5, 0.0, 0.75)),
               "poses": [{"fap": {"close_t_r_eyelid": value}} for value in (700.0, 840.0, 860.0, 1024.0)]},
+    "frown": {"out": "frown_blink_corners.png", "centre": ("3.8", "3.12"), "shift": (0.0, 0.0, 0.0),
+              "views": ((0.0, 0.0, 0.9), (-0.5, 0.0, 0.75)),
+              "poses": [{"fap": {**FROWN, "close_t_r_eyelid": value}} for value in (700.0, 1002.0, 1004.0, 1024.0)]},
 }
 """Per corner: the sheet's file in docs/, the feature points whose middle (shifted) the camera
 looks at, the views and the poses (``Runtime.deform_faps`` arguments)."""

@@ -5,8 +5,9 @@ timed, wall clock and this thread's CPU:
 
 * ``wait``: the loop waiting for a Sample (``LiveSession.wait_for_input``);
 * ``frame``: ``LiveSession.frame``, split into ``controls`` (FAP engine), ``deform`` (DFFD,
-  muscles and their fold guard, rigid parts) and ``normals``; what is left is draining the
-  devices and the mapping;
+  muscles and their fold guard, rigid parts; of it, the eye corners' ``sliver guard``, with the
+  share of frames it had to fix) and ``normals``; what is left is draining the devices and the
+  mapping;
 * ``draw``: the renderer's GL calls (upload, llvmpipe's vertex work and binning run here);
 * ``gl``: waiting for the GL to finish (``Renderer.finish``: llvmpipe's threads shade, the GIL is free);
 * ``read``: reading the image back.
@@ -39,6 +40,7 @@ class Stopwatch:
 
     def __init__(self) -> None:
         self.frame: dict[str, list[int]] = defaultdict(lambda: [0, 0])
+        self.fixed = 0  # frames in which the sliver guard had to fix the eye corners
 
     def timed(self, name: str, fn):
         def wrapper(*args, **kwargs):
@@ -51,6 +53,14 @@ class Stopwatch:
                 entry[1] += time.thread_time_ns() - cpu
         return wrapper
 
+    def fixing(self, fn):
+        """``fn`` (the sliver guard) counting the frames in which it had to fix."""
+        def wrapper(*args, **kwargs):
+            fixed = fn(*args, **kwargs)
+            self.fixed += bool(fixed)
+            return fixed
+        return wrapper
+
 
 def profile(seconds: float, size: tuple[int, int]) -> None:
     runtime = Runtime(load_face())
@@ -58,9 +68,12 @@ def profile(seconds: float, size: tuple[int, int]) -> None:
     runtime.fap_controls = watch.timed("controls", runtime.fap_controls)
     runtime._deform = watch.timed("deform", runtime._deform)
     runtime._normals = watch.timed("normals", runtime._normals)
+    runtime._slivers = watch.timed("sliver guard", watch.fixing(runtime._slivers))
     with live_box(runtime, size) as (session, renderer):
         frames, latencies, process_cpu = _loop(session, renderer, watch, seconds)
     _report(frames, latencies, process_cpu)
+    print(f"the sliver guard fixed the eye corners in {watch.fixed} of {len(frames)} frames "
+          f"({100 * watch.fixed / max(len(frames), 1):.1f}%)")
 
 
 def _loop(session, renderer, watch: Stopwatch, seconds: float):
@@ -93,17 +106,18 @@ def _stats(values: list[float]) -> str:
 
 
 def _report(frames: list[dict], latencies: list[tuple[int, int]], process_cpu) -> None:
-    order = ["wait", "frame", "controls", "deform", "normals", "draw", "gl", "read"]
+    order = ["wait", "frame", "controls", "deform", "sliver guard", "normals", "draw", "gl", "read"]
     print(f"{len(frames)} frames in {process_cpu[1]:.1f} s ({len(frames) / process_cpu[1]:.0f} fps), "
           f"{len(latencies)} samples; load average {' '.join(open('/proc/loadavg').read().split()[:3])}")
-    print(f"{'stage':10s} {'wall median p99':>16s}   {'cpu median p99':>15s}  (ms; controls, deform and normals are inside frame)")
+    print(f"{'stage':12s} {'wall median p99':>16s}   {'cpu median p99':>15s}  (ms; controls, deform and normals "
+          "are inside frame, the sliver guard inside deform)")
     for name in order:
         wall = [f[name][0] / 1e6 for f in frames if name in f]
         cpu = [f[name][1] / 1e6 for f in frames if name in f]
         if wall:
-            print(f"{name:10s} {_stats(wall):>16s}   {_stats(cpu):>15s}")
+            print(f"{name:12s} {_stats(wall):>16s}   {_stats(cpu):>15s}")
     busy = [sum(f[n][0] for n in ("frame", "draw", "gl", "read") if n in f) / 1e6 for f in frames]
-    print(f"{'frame total':10s} {_stats(busy):>16s}   process CPU per frame, all threads: {1e3 * process_cpu[0]:.2f} ms")
+    print(f"{'frame total':12s} {_stats(busy):>16s}   process CPU per frame, all threads: {1e3 * process_cpu[0]:.2f} ms")
     waited = [w / 1e6 for w, _ in latencies]
     own = [o / 1e6 for _, o in latencies]
     total = [(w + o) / 1e6 for w, o in latencies]

@@ -312,7 +312,7 @@ class Runtime:
         elif contracting:
             out += self._muscle_model(mode).displace(contracting).astype(self.dtype, copy=False)
         if pose and self._slivers is not None:
-            self._slivers(out, rigid)
+            self._slivers(out, rigid, np.asarray(displacements))
         for part in self._rigid_vertices:
             if part in rigid:
                 self._move_part(part, self.rest, out, rigid[part][:, :3], rigid[part][:, 3])
@@ -369,6 +369,13 @@ class Runtime:
         order: 1, except on the lid margins (``fapengine.lid_shares``)."""
         shares = lid_shares(self.rig)
         return np.array([shares.get(name, 1.0) for name in self.control_points])
+
+    def points_moving(self, vertices: np.ndarray) -> np.ndarray:
+        """Indices (into ``control_points``) of the active control points whose displacements DFFD
+        spreads onto any of ``vertices``."""
+        B = self.B if self.mode == "precomputed" else self._folded()
+        columns = np.unique(sp.csr_matrix(B[np.asarray(vertices)]).indices)
+        return columns[columns < len(self.control_points)]
 
     @functools.cached_property
     def _muscle_spread(self) -> tuple[np.ndarray, sp.csr_matrix]:

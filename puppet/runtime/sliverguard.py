@@ -28,8 +28,18 @@ cost 0.39 ms median and 0.64 at most, where the sweeps and their fallback made t
 (``deform_faps``, CPU, both lids swinging 496-1024 IRISD). And the corner follows the lid
 smoothly: fixed frame by frame, it jumped 0.9 mm in one 2 IRISD step where the fallback took
 over (850 IRISD); blended, no step moves it more than twice the lid's own steps move the skin.
-The constraints still check every frame and fix what the shapes do not foresee (a blink with a
-squint or a raised cheek).
+A frown with a blink squeezes the outer corner sooner and harder (brows lowered push the skin
+above the lid down onto it), so each lid's shapes are sampled with the brows on its side lowered
+as well (``FROWNS``, at ``FROWN_DEPTHS`` of the way to the face's reach, each from where the lid
+starts to squeeze under that frown) and blended by how far the brows are lowered (``Frown``: read
+from the control points' displacements, blind to the lids' own FAPs). Sampled for the lid alone,
+a frown with a blink was left to the constraints: the shipped slider box needed their fix in 20%
+of its frames (1.1 ms more each; 3.1% now), and under a full frown the corner jumped back and
+forth by 2.5 mm in single 2 IRISD steps of the blink (984, 1004, 1022 IRISD), 86 times the median
+step (the biggest step is now 6 times the median, at the lid's very end, as a slide over 8 IRISD;
+``docs/frown_blink_corners.png``). The other side's brows squeeze a corner a little too (the
+artists' brow motions reach across the face), which the shapes do not foresee; nor a blink with
+a squint or a raised cheek: the constraints still check every frame and fix what is left.
 """
 
 from __future__ import annotations
@@ -48,29 +58,80 @@ cap (a blink closes at 1024 IRISD)."""
 RINGS = 2  # rings of triangles around the folding ones that the guard watches and may move
 STEPS = 8  # corrective shapes per probed lid, from where it starts to squeeze to its range end
 ONSET_TOLERANCE = 1.0  # FAP units: how closely the lid value where the squeeze starts is found
+ONSET_SCAN = 16  # lid values tried from open to the range end before the squeeze's start is bisected
+FROWNS = {19: (31, 33, 35), 20: (32, 34, 36)}
+"""The brow FAPs (raise_l/r_i/m/o_eyebrow) on each probed lid's side: lowered, they push the skin
+above the lid onto its outer corner."""
+FROWN_DEPTHS = (0.0, 0.5, 1.0)  # how far the brows are lowered in the samples: none to the face's reach
 
 
-class Corrective:
-    """The guard's fix of the watched vertices as one lid turns alone: fixes (K, n, 3) at turns
-    ``angles`` (K, radians about the lid's axis, rising toward closed; the first fix is nothing,
-    where the lid starts to squeeze), blended linearly between them, nothing before the first
-    and the last beyond the end."""
+class Frown:
+    """How far the brows on one lid's side are lowered, read from the active control points'
+    displacements: their sum over ``rows`` weighted by ``weights`` (r, 3), which gives 1 at the
+    full frown (the face's reach) and 0 for any motion of the lids (``_frown``), clipped to 0-1."""
 
-    def __init__(self, part: str, axis: np.ndarray, angles: np.ndarray, fixes: np.ndarray) -> None:
-        self.part = part
+    def __init__(self, rows: np.ndarray, weights: np.ndarray) -> None:
+        self.rows = np.asarray(rows, dtype=np.int64)
+        self.weights = np.asarray(weights, dtype=float)
+
+    def depth(self, displacements: np.ndarray) -> float:
+        """0 to 1 for the active control points' ``displacements`` (K, 3)."""
+        return min(max(float(np.sum(displacements[self.rows] * self.weights)), 0.0), 1.0)
+
+
+class TurnShape:
+    """The guard's fix of the watched vertices as one lid turns: fixes (K, n, 3) at turns ``angles``
+    (K, radians about the lid's ``axis``, rising toward closed; the first is where the lid starts
+    to squeeze, whose fix is nothing, or the lid open where something else squeezes the corner
+    already), blended linearly between them, the first before it and the last beyond the end."""
+
+    def __init__(self, axis: np.ndarray, angles: np.ndarray, fixes: np.ndarray) -> None:
         self.axis = np.asarray(axis, dtype=float)
         self.sign = 1.0 if angles[-1] >= angles[0] else -1.0
         self.angles = self.sign * np.asarray(angles, dtype=float)
         self.fixes = np.asarray(fixes, dtype=float)
+        self._before = self.fixes[0] if self.fixes[0].any() else None
 
     def at(self, motion: np.ndarray) -> np.ndarray | None:
         """The fix for the lid's rigid ``motion`` (3 x 4), or None where there is nothing to add."""
         angle = self.sign * turn_about(motion, self.axis)
         if angle <= self.angles[0]:
-            return None
+            return self._before
         k = min(int(np.searchsorted(self.angles, angle)), len(self.angles) - 1)
         t = min((angle - self.angles[k - 1]) / (self.angles[k] - self.angles[k - 1]), 1.0)
         return (1.0 - t) * self.fixes[k - 1] + t * self.fixes[k]
+
+
+class Corrective:
+    """A lid's corrective shapes: one ``TurnShape`` for each frown depth in ``depths`` (rising from
+    0, the lid alone; None where the lid squeezes no corner under that frown), blended linearly by
+    how far ``frown`` finds the brows lowered (the deepest beyond the last depth); a shape before
+    its lid's onset adds nothing to the blend."""
+
+    def __init__(self, part: str, turns: list[TurnShape | None], depths: np.ndarray = (0.0,),
+                 frown: Frown | None = None) -> None:
+        self.part = part
+        self.turns = turns
+        self.depths = np.asarray(depths, dtype=float)
+        self.frown = frown
+
+    def at(self, motion: np.ndarray, displacements: np.ndarray | None = None) -> np.ndarray | None:
+        """The fix for the lid's rigid ``motion`` (3 x 4) under the frown of the active control
+        points' ``displacements`` (K, 3; None: no frown), or None where there is nothing to add."""
+        if len(self.turns) == 1 or self.frown is None or displacements is None:
+            return self._at(0, motion)
+        depth = self.frown.depth(displacements)
+        i = min(max(int(np.searchsorted(self.depths, depth)), 1), len(self.depths) - 1)
+        u = min((depth - self.depths[i - 1]) / (self.depths[i] - self.depths[i - 1]), 1.0)
+        shallow, deep = self._at(i - 1, motion), self._at(i, motion)
+        if shallow is None and deep is None:
+            return None
+        return (1.0 - u) * (0.0 if shallow is None else shallow) + u * (0.0 if deep is None else deep)
+
+    def _at(self, k: int, motion: np.ndarray) -> np.ndarray | None:
+        """Depth ``k``'s fix for the lid's ``motion``, None where it has none."""
+        turn = self.turns[k]
+        return None if turn is None else turn.at(motion)
 
 
 def turn_about(motion: np.ndarray, axis: np.ndarray) -> float:
@@ -99,26 +160,29 @@ class SliverGuard:
             movable = np.asarray(movable, dtype=bool)[self.vertices]
             self.constraints = EdgeConstraints(rest[self.vertices], local.reshape(-1, 3), movable, reached[self.vertices])
 
-    def __call__(self, out: np.ndarray, rigid: dict[str, np.ndarray]) -> bool:
-        """Add the corrective shapes for the lids' turns in ``rigid`` to the deformed positions
-        ``out`` (V, 3), then fix them in place where a watched triangle is still about to fold;
-        returns whether it had to. The fix is a function of the watched vertices' positions
-        alone, so a held pose (a held blink) reuses the last frame's."""
+    def __call__(self, out: np.ndarray, rigid: dict[str, np.ndarray],
+                 displacements: np.ndarray | None = None) -> bool:
+        """Add the corrective shapes for the lids' turns in ``rigid`` and the frown in the active
+        control points' ``displacements`` (K, 3) to the deformed positions ``out`` (V, 3), then fix
+        them in place where a watched triangle is still about to fold; returns whether it had to.
+        The fix is a function of the watched vertices' positions alone, so a held pose (a held
+        blink) reuses the last frame's."""
         if self.constraints is None:
             return False
         positions = out[self.vertices].astype(float)
-        shaped = self._shape(positions, rigid)
+        shaped = self._shape(positions, rigid, displacements)
         fixed = self._last.get("fixed", positions.tobytes(), lambda: self._fixed(positions.copy()))
         if len(fixed) or shaped:
             out[self.vertices] = fixed if len(fixed) else positions
         return bool(len(fixed))
 
-    def _shape(self, positions: np.ndarray, rigid: dict[str, np.ndarray]) -> bool:
+    def _shape(self, positions: np.ndarray, rigid: dict[str, np.ndarray],
+               displacements: np.ndarray | None) -> bool:
         """Add the corrective shapes to the watched ``positions`` in place; whether any added."""
         shaped = False
         for shape in self.shapes:
             motion = rigid.get(shape.part)
-            fix = None if motion is None else shape.at(motion)
+            fix = None if motion is None else shape.at(motion, displacements)
             if fix is not None:
                 positions += fix
                 shaped = True
@@ -159,47 +223,108 @@ def sliver_guard(runtime) -> SliverGuard:
 
 
 def _corrective(runtime, guard: SliverGuard, number: int, high: float) -> Corrective | None:
-    """The corrective shape of lid FAP ``number``: the guard's fix at ``STEPS`` values from where
-    the lid alone starts to squeeze a watched corner to ``high``, by the lid's turn; None if it
-    squeezes none (on a face where only the other lid's corners fold)."""
+    """The corrective shapes of lid FAP ``number`` under each of ``FROWN_DEPTHS``: the guard's fix
+    at ``STEPS`` values from where the lid starts to squeeze a watched corner under that frown to
+    ``high``; None if it squeezes none under any (on a face where only the other lid's corners
+    fold)."""
     part = LID_FAPS[number][0]
     axis = runtime.rig.rigid_parts[part].axis
-    onset = _onset(runtime, guard, number, high)
+    brows = _brows_lowered(runtime, number)
+    frown = _frown(runtime, guard, brows)
+    depths = np.array(FROWN_DEPTHS if frown is not None else FROWN_DEPTHS[:1])
+    turns = [_turn_shape(runtime, guard, number, high, axis, {brow: depth * low for brow, low in brows.items()})
+             for depth in depths]
+    if all(turn is None for turn in turns):
+        return None
+    return Corrective(part, turns, depths, frown)
+
+
+def _turn_shape(runtime, guard: SliverGuard, number: int, high: float, axis: np.ndarray,
+                frown: dict[int, float]) -> TurnShape | None:
+    """Lid FAP ``number``'s shape with the brow FAPs ``frown``; None if it squeezes no watched corner
+    up to ``high`` or does not turn past where it starts to."""
+    onset = _onset(runtime, guard, number, high, frown)
     if onset >= high:
         return None
-    values = np.linspace(onset, high, STEPS + 1)
     angles, fixes = [], []
-    for value in values:
-        positions, motion = _lid_pose(runtime, number, value)
+    for value in np.linspace(onset, high, STEPS + 1):
+        positions, motion = _lid_pose(runtime, number, value, frown)
         watched = positions[guard.vertices]
         fixed = watched.copy()
         guard.constraints.guard(fixed)
         angles.append(turn_about(motion, axis))
         fixes.append(fixed - watched)
-    angles = np.array(angles)  # the first fix is nothing: at the onset no watched corner is squeezed
+    angles = np.array(angles)
     turning = np.concatenate([[True], np.abs(angles[1:] - angles[0]) > np.abs(angles[:-1] - angles[0])])
-    if turning.sum() < 2:  # the lid does not turn past its onset
+    if turning.sum() < 2:
         return None
-    return Corrective(part, axis, angles[turning], np.array(fixes)[turning])  # a lid past meeting turns no more
+    return TurnShape(axis, angles[turning], np.array(fixes)[turning])  # a lid past meeting turns no more
 
 
-def _onset(runtime, guard: SliverGuard, number: int, high: float) -> float:
-    """The largest value of lid FAP ``number`` alone (to ``ONSET_TOLERANCE``) at which no watched
-    corner is squeezed: the guard's first work is just above it."""
-    low = 0.0
-    if not guard.constraints.squeezed(_lid_pose(runtime, number, high)[0][guard.vertices]):
+def _brows_lowered(runtime, number: int) -> dict[int, float]:
+    """{brow FAP on lid ``number``'s side: its lowest value on this face} for those that lower
+    the brow at all (none on a face without brow control points)."""
+    low = runtime.faps.reach[0]
+    return {brow: float(low[brow - 1]) for brow in FROWNS.get(number, ()) if low[brow - 1] < 0}
+
+
+def _frown(runtime, guard: SliverGuard, brows: dict[int, float]) -> Frown | None:
+    """How far ``brows`` (at their lowest) are lowered, read from the control points that DFFD
+    spreads onto the watched skin and they move (the skin above the corner comes down through
+    those whichever brow lowers it: the artists' brow motions reach across the face, so one brow
+    lowered squeezes the other eye's corner a little too), blind to the lids' FAPs (an artist's
+    blink moves some of those points too)."""
+    if not brows:
+        return None
+    rows = runtime.points_moving(guard.vertices)
+    full = runtime.fap_controls(_values(brows))[0][rows]
+    moved = np.any(full != 0, axis=1)
+    if not moved.any():
+        return None
+    rows, full = rows[moved], full[moved].ravel()
+    lids = np.array([runtime.fap_controls(_values({number: 1.0}))[0][rows].ravel() for number in LID_FAPS]).T
+    u, sigma, _ = np.linalg.svd(lids, full_matrices=False)
+    basis = u[:, sigma > 1e-9 * sigma.max()] if sigma.max() > 0 else u[:, :0]
+    across = full - basis @ (basis.T @ full)
+    if across @ full <= 1e-9 * (full @ full):  # the frown moves these points only as the lids do
+        return None
+    return Frown(rows, (across / (across @ full)).reshape(-1, 3))
+
+
+def _values(faps: dict[int, float]) -> np.ndarray:
+    """The 68 FAP values with ``faps`` ({number: value}) set, the rest 0."""
+    values = np.zeros(N_FAPS)
+    for number, value in faps.items():
+        values[number - 1] = value
+    return values
+
+
+def _onset(runtime, guard: SliverGuard, number: int, high: float, frown: dict[int, float]) -> float:
+    """The largest value of lid FAP ``number`` (to ``ONSET_TOLERANCE``), with the brow FAPs
+    ``frown``, below which no watched corner is squeezed: the guard's first work is just above it.
+    Scanned from open first (under a frown the squeeze can come and go as the lid turns), then
+    bisected."""
+    def squeezed(value: float) -> bool:
+        return guard.constraints.squeezed(_lid_pose(runtime, number, value, frown)[0][guard.vertices])
+
+    values = np.linspace(0.0, high, ONSET_SCAN + 1)
+    first = next((k for k, value in enumerate(values) if squeezed(value)), None)
+    if first is None:
         return high
+    if first == 0:
+        return 0.0
+    low, high = values[first - 1], values[first]
     while high - low > ONSET_TOLERANCE:
         middle = 0.5 * (low + high)
-        squeezed = guard.constraints.squeezed(_lid_pose(runtime, number, middle)[0][guard.vertices])
-        low, high = (low, middle) if squeezed else (middle, high)
+        low, high = (low, middle) if squeezed(middle) else (middle, high)
     return low
 
 
-def _lid_pose(runtime, number: int, value: float) -> tuple[np.ndarray, np.ndarray | None]:
+def _lid_pose(runtime, number: int, value: float,
+              frown: dict[int, float] | None = None) -> tuple[np.ndarray, np.ndarray | None]:
     """(the face's positions, the lid's rigid motion, None without that lid) with FAP ``number``
-    at ``value`` alone, as the runtime deforms it without a sliver guard."""
-    values = np.zeros(N_FAPS)
-    values[number - 1] = value
+    at ``value`` and the brow FAPs ``frown`` ({number: value}), as the runtime deforms them
+    without a sliver guard."""
+    values = _values({**(frown or {}), number: value})
     rigid = runtime.fap_controls(values)[1]
     return runtime.deform_faps(values).astype(float), rigid.get(LID_FAPS[number][0])
