@@ -1,5 +1,6 @@
 """The sliver guard's corrective shapes (puppet.runtime.sliverguard): a lid's turn read back from
-its rigid motion, the shapes blended by it, and a lid that never squeezes a corner getting none.
+its rigid motion, the shapes blended by it and by how far the brows are lowered, and a lid that
+never squeezes a corner getting none.
 The blink's behaviour on the default face is in test_foldlimits.py."""
 
 from __future__ import annotations
@@ -26,13 +27,12 @@ def test_a_turn_about_an_axis_is_read_back_from_its_motion(axis, angle, pivot):
 
 
 @pytest.mark.parametrize("sign", [1.0, -1.0])
-def test_a_corrective_shape_is_nothing_before_its_onset_blended_between_and_held_beyond(sign):
-    axis = np.array([1.0, 0.0, 0.0])
+def test_a_turn_shape_is_nothing_before_its_onset_blended_between_and_held_beyond(sign):
     fixes = np.array([np.zeros((2, 3)), np.full((2, 3), 1.0), np.full((2, 3), 3.0)])
-    shape = TurnShape(axis, sign * np.array([0.2, 0.3, 0.5]), fixes)
+    shape = TurnShape(sign * np.array([0.2, 0.3, 0.5]), fixes)
 
     def at(angle):
-        return shape.at(rigid.about(np.zeros(3), rigid.rotation(axis, sign * angle)))
+        return shape.at(sign * angle)
 
     assert at(0.0) is None and at(0.2) is None and at(-0.4) is None  # open, or not yet squeezing
     np.testing.assert_allclose(at(0.25), 0.5)
@@ -44,10 +44,9 @@ def test_a_corrective_shape_is_nothing_before_its_onset_blended_between_and_held
 def test_a_turn_shape_that_squeezes_from_open_holds_its_first_fix_before_it():
     """Where something else (a deep frown) squeezes the corner with the lid open, the shape's first
     fix is not nothing: it holds below its first turn rather than jumping in at it."""
-    axis = np.array([1.0, 0.0, 0.0])
-    shape = TurnShape(axis, np.array([0.0, 0.4]), np.stack([np.full((1, 3), 2.0), np.full((1, 3), 4.0)]))
+    shape = TurnShape(np.array([0.0, 0.4]), np.stack([np.full((1, 3), 2.0), np.full((1, 3), 4.0)]))
     for angle, fix in ((-0.2, 2.0), (0.0, 2.0), (0.2, 3.0), (0.6, 4.0)):
-        np.testing.assert_allclose(shape.at(rigid.about(np.zeros(3), rigid.rotation(axis, angle))), fix)
+        np.testing.assert_allclose(shape.at(angle), fix)
 
 
 @pytest.mark.parametrize(("lid", "depth"), [(0.0, 0.0), (1024.0, 0.0), (600.0, 0.4), (1080.0, 1.0), (300.0, 1.7),
@@ -65,20 +64,22 @@ def test_a_frown_is_read_as_its_share_of_the_full_frown_whatever_the_lids_do(run
     assert shape.frown.depth(controls) == pytest.approx(min(max(depth, 0.0), 1.0), abs=1e-9)
 
 
-def test_a_corrective_shape_blends_the_frowns_it_was_sampled_at():
-    """Between the lid alone and the full frown the fixes blend by the frown's depth; a frown that
-    starts to squeeze sooner than the lid alone blends with nothing there."""
+def test_a_corrective_shape_reads_the_lid_s_turn_and_blends_the_frowns_it_was_sampled_at():
+    """The lid's turn is read from its rigid motion, in either sense about its axis; between the
+    lid alone and the full frown the fixes blend by the frown's depth; a frown that starts to
+    squeeze sooner than the lid alone blends with nothing there."""
     axis = np.array([1.0, 0.0, 0.0])
-    alone = TurnShape(axis, np.array([0.3, 0.4]), np.stack([np.zeros((1, 3)), np.full((1, 3), 1.0)]))
-    frowned = TurnShape(axis, np.array([0.2, 0.4]), np.stack([np.zeros((1, 3)), np.full((1, 3), 3.0)]))
+    alone = TurnShape(np.array([0.3, 0.4]), np.stack([np.zeros((1, 3)), np.full((1, 3), 1.0)]))
+    frowned = TurnShape(np.array([0.2, 0.4]), np.stack([np.zeros((1, 3)), np.full((1, 3), 3.0)]))
     frown = Frown(np.array([0]), np.array([[0.0, -1.0, 0.0]]))  # the full frown: the point 1 down
-    shape = Corrective("upper_lid_l", [alone, frowned], np.array([0.0, 1.0]), frown)
+    shape = Corrective("upper_lid_l", axis, [alone, frowned], np.array([0.0, 1.0]), frown)
 
-    def at(angle, lowered=None):
-        motion = rigid.about(np.zeros(3), rigid.rotation(axis, angle))
+    def at(angle, lowered=None, about=axis):
+        motion = rigid.about(np.zeros(3), rigid.rotation(about, angle))
         return shape.at(motion, None if lowered is None else np.array([[0.0, -lowered, 0.0]]))
 
     np.testing.assert_allclose(at(0.4, 0.25), 1.5)
+    np.testing.assert_allclose(at(-0.4, 0.25, -axis), 1.5)
     np.testing.assert_allclose(at(0.4, 2.0), 3.0)  # beyond the full frown: held
     np.testing.assert_allclose(at(0.4, -0.5), 1.0)  # brows raised: the lid alone
     np.testing.assert_allclose(at(0.4), 1.0)  # no frown given

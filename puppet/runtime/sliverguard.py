@@ -44,6 +44,8 @@ a squint or a raised cheek: the constraints still check every frame and fix what
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import scipy.sparse as sp
 
@@ -63,6 +65,7 @@ FROWNS = {19: (31, 33, 35), 20: (32, 34, 36)}
 """The brow FAPs (raise_l/r_i/m/o_eyebrow) on each probed lid's side: lowered, they push the skin
 above the lid onto its outer corner."""
 FROWN_DEPTHS = (0.0, 0.5, 1.0)  # how far the brows are lowered in the samples: none to the face's reach
+BLEND_FLOOR = 1e-6  # a frown depth's share of the blend below which its shape is not looked up
 
 
 class Frown:
@@ -73,28 +76,31 @@ class Frown:
     def __init__(self, rows: np.ndarray, weights: np.ndarray) -> None:
         self.rows = np.asarray(rows, dtype=np.int64)
         self.weights = np.asarray(weights, dtype=float)
+        self._flat = (3 * self.rows[:, None] + np.arange(3)).ravel()  # the rows' entries in a raveled (K, 3)
+        self._flat_weights = self.weights.ravel()
 
     def depth(self, displacements: np.ndarray) -> float:
         """0 to 1 for the active control points' ``displacements`` (K, 3)."""
-        return min(max(float(np.sum(displacements[self.rows] * self.weights)), 0.0), 1.0)
+        along = float(np.asarray(displacements, dtype=float).ravel().take(self._flat) @ self._flat_weights)
+        return min(max(along, 0.0), 1.0)
 
 
 class TurnShape:
     """The guard's fix of the watched vertices as one lid turns: fixes (K, n, 3) at turns ``angles``
-    (K, radians about the lid's ``axis``, rising toward closed; the first is where the lid starts
-    to squeeze, whose fix is nothing, or the lid open where something else squeezes the corner
+    (K, radians about the lid's axis, rising toward closed; the first is where the lid starts to
+    squeeze, whose fix is nothing, or the lid open where something else squeezes the corner
     already), blended linearly between them, the first before it and the last beyond the end."""
 
-    def __init__(self, axis: np.ndarray, angles: np.ndarray, fixes: np.ndarray) -> None:
-        self.axis = np.asarray(axis, dtype=float)
+    def __init__(self, angles: np.ndarray, fixes: np.ndarray) -> None:
         self.sign = 1.0 if angles[-1] >= angles[0] else -1.0
         self.angles = self.sign * np.asarray(angles, dtype=float)
         self.fixes = np.asarray(fixes, dtype=float)
         self._before = self.fixes[0] if self.fixes[0].any() else None
 
-    def at(self, motion: np.ndarray) -> np.ndarray | None:
-        """The fix for the lid's rigid ``motion`` (3 x 4), or None where there is nothing to add."""
-        angle = self.sign * turn_about(motion, self.axis)
+    def at(self, angle: float) -> np.ndarray | None:
+        """The fix for the lid turned by ``angle`` (radians about its axis), or None where there is
+        nothing to add."""
+        angle *= self.sign
         if angle <= self.angles[0]:
             return self._before
         k = min(int(np.searchsorted(self.angles, angle)), len(self.angles) - 1)
@@ -104,13 +110,14 @@ class TurnShape:
 
 class Corrective:
     """A lid's corrective shapes: one ``TurnShape`` for each frown depth in ``depths`` (rising from
-    0, the lid alone; None where the lid squeezes no corner under that frown), blended linearly by
-    how far ``frown`` finds the brows lowered (the deepest beyond the last depth); a shape before
-    its lid's onset adds nothing to the blend."""
+    0, the lid alone; None where the lid squeezes no corner under that frown), by the lid's turn
+    about ``axis``, blended linearly by how far ``frown`` finds the brows lowered (the deepest
+    beyond the last depth); a shape before its lid's onset adds nothing to the blend."""
 
-    def __init__(self, part: str, turns: list[TurnShape | None], depths: np.ndarray = (0.0,),
-                 frown: Frown | None = None) -> None:
+    def __init__(self, part: str, axis: np.ndarray, turns: list[TurnShape | None],
+                 depths: np.ndarray = (0.0,), frown: Frown | None = None) -> None:
         self.part = part
+        self.axis = np.asarray(axis, dtype=float)
         self.turns = turns
         self.depths = np.asarray(depths, dtype=float)
         self.frown = frown
@@ -118,27 +125,31 @@ class Corrective:
     def at(self, motion: np.ndarray, displacements: np.ndarray | None = None) -> np.ndarray | None:
         """The fix for the lid's rigid ``motion`` (3 x 4) under the frown of the active control
         points' ``displacements`` (K, 3; None: no frown), or None where there is nothing to add."""
+        angle = turn_about(motion, self.axis)
         if len(self.turns) == 1 or self.frown is None or displacements is None:
-            return self._at(0, motion)
+            return self._at(0, angle)
         depth = self.frown.depth(displacements)
         i = min(max(int(np.searchsorted(self.depths, depth)), 1), len(self.depths) - 1)
         u = min((depth - self.depths[i - 1]) / (self.depths[i] - self.depths[i - 1]), 1.0)
-        shallow, deep = self._at(i - 1, motion), self._at(i, motion)
+        if u < BLEND_FLOOR or u > 1.0 - BLEND_FLOOR:  # one shape's worth: the other adds under a millionth
+            return self._at(i - 1 if u < BLEND_FLOOR else i, angle)
+        shallow, deep = self._at(i - 1, angle), self._at(i, angle)
         if shallow is None and deep is None:
             return None
         return (1.0 - u) * (0.0 if shallow is None else shallow) + u * (0.0 if deep is None else deep)
 
-    def _at(self, k: int, motion: np.ndarray) -> np.ndarray | None:
-        """Depth ``k``'s fix for the lid's ``motion``, None where it has none."""
+    def _at(self, k: int, angle: float) -> np.ndarray | None:
+        """Depth ``k``'s fix for the lid turned by ``angle``, None where it has none."""
         turn = self.turns[k]
-        return None if turn is None else turn.at(motion)
+        return None if turn is None else turn.at(angle)
 
 
 def turn_about(motion: np.ndarray, axis: np.ndarray) -> float:
     """The signed angle (radians) of a rigid ``motion``'s rotation about unit ``axis``."""
-    r = motion[:, :3]
-    sine = 0.5 * float(axis @ np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]]))
-    return float(np.arctan2(sine, 0.5 * (np.trace(r) - 1.0)))
+    (r00, r01, r02, _), (r10, r11, r12, _), (r20, r21, r22, _) = np.asarray(motion, dtype=float).tolist()
+    x, y, z = np.asarray(axis, dtype=float).tolist()
+    sine = 0.5 * (x * (r21 - r12) + y * (r02 - r20) + z * (r10 - r01))
+    return math.atan2(sine, 0.5 * (r00 + r11 + r22 - 1.0))
 
 
 class SliverGuard:
@@ -236,7 +247,7 @@ def _corrective(runtime, guard: SliverGuard, number: int, high: float) -> Correc
              for depth in depths]
     if all(turn is None for turn in turns):
         return None
-    return Corrective(part, turns, depths, frown)
+    return Corrective(part, axis, turns, depths, frown)
 
 
 def _turn_shape(runtime, guard: SliverGuard, number: int, high: float, axis: np.ndarray,
@@ -258,7 +269,7 @@ def _turn_shape(runtime, guard: SliverGuard, number: int, high: float, axis: np.
     turning = np.concatenate([[True], np.abs(angles[1:] - angles[0]) > np.abs(angles[:-1] - angles[0])])
     if turning.sum() < 2:
         return None
-    return TurnShape(axis, angles[turning], np.array(fixes)[turning])  # a lid past meeting turns no more
+    return TurnShape(angles[turning], np.array(fixes)[turning])  # a lid past meeting turns no more
 
 
 def _brows_lowered(runtime, number: int) -> dict[int, float]:
