@@ -4,7 +4,8 @@
   of its own (``PtyJoystick`` on a pseudo-terminal, 200 readings/s, read by pyserial as
   ``puppet live`` reads a port), every frame drawn and read back by a 640x480 offscreen renderer
   with the live window's settings (``session.measure_latency``): every Sample, from its
-  timestamp to the first frame that shows it, mesh ready and frame drawn; medians and p99.
+  timestamp to the first frame that shows it, mesh ready and frame drawn; medians and p99, over
+  ``BOX_CYCLE_S`` (``puppet bench --quick``: 3 s).
 * ``flood``: the same loop, recording a take, while the box sends ``rate`` readings a second
   (COBS frames) for ``seconds``: frames per second against a baseline run in the same call at
   200 readings/s, the samples taken in, the process's resident memory over time (flat: nothing
@@ -38,6 +39,10 @@ from puppet.runtime.runtime import Runtime
 from puppet.view.renderer import Renderer
 
 MAPPING = shipped_mapping("arduino_sliders")
+BOX_CYCLE_S = 20.0
+"""The slider box's six sines (0.25 to 1.0 Hz) come back to where they were every 20 s: a latency
+run of one cycle sees every combination of its sliders (a frown with a blink costs the frame
+more than the rest), where a run of a few seconds sees whichever part of it the run falls on."""
 PAGE = os.sysconf("SC_PAGE_SIZE")
 
 
@@ -69,7 +74,7 @@ def _renderer(runtime: Runtime, size: tuple[int, int]) -> Renderer:
     return renderer
 
 
-def latency(runtime: Runtime, seconds: float = 3.0, size: tuple[int, int] = (640, 480)) -> dict:
+def latency(runtime: Runtime, seconds: float = BOX_CYCLE_S, size: tuple[int, int] = (640, 480)) -> dict:
     """Input-to-frame latency of the live loop (see the module docstring)."""
     with live_box(runtime, size) as (session, renderer):
         return measure_latency(session, renderer, seconds)

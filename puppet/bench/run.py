@@ -68,15 +68,15 @@ def _steps(frames: int, ict: bool, flood_seconds: float, take_seconds: float, on
         steps.append(("muscles", "default", lambda: bench_muscles(faces()[0][0], frames)))
     if "inputs" in only:
         steps.append(("inputs", "every adapter", lambda: bench_inputs(0.5 if quick else 2.0)))
-    live = _live_sections(default, flood_seconds, take_seconds)
+    live = _live_sections(default, flood_seconds, take_seconds, 3.0 if quick else pipeline.BOX_CYCLE_S)
     steps += [(name, label, fn) for name, (label, fn) in live.items() if name in only]
     return steps
 
 
-def _live_sections(runtime: Callable[[], Runtime], flood_seconds: float,
-                   take_seconds: float) -> dict[str, tuple[str, Callable[[], dict]]]:
+def _live_sections(runtime: Callable[[], Runtime], flood_seconds: float, take_seconds: float,
+                   latency_seconds: float) -> dict[str, tuple[str, Callable[[], dict]]]:
     """The live pipeline on the default face: latency, a flood of input, a long take."""
-    return {"latency": ("sim slider box -> drawn frame", lambda: pipeline.latency(runtime())),
+    return {"latency": ("sim slider box -> drawn frame", lambda: pipeline.latency(runtime(), latency_seconds)),
             "flood": (f"{flood_seconds:g} s of 10,000 readings/s", lambda: pipeline.flood(runtime(), flood_seconds)),
             "long_take": (f"a {take_seconds:g} s take", lambda: pipeline.long_take(take_seconds))}
 
