@@ -336,6 +336,5 @@ def _lid_pose(runtime, number: int, value: float,
     """(the face's positions, the lid's rigid motion, None without that lid) with FAP ``number``
     at ``value`` and the brow FAPs ``frown`` ({number: value}), as the runtime deforms them
     without a sliver guard."""
-    values = _values({**(frown or {}), number: value})
-    rigid = runtime.fap_controls(values)[1]
-    return runtime.deform_faps(values).astype(float), rigid.get(LID_FAPS[number][0])
+    controls, rigid = runtime.fap_controls(_values({**(frown or {}), number: value}))
+    return runtime.deform(controls, rigid).astype(float), rigid.get(LID_FAPS[number][0])
