@@ -273,6 +273,20 @@ def from_runs(pairs: list[list[int]]) -> np.ndarray:
 def rig_to_dict(rig: Rig) -> dict:
     """The JSON-ready form of a rig."""
     return {
+        **rig_geometry_to_dict(rig),
+        "muscles": muscles_to_json(rig.muscles),
+        "fap_motions": {str(number): {name: _floats(m, 5) for name, m in motions.items()}
+                        for number, motions in sorted(rig.fap_motions.items())},
+        "fap_reach": {str(number): [_limit(low), _limit(high)] for number, (low, high) in sorted(rig.fap_reach.items())},
+        "fap_follow": {f"{a},{b}": [float(low), float(high), _limit(m_low), _limit(m_high)]
+                       for (a, b), (low, high, m_low, m_high) in sorted(rig.fap_follow.items())},
+    }
+
+
+def rig_geometry_to_dict(rig: Rig) -> dict:
+    """The part of ``rig_to_dict`` that places the control points, regions and rigid parts (what
+    Sibson coordinates depend on; the muscles and FAP motions, reach and follow pairs do not)."""
+    return {
         "format": FORMAT,
         "version": VERSION,
         "n_vertices": rig.n_vertices,
@@ -292,12 +306,6 @@ def rig_to_dict(rig: Rig) -> dict:
             for name, p in rig.rigid_parts.items()
         },
         "lip_lines": [{"name": l.name, "keys": l.keys, "points": l.points} for l in rig.lip_lines],
-        "muscles": muscles_to_json(rig.muscles),
-        "fap_motions": {str(number): {name: _floats(m, 5) for name, m in motions.items()}
-                        for number, motions in sorted(rig.fap_motions.items())},
-        "fap_reach": {str(number): [_limit(low), _limit(high)] for number, (low, high) in sorted(rig.fap_reach.items())},
-        "fap_follow": {f"{a},{b}": [float(low), float(high), _limit(m_low), _limit(m_high)]
-                       for (a, b), (low, high, m_low, m_high) in sorted(rig.fap_follow.items())},
     }
 
 

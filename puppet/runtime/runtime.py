@@ -82,7 +82,7 @@ import scipy.sparse as sp
 from scipy.sparse import _sparsetools
 
 from puppet.face.autorig import rig_for_face
-from puppet.face.rig import Rig, rig_to_dict
+from puppet.face.rig import Rig, rig_geometry_to_dict
 from puppet.face.rigid import compose
 from puppet.fap.pose import Pose
 from puppet.runtime import coefcache
@@ -168,10 +168,7 @@ class Runtime:
 
     def _load_or_compute(self, cache: bool) -> dict[str, RegionDeformer]:
         """Each region's deformer from the coefficient cache, or computed (and then cached)."""
-        geometry = rig_to_dict(self.rig)
-        for key in ("muscles", "fap_motions", "fap_reach", "fap_follow"):  # they change no Sibson coordinate: editing them keeps the cache
-            del geometry[key]
-        key = coefcache.cache_key(self.face.content_hash, geometry)
+        key = coefcache.cache_key(self.face.content_hash, rig_geometry_to_dict(self.rig))  # muscle or FAP edits keep it
         cached = (coefcache.load(key) if cache else None) or {}
         deformers, computed = {}, False
         for region in self._regions:
