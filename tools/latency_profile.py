@@ -16,7 +16,9 @@ Then each Sample's latency (its timestamp to its frame read back) is split into 
 the frame being drawn when it came and its own frame. Medians and 99th percentiles; the process's
 CPU time per frame, llvmpipe's threads included, shows how much of the two cores a frame takes.
 
-    OPENBLAS_NUM_THREADS=1 python tools/latency_profile.py [--seconds 5] [--size 640x480]
+    OPENBLAS_NUM_THREADS=1 python tools/latency_profile.py [--seconds 20] [--size 640x480]
+
+The default, 20 s, is one whole cycle of the box's sliders (``pipeline.BOX_CYCLE_S``), as the bench's run.
 """
 
 from __future__ import annotations
@@ -30,7 +32,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from puppet.bench.pipeline import live_box
+from puppet.bench.pipeline import BOX_CYCLE_S, live_box
 from puppet.face.load import load_face
 from puppet.runtime.runtime import Runtime
 
@@ -127,7 +129,7 @@ def _report(frames: list[dict], latencies: list[tuple[int, int]], process_cpu) -
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seconds", type=float, default=5.0)
+    parser.add_argument("--seconds", type=float, default=BOX_CYCLE_S)
     parser.add_argument("--size", default="640x480")
     args = parser.parse_args()
     profile(args.seconds, tuple(int(x) for x in args.size.split("x")))
