@@ -49,7 +49,7 @@ import math
 import numpy as np
 import scipy.sparse as sp
 
-from puppet.fap.table import N_FAPS, clamp_ranges
+from puppet.fap.table import clamp_ranges
 from puppet.runtime.fapengine import LID_FAPS
 from puppet.runtime.lastmade import LastMade
 from puppet.runtime.musclesolver import EdgeConstraints, folded_triangles
@@ -288,26 +288,18 @@ def _frown(runtime, guard: SliverGuard, brows: dict[int, float]) -> Frown | None
     if not brows:
         return None
     rows = runtime.points_moving(guard.vertices)
-    full = runtime.fap_controls(_values(brows))[0][rows]
+    full = runtime.fap_controls(brows)[0][rows]
     moved = np.any(full != 0, axis=1)
     if not moved.any():
         return None
     rows, full = rows[moved], full[moved].ravel()
-    lids = np.array([runtime.fap_controls(_values({number: 1.0}))[0][rows].ravel() for number in LID_FAPS]).T
+    lids = np.array([runtime.fap_controls({number: 1.0})[0][rows].ravel() for number in LID_FAPS]).T
     u, sigma, _ = np.linalg.svd(lids, full_matrices=False)
     basis = u[:, sigma > 1e-9 * sigma.max()] if sigma.max() > 0 else u[:, :0]
     across = full - basis @ (basis.T @ full)
     if across @ full <= 1e-9 * (full @ full):  # the frown moves these points only as the lids do
         return None
     return Frown(rows, (across / (across @ full)).reshape(-1, 3))
-
-
-def _values(faps: dict[int, float]) -> np.ndarray:
-    """The 68 FAP values with ``faps`` ({number: value}) set, the rest 0."""
-    values = np.zeros(N_FAPS)
-    for number, value in faps.items():
-        values[number - 1] = value
-    return values
 
 
 def _onset(runtime, guard: SliverGuard, number: int, high: float, frown: dict[int, float]) -> float:
@@ -336,5 +328,5 @@ def _lid_pose(runtime, number: int, value: float,
     """(the face's positions, the lid's rigid motion, None without that lid) with FAP ``number``
     at ``value`` and the brow FAPs ``frown`` ({number: value}), as the runtime deforms them
     without a sliver guard."""
-    controls, rigid = runtime.fap_controls(_values({**(frown or {}), number: value}))
+    controls, rigid = runtime.fap_controls({**(frown or {}), number: value})
     return runtime.deform(controls, rigid).astype(float), rigid.get(LID_FAPS[number][0])
