@@ -7,6 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from puppet.face.rigid import IDENTITY
 from puppet.fap.table import UnknownFapError, faps
 from puppet.runtime.fapengine import FapEngine
 
@@ -256,16 +257,28 @@ def test_rigid_motions_kept_between_frames_are_those_a_fresh_engine_makes(runtim
         assert motions.keys() == motions0.keys()
         for part in motions:
             np.testing.assert_array_equal(motions[part], motions0[part], err_msg=part)
+    values = np.zeros(68)
+    values[2] = 300.0  # open_jaw
     with pytest.raises(ValueError):
-        motions["jaw"][0, 3] = 1.0
+        runtime.faps.controls(values)[1]["jaw"][0, 3] = 1.0
+
+
+def test_a_part_whose_faps_are_all_zero_is_at_rest_and_left_out(runtime):
+    """The engine gives motions only for the parts that move: each part it leaves out would have
+    been exactly the identity (so the runtime, which skips parts at rest, deforms the same)."""
+    values = np.zeros(68)
+    values[[2, 18]] = 300.0, 500.0  # open_jaw, close_t_l_eyelid
+    assert set(runtime.faps.controls(values)[1]) == {"jaw", "upper_lid_l"}
+    for part, (make, _) in runtime.faps._parts.items():
+        np.testing.assert_array_equal(make(np.zeros(68)), IDENTITY, err_msg=part)
 
 
 @settings(max_examples=25, deadline=None)
 @given(st.lists(st.floats(-1000.0, 1000.0), min_size=68, max_size=68))
 def test_control_point_displacements_are_each_fap_times_its_motion_summed(runtime, frame):
     """A frame's control point displacements are the sum over FAPs of each FAP's value (as the
-    face shows it) times that FAP's motion of every point: the engine's sparse product gives the
-    dense definition's sums, to float64 rounding."""
+    face shows it) times that FAP's motion of every point: the engine's product over the FAPs a
+    frame shows gives the dense definition's sums, to float64 rounding (the runtime's dtype)."""
     values = np.array(frame)
     values[:2] = 0.0
     engine = runtime.faps

@@ -6,6 +6,9 @@ import math
 
 import numpy as np
 
+IDENTITY = np.hstack([np.eye(3), np.zeros((3, 1))])
+IDENTITY.setflags(write=False)
+
 
 def rotation(axis: np.ndarray, angle: float) -> np.ndarray:
     """3x3 rotation by ``angle`` radians about the unit vector ``axis`` (right-hand rule)."""

@@ -60,8 +60,6 @@ import functools
 import math
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse import _sparsetools
 
 from puppet.face import rigid
 from puppet.fap.highlevel import expand
@@ -106,7 +104,8 @@ class FapEngine:
         self._index = {name: i for i, name in enumerate(runtime.control_points)}
         self._own = self._translation_matrix()
         self._translations = self._own + self._calibrated_matrix()
-        self._moves = sp.csr_matrix(self._translations)  # a quarter of it is non-zero: the per-frame product
+        self._moves = np.ascontiguousarray(self._translations.T, dtype=runtime.dtype)  # a FAP's motion a row
+        self._moving = np.abs(self._translations).sum(axis=0) > 0  # the FAPs that move some point
         self.reach = self._face_limits()
         self.skin_reach = np.stack([np.full(N_FAPS, -np.inf), np.full(N_FAPS, np.inf)])
         for number, (low, high) in self.rig.fap_reach.items():
@@ -207,16 +206,19 @@ class FapEngine:
         return expand(values, viseme, expression)
 
     def controls(self, values: np.ndarray) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-        """Control point displacements (K, 3) and rigid motions for 68 low-level FAP values, as
-        the face shows them (``shown``). A part's motion is made again only when the FAPs it
-        follows change (the motions are shared from frame to frame, so they are read-only)."""
+        """Control point displacements (K, 3, in the runtime's dtype) and the rigid motions of
+        the parts that move, for 68 low-level FAP values as the face shows them (``shown``). A
+        part whose FAPs are all 0 is at rest and left out; a part's motion is made again only
+        when the FAPs it follows change (the motions are shared from frame to frame, so they are
+        read-only). The displacements sum only the FAPs the frame shows: a take's frame shows
+        few of them (the live slider box 21 of the 50 that move the skin)."""
         v = self.shown(values)
-        m = self._moves
-        d = np.zeros(m.shape[0])
-        _sparsetools.csr_matvec(m.shape[0], m.shape[1], m.indptr, m.indices, m.data,
-                                np.clip(v, self.skin_reach[0], self.skin_reach[1]), d)
-        d = d.reshape(-1, 3)
-        return d, {part: self._motion(part, make, v) for part, (make, _) in self._parts.items()}
+        skin = np.clip(v, self.skin_reach[0], self.skin_reach[1])
+        showing = np.flatnonzero((skin != 0) & self._moving)
+        d = (skin[showing].astype(self._moves.dtype) @ self._moves[showing]).reshape(-1, 3)
+        moving = np.logical_or.reduceat(v[self._followed] != 0, self._first_followed)
+        return d, {part: self._motion(part, make, v)
+                   for (part, (make, _)), moves in zip(self._parts.items(), moving) if moves}
 
     @functools.cached_property
     def _parts(self) -> dict[str, tuple]:
@@ -228,6 +230,16 @@ class FapEngine:
             parts[part] = (functools.partial(self._lid_of, part, point, sign, number - 1), [number - 1])
         parts["tongue"] = (self._tongue, [n - 1 for n in TONGUE_FAPS])
         return {part: entry for part, entry in parts.items() if part in self.rig.rigid_parts}
+
+    @functools.cached_property
+    def _followed(self) -> np.ndarray:
+        """The FAPs (0-based) the rigid parts follow, part after part in ``_parts`` order."""
+        return np.concatenate([followed for _, followed in self._parts.values()]).astype(np.int64)
+
+    @functools.cached_property
+    def _first_followed(self) -> np.ndarray:
+        """Where each part's FAPs start in ``_followed``."""
+        return np.cumsum([0] + [len(followed) for _, followed in self._parts.values()][:-1])
 
     def _motion(self, part: str, make, v: np.ndarray) -> np.ndarray:
         return self._last_motions.get(part, v[self._parts[part][1]].tobytes(), lambda: make(v))

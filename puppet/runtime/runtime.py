@@ -83,7 +83,7 @@ from scipy.sparse import _sparsetools
 
 from puppet.face.autorig import rig_for_face
 from puppet.face.rig import Rig, rig_geometry_to_dict
-from puppet.face.rigid import compose
+from puppet.face.rigid import IDENTITY, compose
 from puppet.fap.pose import Pose
 from puppet.runtime import coefcache
 from puppet.runtime.dffd import DffdError, RegionDeformer
@@ -96,7 +96,6 @@ from puppet.runtime.spreading import spread_matrix
 
 MODES = ("precomputed", "realtime")
 MUSCLE_MODES = ("control", "classic", "improved")
-_IDENTITY = np.hstack([np.eye(3), np.zeros((3, 1))])
 
 
 class Runtime:
@@ -550,10 +549,10 @@ class Runtime:
                 raise ValueError(f"rigid motion {name!r} must be a 3x4 [R | t] matrix, got shape {motion.shape}")
         for name, parent in self._parents:
             if parent in rigid:
-                rigid[name] = self._composed(name, rigid[parent], rigid.get(name, _IDENTITY))
+                rigid[name] = self._composed(name, rigid[parent], rigid.get(name, IDENTITY))
         if not rigid:
             return rigid
-        still = (np.stack(list(rigid.values())) == _IDENTITY).all(axis=(1, 2))
+        still = (np.stack(list(rigid.values())) == IDENTITY).all(axis=(1, 2))
         return {name: motion for (name, motion), rest in zip(rigid.items(), still) if not rest}
 
     @functools.cached_property

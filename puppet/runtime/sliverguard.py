@@ -49,6 +49,7 @@ import math
 import numpy as np
 import scipy.sparse as sp
 
+from puppet.face.rigid import IDENTITY
 from puppet.fap.table import clamp_ranges
 from puppet.runtime.fapengine import LID_FAPS
 from puppet.runtime.lastmade import LastMade
@@ -324,9 +325,9 @@ def _onset(runtime, guard: SliverGuard, number: int, high: float, frown: dict[in
 
 
 def _lid_pose(runtime, number: int, value: float,
-              frown: dict[int, float] | None = None) -> tuple[np.ndarray, np.ndarray | None]:
-    """(the face's positions, the lid's rigid motion, None without that lid) with FAP ``number``
+              frown: dict[int, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(the face's positions, the lid's rigid motion: the identity at rest) with FAP ``number``
     at ``value`` and the brow FAPs ``frown`` ({number: value}), as the runtime deforms them
     without a sliver guard."""
     controls, rigid = runtime.fap_controls({**(frown or {}), number: value})
-    return runtime.deform(controls, rigid).astype(float), rigid.get(LID_FAPS[number][0])
+    return runtime.deform(controls, rigid).astype(float), rigid.get(LID_FAPS[number][0], IDENTITY)
