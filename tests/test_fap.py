@@ -278,11 +278,14 @@ def test_a_part_whose_faps_are_all_zero_is_at_rest_and_left_out(runtime):
 def test_control_point_displacements_are_each_fap_times_its_motion_summed(runtime, frame):
     """A frame's control point displacements are the sum over FAPs of each FAP's value (as the
     face shows it) times that FAP's motion of every point: the engine's product over the FAPs a
-    frame shows gives the dense definition's sums, to float64 rounding (the runtime's dtype)."""
+    frame shows gives the dense definition's sums, to float64 rounding (the runtime's dtype), on
+    every point but the upper lid margins, which a closing lid also gives its closing shape
+    (``tests/test_lidclosure.py``)."""
     values = np.array(frame)
     values[:2] = 0.0
     engine = runtime.faps
     shown = np.clip(engine.shown(values), engine.skin_reach[0], engine.skin_reach[1])
     expected = (engine._translations * shown).sum(axis=1).reshape(-1, 3)
     scale = max(np.abs(engine._translations).max() * np.abs(shown).sum(), 1e-300)
-    np.testing.assert_allclose(engine.controls(values)[0], expected, rtol=0, atol=1e-13 * scale)
+    kept = np.setdiff1d(np.arange(len(expected)), engine.closing_rows)
+    np.testing.assert_allclose(engine.controls(values)[0][kept], expected[kept], rtol=0, atol=1e-13 * scale)

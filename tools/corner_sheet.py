@@ -10,11 +10,14 @@ each view's row of the other checkout above this one's, folded triangles marked 
 * ``--corner blink`` (``docs/blink_corners.png``): the same eye closing (close_t_r_eyelid 700,
   840, 860, 1024 IRISD: where the sliver guard's fallback took over, 850, is between the middle
   two);
+* ``--corner close`` (``docs/closed_eye.png``): the same eye closing with the upper lid alone
+  (close_t_r_eyelid 900, 1024 IRISD), with the slider box's blink slider at the top (900 and the
+  lower lid 60) and as the artists' blink closes it (800 and 224: the lids meet);
 * ``--corner frown`` (``docs/frown_blink_corners.png``): the same eye closing under a frown (the
   right brows lowered as far as the face takes them; 700, 1002, 1004, 1024 IRISD: with shapes
   sampled for the lid alone, the outer corner jumped 2.5 mm between the middle two).
 
-    PYTHONPATH=. .venv/bin/python tools/corner_sheet.py --before DIR [--corner mouth|eye|blink|frown] [--out PNG]
+    PYTHONPATH=. .venv/bin/python tools/corner_sheet.py --before DIR [--corner mouth|eye|blink|close|frown] [--out PNG]
 
 ``--before`` is a checkout of the project (e.g. ``git worktree add /tmp/before REV``); its tiles
 are rendered by running this script there (``--tiles``), with its own face, rig and renderer.
@@ -51,6 +54,11 @@ CORNERS = {
     "frown": {"out": "frown_blink_corners.png", "centre": ("3.8", "3.12"), "shift": (0.0, 0.0, 0.0),
               "views": ((0.0, 0.0, 0.9), (-0.5, 0.0, 0.75)),
               "poses": [{"fap": {**FROWN, "close_t_r_eyelid": value}} for value in (700.0, 1002.0, 1004.0, 1024.0)]},
+    "close": {"out": "closed_eye.png", "centre": ("3.8", "3.12"), "shift": (0.0, 0.0, 0.0),
+              "views": ((0.0, 0.0, 0.9), (-0.5, 0.0, 0.75)),
+              "poses": [{"fap": {"close_t_r_eyelid": 900.0}}, {"fap": {"close_t_r_eyelid": 1024.0}},
+                        {"fap": {"close_t_r_eyelid": 900.0, "close_b_r_eyelid": 60.0}},
+                        {"fap": {"close_t_r_eyelid": 800.0, "close_b_r_eyelid": 224.0}}]},
 }
 """Per corner: the sheet's file in docs/, the feature points whose middle (shifted) the camera
 looks at, the views and the poses (``Runtime.deform_faps`` arguments)."""

@@ -66,6 +66,7 @@ from puppet.fap.highlevel import expand
 from puppet.fap.table import N_FAPS, fap, faps
 from puppet.runtime import follow
 from puppet.runtime.lastmade import LastMade
+from puppet.runtime.lidclosure import LidClosure
 
 JAW_FAPS = (3, 14, 15)
 LID_FAPS = {19: ("upper_lid_l", "3.1", 1), 20: ("upper_lid_r", "3.2", 1),  # +: the point drops
@@ -213,6 +214,12 @@ class FapEngine:
         read-only). The displacements sum only the FAPs the frame shows: a take's frame shows
         few of them (the live slider box 21 of the 50 that move the skin)."""
         v = self.shown(values)
+        d, motions = self._shown_controls(v)
+        self._closure.add(v, d)
+        return d, motions
+
+    def _shown_controls(self, v: np.ndarray) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """``controls`` of values the face shows, without the lids' closing shapes."""
         skin = np.clip(v, self.skin_reach[0], self.skin_reach[1])
         showing = np.flatnonzero((skin != 0) & self._moving)
         d = (skin[showing].astype(self._moves.dtype) @ self._moves[showing]).reshape(-1, 3)
@@ -230,6 +237,17 @@ class FapEngine:
             parts[part] = (functools.partial(self._lid_of, part, point, sign, number - 1), [number - 1])
         parts["tongue"] = (self._tongue, [n - 1 for n in TONGUE_FAPS])
         return {part: entry for part, entry in parts.items() if part in self.rig.rigid_parts}
+
+    @property
+    def closing_rows(self) -> np.ndarray:
+        """The active control points (indices into ``control_points``) that the upper lids'
+        closing shapes move: the margins' points other than feature points."""
+        return np.concatenate([side.rows for side in self._closure.sides] + [np.zeros(0, np.int64)])
+
+    @functools.cached_property
+    def _closure(self) -> LidClosure:
+        """The upper lids' closing shapes (``puppet.runtime.lidclosure``), sampled on first use."""
+        return LidClosure(self.runtime, lambda values: self._shown_controls(self.shown(values)), LIDS_MEET)
 
     @functools.cached_property
     def _followed(self) -> np.ndarray:

@@ -366,6 +366,14 @@ class Runtime:
         shares = lid_shares(self.rig)
         return np.array([shares.get(name, 1.0) for name in self.control_points])
 
+    def control_positions(self, displacements: np.ndarray,
+                          rigid: Mapping[str, np.ndarray] | None = None) -> np.ndarray:
+        """Positions (K, 3) of the active control points for these displacements and rigid
+        motions (as given to ``deform``): the points a part carries ride on its motion."""
+        k = len(self.control_points)
+        moved = self._effective(np.asarray(displacements, dtype=float), self._checked(rigid))
+        return self._p0[self._inputs[:k]] + moved[:k]
+
     def points_moving(self, vertices: np.ndarray) -> np.ndarray:
         """Indices (into ``control_points``) of the active control points whose displacements DFFD
         spreads onto any of ``vertices``."""

@@ -17,7 +17,7 @@ guard's springs). Every frame that brings a watched corner within 5% of its oppo
 constraints push it back, moving only the watched skin vertices that are not feature points (a
 FAP still moves its own point by value x FAPU exactly); other frames cost one check of those
 few hundred triangles, and a frame whose watched vertices are where the last frame's were (a
-held blink) reuses its fix. On the default face a closed lid moves at most 0.94 mm from where DFFD
+held blink) reuses its fix. On the default face a closed lid moves at most 0.97 mm from where DFFD
 put it, at the corners only. A limit on the FAP values could not do this: the lid must close.
 
 A blink is the one motion that needs the fix, so it also gets corrective shapes (as a rigger
@@ -285,10 +285,11 @@ def _frown(runtime, guard: SliverGuard, brows: dict[int, float]) -> Frown | None
     spreads onto the watched skin and they move (the skin above the corner comes down through
     those whichever brow lowers it: the artists' brow motions reach across the face, so one brow
     lowered squeezes the other eye's corner a little too), blind to the lids' FAPs (an artist's
-    blink moves some of those points too)."""
+    blink moves some of those points too, and a closing lid's shape the margin's:
+    ``FapEngine.closing_rows`` are left out)."""
     if not brows:
         return None
-    rows = runtime.points_moving(guard.vertices)
+    rows = np.setdiff1d(runtime.points_moving(guard.vertices), runtime.faps.closing_rows)
     full = runtime.fap_controls(brows)[0][rows]
     moved = np.any(full != 0, axis=1)
     if not moved.any():
