@@ -49,6 +49,9 @@ def test_a_bad_line_in_the_middle_names_file_and_line(tmp_path):
 
 
 def test_replay_keeps_the_spacing_and_the_values(tmp_path):
+    """Replayed samples come on the log's schedule, each never early and late by at most a
+    scheduler's hiccup, and one late sample does not push the later ones back (on a loaded
+    machine a gap of 46 ms was followed by one of 34: back on time)."""
     path = tmp_path / "take.samples.jsonl"
     with SampleLogWriter(path) as log:
         for i in range(6):
@@ -63,8 +66,8 @@ def test_replay_keeps_the_spacing_and_the_values(tmp_path):
             if len(got) == 6:
                 break
     assert [s.values["ch0"] for s in got] == [0, 1, 2, 3, 4, 5]
-    gaps = [(b.t_ns - a.t_ns) / 1e6 for a, b in zip(got, got[1:])]
-    assert all(35 < gap < 60 for gap in gaps), gaps
+    offsets = [(sample.t_ns - got[0].t_ns) / 1e6 for sample in got]
+    assert all(40 * i - 1 < offset < 40 * i + 25 for i, offset in enumerate(offsets)), offsets
 
 
 def test_replay_as_fast_as_possible_and_a_missing_log_is_lost(tmp_path):

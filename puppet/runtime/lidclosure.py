@@ -49,6 +49,7 @@ class LidClosure:
                                         for number, parts in SIDES.items()) if side is not None]
 
     def add(self, values: np.ndarray, d: np.ndarray) -> None:
+        """Add each closing lid's shape, faded in by how far it closes, to ``d`` in place."""
         for side in self.sides:
             upper, lower = float(values[side.number - 1]), max(float(values[side.lower_number - 1]), 0.0)
             closing = (upper + lower) / self.meet

@@ -34,14 +34,15 @@ as well (``FROWNS``, at ``FROWN_DEPTHS`` of the way to the face's reach, each fr
 starts to squeeze under that frown) and blended by how far the brows are lowered (``Frown``: read
 from the control points' displacements, blind to the lids' own FAPs). Sampled for the lid alone,
 a frown with a blink was left to the constraints: the shipped slider box needed their fix in 20%
-of its frames (1.1 ms more each; 3.1% after; 19% again since its blink slider closes the eye with
-the lower lid's share, which the shapes do not foresee: sampled with it, they closed the eye less
-well than the constraints' own fix and stepped 7 times the median, against 1.3), and under a full frown the corner jumped back and
-forth by 2.5 mm in single 2 IRISD steps of the blink (984, 1004, 1022 IRISD), 86 times the median
-step (the biggest step is now 6 times the median, at the lid's very end, as a slide over 8 IRISD;
-``docs/frown_blink_corners.png``). The other side's brows squeeze a corner a little too (the
-artists' brow motions reach across the face), which the shapes do not foresee; nor a blink with
-a squint or a raised cheek: the constraints still check every frame and fix what is left.
+of its frames (1.1 ms more each; 3.1% after; 19% again since its blink slider closes the eye
+with the lower lid's share, which the shapes do not foresee: sampled with it too, they closed
+the eye less well than the constraints' own fix and stepped 7 times the median, against 1.3),
+and under a full frown the corner jumped back and forth by 2.5 mm in single 2 IRISD steps of
+the blink (984, 1004, 1022 IRISD), 86 times the median step (the biggest step is now 6 times the
+median, at the lid's very end, as a slide over 8 IRISD; ``docs/frown_blink_corners.png``). The
+other side's brows squeeze a corner a little too (the artists' brow motions reach across the
+face), which the shapes do not foresee; nor a blink with a squint or a raised cheek: the
+constraints still check every frame and fix what is left.
 """
 
 from __future__ import annotations
