@@ -9,22 +9,9 @@ import pytest
 
 from puppet.runtime.lidclosure import ONSET
 from puppet.runtime.musclesolver import folded_triangles
+from tools.eye_closure import opening
 
 SIDES = [("l", 19, 21), ("r", 20, 22)]  # the eye, its upper and lower lid FAPs
-
-
-def _opening(runtime, vertices: np.ndarray, side: str) -> float:
-    """The area (front view) between the upper and lower lid margins, traced through the margin
-    control points' vertices across the eye."""
-    def margin(lid: str) -> np.ndarray:
-        rows = [p.vertex for p in runtime.rig.control_points if p.attach == f"{lid}_lid_{side}"]
-        points = np.asarray(vertices, dtype=float)[rows]
-        return points[np.argsort(points[:, 0])]
-
-    upper, lower = margin("upper"), margin("lower")
-    x = np.linspace(max(upper[0, 0], lower[0, 0]), min(upper[-1, 0], lower[-1, 0]), 400)
-    gap = np.interp(x, upper[:, 0], upper[:, 1]) - np.interp(x, lower[:, 0], lower[:, 1])
-    return float(np.trapezoid(np.maximum(gap, 0.0), x))
 
 
 def _values(pose: dict[int, float]) -> np.ndarray:
@@ -39,11 +26,11 @@ def test_a_blink_closes_the_whole_eye_and_folds_nothing(runtime, face, side, upp
     """The upper lid alone at 1024 IRISD leaves under 4% of the eye's opening (8.6% without the
     closing shape: the outer half 1.6 mm open, the white of the eye showing); with the lower lid
     taking the artists' share of the closing (800 + 224) under 1%. Nothing folds."""
-    rest = _opening(runtime, face.vertices, side)
+    rest = opening(runtime, face.vertices, side)
     triangles = np.asarray(face.triangles)
     for pose, left in (({upper: 1024.0}, 0.04), ({upper: 800.0, lower: 224.0}, 0.01)):
         closed = runtime.deform_faps(_values(pose))
-        assert _opening(runtime, closed, side) < left * rest, pose
+        assert opening(runtime, closed, side) < left * rest, pose
         assert folded_triangles(face.vertices, closed, triangles).sum() == 0, pose
 
 

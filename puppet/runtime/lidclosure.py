@@ -4,8 +4,9 @@ A lid FAP turns its margin about the eyeball so that the middle point (3.1 / 3.2
 exactly value x IRISD: at 1024 IRISD it lies on the lower lid's middle point. The rest of the
 margin takes a share of the turn that fades toward the still eye corners (``lid_shares``), and
 the calibrated FAP motions add the artists' own motions of those points, so on the default face
-a blink with the upper lid alone left 8.6% of the eye's opening, the outer half 1.6 mm open and
-the white of the eye showing. The artists' blinks close it all (0.1% left).
+a blink with the upper lids alone left 8.4% of the eyes' opening, the outer half 1.6 mm open and
+the white of the eye showing (``tools/eye_closure.py``). The artists' blinks close it all (0.1%
+left).
 
 So each upper lid has a closing shape, as a rigger sculpts one: where the two lids meet (the
 upper lid's drop plus the lower lid's rise = ``LIDS_MEET``), the motion that brings each point
@@ -13,8 +14,8 @@ of its margin onto the lower margin (at the same place across the eye, on the lo
 curve), times the point's share of the lid's turn. Toward the still corners the points go less
 than all the way: brought all the way down, the 1 mm triangles beside the outer corner fold, and
 the sliver guard, which keeps them, pushed the whole outer margin open again (8.9% left). With
-the shares, 3.5% is left at 1024 IRISD (the corners' last 1 mm), 0.6% with the lower lid taking
-its share of the closing as the artists' blinks do (800 + 224), and nothing folds.
+the shares, 3.4% is left at 1024 IRISD (the corners' last 1 mm), 0.5% with the lower lid taking
+its share of the closing as the artists' blinks do (800 + 224; 2.7% before), and nothing folds.
 
 The shape is sampled with the lower lid taking none, a quarter and half of the closing
 (``SPLITS``), in the frame before the lids carry their points (the lid's turn is undone, so that
