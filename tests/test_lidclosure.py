@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import copy
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
-from puppet.runtime.lidclosure import ONSET
+from puppet.runtime.lidclosure import ONSET, LidClosure
 from puppet.runtime.musclesolver import folded_triangles
 from tools.eye_closure import opening
 
@@ -69,3 +70,18 @@ def test_the_margin_closes_smoothly_through_the_onset(runtime):
     frames = np.array([unguarded.deform_faps(_values({19: value}))[rows] for value in np.arange(500.0, 1025.0, 4.0)])
     steps = np.linalg.norm(np.diff(frames, axis=0), axis=2)
     assert (steps.max(axis=0) < 2.5 * np.median(steps, axis=0)).all()
+
+
+def test_a_rig_with_no_margin_points_on_a_lid_gets_no_closing_shape_for_it(runtime):
+    """A rig made elsewhere may have the lid parts but carry no points on one of them: that side
+    gets no closing shape (nothing to close), the other side its own."""
+    points = [p for p in runtime.rig.control_points if p.attach != "lower_lid_r"]
+    attach = {p.name: p.attach for p in runtime.rig.control_points}
+    kept = [i for i, name in enumerate(runtime.control_points) if attach[name] != "lower_lid_r"]
+    stub = SimpleNamespace(
+        rig=SimpleNamespace(rigid_parts=runtime.rig.rigid_parts, control_points=points), face=runtime.face,
+        control_points=[runtime.control_points[i] for i in kept], muscle_shares=runtime.muscle_shares[kept],
+        control_positions=lambda d, rigid: runtime.control_positions(d, rigid)[kept])
+
+    closure = LidClosure(stub, lambda values: runtime.faps._shown_controls(runtime.faps.shown(values)), 1024.0)
+    assert [side.number for side in closure.sides] == [19]

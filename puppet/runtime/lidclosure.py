@@ -78,14 +78,18 @@ class _ClosingShape:
     @classmethod
     def sampled(cls, runtime, controls: Controls, meet: float, number: int,
                 upper_part: str, lower_part: str, lower_number: int) -> _ClosingShape | None:
-        """The shape of FAP ``number``'s lid, None where the rig has not both lids."""
+        """The shape of FAP ``number``'s lid, None where the rig has not both lids or no margin
+        points on them (a rig made elsewhere may carry none)."""
         if upper_part not in runtime.rig.rigid_parts or lower_part not in runtime.rig.rigid_parts:
             return None
         feature = set(runtime.face.feature_points)
         points = runtime.rig.control_points
         index = {name: i for i, name in enumerate(runtime.control_points)}
-        upper = np.array([index[p.name] for p in points if p.attach == upper_part and p.name not in feature])
-        lower = np.array([index[p.name] for p in points if p.attach == lower_part])
+        upper = np.array([index[p.name] for p in points if p.attach == upper_part and p.name not in feature],
+                         dtype=np.int64)
+        lower = np.array([index[p.name] for p in points if p.attach == lower_part], dtype=np.int64)
+        if not len(upper) or not len(lower):
+            return None
         shares = runtime.muscle_shares
         motions = []
         for split in SPLITS:
