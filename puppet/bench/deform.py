@@ -23,7 +23,8 @@ before the skin grid and the calibrated FAP motions, the "before" of that change
 ``puppet.bench.run`` runs the sections and prints the tables. A second table splits whole frames (``bench_frame_split``): FAP frame (the demo take, where the
 face has feature points; the smooth take's displacements otherwise) -> control points -> DFFD ->
 normals -> draw -> read-back of a 640x480 offscreen image, with the frames per second and the
-share of the frame spent deforming (controls + DFFD + normals). A third table
+share of the frame spent deforming (controls + DFFD + normals; no normals where the renderer's
+draw sums them, as on a GPU: ``render.choose_normals``). A third table
 (``puppet.bench.inputs``) pushes samples through each device adapter and its shipped mapping.
 
 A muscle table (``bench_muscles``, default face): median ms of one frame (``Runtime.deform_faps``:
@@ -175,7 +176,8 @@ def bench_frame_split(face: Face, frames: int, rig=None, size: tuple[int, int] =
             t.append(time.perf_counter())
             runtime.deform(d, motions, out=out)
             t.append(time.perf_counter())
-            runtime.normals(out, motions, out=normals)
+            if not renderer.gpu_normals:  # a draw that sums its own needs none (``choose_normals``)
+                runtime.normals(out, motions, out=normals)
             t.append(time.perf_counter())
             renderer.draw(out, normals)
             renderer.finish()

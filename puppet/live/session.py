@@ -74,11 +74,12 @@ from puppet.runtime.runtime import Runtime
 @dataclass
 class LiveFrame:
     """One frame of the live loop. ``vertices`` and ``normals`` are the session's buffers,
-    overwritten by the next frame; ``newest_sample_ns`` is the newest Sample ever fed (None before
+    overwritten by the next frame (``normals`` None where the session computes none:
+    ``LiveSession.normals``); ``newest_sample_ns`` is the newest Sample ever fed (None before
     any); ``n_samples`` how many Samples this frame fed, ``sample_ns`` their timestamps."""
 
     vertices: np.ndarray
-    normals: np.ndarray
+    normals: np.ndarray | None
     pose: Pose
     t_ns: int
     newest_sample_ns: int | None
@@ -136,6 +137,7 @@ class LiveSession:
 
         self._vertices = np.empty_like(self.runtime.rest)
         self._normals = np.empty_like(self.runtime.rest)
+        self._with_normals = True
         self._hold_ns: int | None = None    # pose time of the last frame with every device open
         self._held = False                  # whether the pose is held (a device away)
         self._last_pose_ns: int | None = None
@@ -151,6 +153,18 @@ class LiveSession:
         self.pose_error: str | None = None    # the first mapping value held because it was NaN
 
     # -- the live loop ----------------------------------------------------------------------
+
+    @property
+    def normals(self) -> bool:
+        """Whether frames carry vertex normals (the default); turned off for a renderer whose
+        draw sums its own (``Renderer.gpu_normals``), which saves the frame their CPU time."""
+        return self._with_normals
+
+    @normals.setter
+    def normals(self, on: bool) -> None:
+        if bool(on) != self._with_normals:
+            self._with_normals = bool(on)
+            self._have_mesh = False  # a held pose's buffers lack (or need not) the normals
 
     def frame(self, now_ns: int | None = None) -> LiveFrame:
         """Drain, map, deform: one frame at ``now_ns`` (default: ``time.monotonic_ns()``)."""
@@ -202,12 +216,15 @@ class LiveSession:
             warnings.warn(self.pose_error, RuntimeWarning, stacklevel=2)
         if samples or pose_ns != self._last_pose_ns or not self._have_mesh or self.layer is not None:
             shown = pose if self.layer is None else Pose(*self._layered(now, pose), pose.muscles)
-            self.runtime.deform_pose(shown, out=self._vertices, normals_out=self._normals)
+            if self._with_normals:
+                self.runtime.deform_pose(shown, out=self._vertices, normals_out=self._normals)
+            else:
+                self.runtime.pose_vertices(shown, out=self._vertices)
             self._have_mesh = True
         # else: nothing changed since the last frame (a held pose): the buffers already hold it
         self._last_pose_ns = pose_ns
         self.frames += 1
-        return LiveFrame(self._vertices, self._normals, pose, now, self.newest_sample_ns, states, len(samples),
+        return LiveFrame(self._vertices, self._normals if self._with_normals else None, pose, now, self.newest_sample_ns, states, len(samples),
                      tuple(sample.t_ns for sample in samples))
 
     def wait_for_input(self, timeout: float) -> bool:
@@ -348,7 +365,8 @@ def measure_latency(session: LiveSession, renderer, seconds: float = 3.0) -> dic
     Every Sample is measured from its timestamp to the first frame that shows it:
     ``sample_to_drawn_ms`` until that frame is drawn and read back (``renderer.render``),
     ``sample_to_mesh_ms`` until its vertices and normals are ready, before drawing;
-    ``frame_work_ms`` is a frame's own work from taking the Samples in to the mesh ready, and
+    ``frame_work_ms`` is a frame's own work from taking the Samples in to the mesh ready (its
+    normals too unless the renderer's draw sums them: it sets ``session.normals``), and
     ``draw_ms`` its drawing and read-back: a Sample waits for the frame being drawn when it
     arrives, then for its own. The loop starts a frame as soon as a Sample is queued
     (``wait_for_input``), as a live loop free of a display's clock would. Samples queued before
@@ -357,6 +375,7 @@ def measure_latency(session: LiveSession, renderer, seconds: float = 3.0) -> dic
     run, and all of its p99. Medians and 99th percentiles. The device's own transport (USB, the
     pty) comes before the Sample's timestamp and is not included.
     """
+    session.normals = not renderer.gpu_normals
     if renderer.camera is None:
         renderer.aim(session.runtime.rest)
     renderer.render(session.runtime.rest, session.runtime.rest_normals)  # warm-up (shaders, buffers)

@@ -89,3 +89,18 @@ class VertexNormals:
             np.multiply(a[j], b[k], out=c[i])
             np.multiply(a[k], b[j], out=t)
             c[i] -= t
+
+
+def vertex_rings(triangles: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
+    """Each vertex's triangles as the other two corners in the triangle's winding, for summing a
+    vertex normal where only the positions are at hand (a shader): ``starts`` (n_vertices + 1,)
+    uint32 and ``others`` (3T, 2) uint32, vertex v's pairs ``others[starts[v]:starts[v + 1]]``.
+    The cross product of (b - v, c - v) over a pair (b, c) is the triangle's area-weighted
+    normal, so summing it over the ring gives the vertex's ``VertexNormals`` sum."""
+    tri = np.asarray(triangles, dtype=np.int64)
+    corners = tri.ravel()
+    others = np.stack([np.roll(tri, -1, axis=1).ravel(), np.roll(tri, -2, axis=1).ravel()], axis=1)
+    starts = np.zeros(int(n_vertices) + 1, dtype=np.uint32)
+    np.cumsum(np.bincount(corners, minlength=int(n_vertices)), out=starts[1:])
+    order = np.argsort(corners, kind="stable")
+    return starts, np.ascontiguousarray(others[order], dtype=np.uint32)

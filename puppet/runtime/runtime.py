@@ -518,6 +518,12 @@ class Runtime:
         d, motions = self.fap_controls(pose.fap, viseme=pose.viseme, expression=pose.expression)
         return self._deform_with_normals(d, motions, out, normals_out, pose.muscles, mode, pose=True)
 
+    def pose_vertices(self, pose: Pose, *, out: np.ndarray | None = None, mode: str = "control") -> np.ndarray:
+        """The positions ``deform_pose`` gives, without the normals: for a renderer that sums
+        its own in the draw (``Renderer.gpu_normals``)."""
+        d, motions = self.fap_controls(pose.fap, viseme=pose.viseme, expression=pose.expression)
+        return self._deform(d, self._checked(motions), out, pose.muscles, mode, pose=True)
+
     def deform_faps(self, fap: Mapping[int | str, float] | np.ndarray | None = None, *,
              viseme: tuple | None = None, expression: tuple | None = None,
              muscles: Mapping[str, float] | None = None, mode: str = "control",

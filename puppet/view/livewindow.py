@@ -232,6 +232,7 @@ class LiveView:
         face = self.session.runtime.face
         self.renderer = Renderer.for_face(face, width=size[0], height=size[1], ctx=self.window.ctx)
         aim_at_head(self.renderer, face, self.view)
+        self.session.normals = not self.renderer.gpu_normals
         self.window.fbo.viewport = (0, 0, *size)
 
     def _draw_cockpit(self, states: dict[str, Any]) -> None:

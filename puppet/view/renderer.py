@@ -4,7 +4,8 @@ The face's topology, albedo and materials never change while it is puppeteered; 
 positions (and therefore normals) do. So the renderer uploads colours, materials and triangle
 indices once into static buffers and, each frame, writes positions and normals into one dynamic
 vertex buffer of fixed size (``Buffer.write``, no reallocation) before drawing and reading the
-image back.
+image back. On a GPU the vertex shader sums the normals itself from the positions and the mesh's
+vertex rings in storage buffers (``choose_normals``), so a frame uploads positions alone.
 
 Shading aims to be realistic enough to judge facial motion, not photoreal: per-frame vertex
 normals; a three-light studio rig (warm key, cool fill, rim) attached to the camera; wrapped
@@ -45,7 +46,7 @@ from typing import Protocol
 import moderngl
 import numpy as np
 
-from puppet.runtime.normals import VertexNormals
+from puppet.runtime.normals import VertexNormals, vertex_rings
 
 SKIN_SRGB = (0.80, 0.62, 0.53)
 """Albedo (sRGB, 0-1) used where a mesh has no colours."""
@@ -89,7 +90,9 @@ _GROUND_COLOR = (0.05, 0.04, 0.035)
 # triangle then interpolates one sRGB colour, a textured one its light and sheen, which the
 # fragment shader multiplies into the texture's albedo. Without it every pixel is lit from the
 # interpolated position and normal (varyings packed into vec4s: albedo + specular strength share
-# one). The lighting itself (``_LIGHTING``) is the same text in either stage.
+# one). The lighting itself (``_LIGHTING``) is the same text in either stage. ``GPU_NORMALS``
+# (GLSL 4.30: storage buffers) sums each vertex's normal from the positions in the draw itself
+# (``choose_normals``) instead of taking the CPU's from a vertex attribute.
 _LIGHTING = """
 const int N_LIGHTS = 3;
 const float WRAP = 0.5;                           // how far light wraps past the terminator
@@ -155,8 +158,32 @@ vec3 srgb_encode(vec3 c) {
 _MESH_VERTEX_SHADER = """
 uniform mat4 view_projection;
 in vec3 in_position;
-in vec3 in_normal;
 in vec4 in_material;  // linear albedo, specular strength
+#ifdef GPU_NORMALS
+layout(std430, binding = 0) readonly buffer Positions { float positions[]; };  // in_position's buffer
+layout(std430, binding = 1) readonly buffer RingStarts { uint ring_starts[]; };
+layout(std430, binding = 2) readonly buffer Rings { uint rings[]; };  // corner pairs (normals.vertex_rings)
+
+vec3 position(uint i) {
+    return vec3(positions[3u * i], positions[3u * i + 1u], positions[3u * i + 2u]);
+}
+
+// The unit sum of this vertex's triangles' area-weighted normals, as VertexNormals on the CPU.
+vec3 vertex_normal() {
+    uint v = uint(gl_VertexID);
+    vec3 sum = vec3(0.0);
+    for (uint j = ring_starts[v]; j < ring_starts[v + 1u]; ++j) {
+        sum += cross(position(rings[2u * j]) - in_position, position(rings[2u * j + 1u]) - in_position);
+    }
+    return normalize(sum);
+}
+#else
+in vec3 in_normal;
+
+vec3 vertex_normal() {
+    return in_normal;
+}
+#endif
 #ifdef TEXTURED
 in vec3 in_surface;   // uv, texture weight
 out vec3 v_surface;
@@ -180,7 +207,7 @@ void main() {
     v_surface = in_surface;
 #endif
 #ifdef PER_VERTEX
-    vec3 n = normalize(in_normal);
+    vec3 n = normalize(vertex_normal());
     vec3 light = diffuse_light(n);
     vec3 shine = sheen(n, normalize(eye - in_position), in_material.a);
 #ifdef TEXTURED
@@ -192,7 +219,7 @@ void main() {
 #endif
 #else
     v_position = in_position;
-    v_normal = in_normal;
+    v_normal = vertex_normal();
     v_material = in_material;
 #endif
     gl_Position = view_projection * vec4(in_position, 1.0);
@@ -327,6 +354,9 @@ SHADING_MODES = ("pixel", "vertex")
 """Where the studio lighting is computed: per pixel from the interpolated normal, or per vertex
 with the colour interpolated (Gouraud)."""
 
+_RING_BINDINGS = (0, 1, 2)
+"""Storage buffer bindings of the GPU normals' positions, ring starts and rings (the shader's)."""
+
 
 def software_rasteriser(ctx: moderngl.Context) -> bool:
     """Whether ``ctx`` draws on the CPU (``SOFTWARE_RASTERISERS``), where every sample costs."""
@@ -375,6 +405,33 @@ def choose_shading(ctx: moderngl.Context, shading: str | None = None, *, cull: b
     if not cull:
         return "pixel"
     return shading or ("vertex" if software_rasteriser(ctx) else "pixel")
+
+
+def gpu_normals_supported(ctx: moderngl.Context) -> bool:
+    """Whether a vertex shader on ``ctx`` can read storage buffers (GL 4.3 with vertex shader
+    storage blocks): what summing normals in the draw needs. macOS stops at GL 4.1."""
+    blocks = ctx.info.get("GL_MAX_VERTEX_SHADER_STORAGE_BLOCKS", 0)
+    return ctx.version_code >= 430 and int(blocks or 0) > 0
+
+
+def choose_normals(ctx: moderngl.Context, gpu_normals: bool | None = None) -> bool:
+    """Whether a renderer on ``ctx`` sums vertex normals in its vertex shader, beside
+    ``choose_antialias``: then a frame uploads positions only and the CPU computes no normals
+    (a quarter to two thirds of the CPU's deform + normals: 0.25 ms of the default face's
+    frame, 2.6 ms at 75k vertices). On a GPU, yes where it can (``gpu_normals_supported``): a
+    vertex's ring of six triangles is a few hundred flops beside its lighting. On a software
+    rasteriser, no: there the vertex shader runs on the CPU once per corner that misses
+    llvmpipe's small vertex cache (1.5 times a vertex on the default face), so summing a ring
+    per invocation costs more than numpy's sums once per vertex (``tools/normals_draw.py``).
+    ``gpu_normals`` True asks for it anyway and fails clearly where the GL cannot.
+    """
+    if gpu_normals and not gpu_normals_supported(ctx):
+        raise ValueError(f"normals on the GPU need GL 4.3 with vertex shader storage blocks; "
+                         f"this GL is {ctx.info.get('GL_VERSION', ctx.version_code)} "
+                         f"({ctx.info.get('GL_RENDERER', 'unknown renderer')})")
+    if gpu_normals is not None:
+        return bool(gpu_normals)
+    return gpu_normals_supported(ctx) and not software_rasteriser(ctx)
 
 
 def wait_for_gl(ctx: moderngl.Context) -> None:
@@ -506,6 +563,7 @@ class Renderer:
         shading: str | None = None,
         ctx: moderngl.Context | None = None,
         cull: bool = True,
+        gpu_normals: bool | None = None,
     ) -> None:
         """Upload topology, albedo (sRGB 0-1, per vertex) and specular strengths (0-1).
 
@@ -514,22 +572,24 @@ class Renderer:
         per vertex (v up, as in OBJ) and ``texture_weight`` (N,) in 0-1 (None: 1) paints the
         texture over the vertex colours. ``samples`` (MSAA, > 1 where supported) and
         ``antialias`` (``ANTIALIAS_MODES``) default to ``choose_antialias``'s choice for the GL,
-        ``shading`` (``SHADING_MODES``) to ``choose_shading``'s. ``cull`` False draws back faces
-        too (a mesh seen from inside), always shaded per pixel.
+        ``shading`` (``SHADING_MODES``) to ``choose_shading``'s, ``gpu_normals`` to
+        ``choose_normals``'s (True: the draw sums the normals, ``draw`` ignores any given).
+        ``cull`` False draws back faces too (a mesh seen from inside), always shaded per pixel.
         """
         self.n_vertices = int(n_vertices)
         self.cull = cull
         self.size = (int(width), int(height))
         self._owns_ctx = ctx is None
         self.ctx = ctx or moderngl.create_context(standalone=True, backend=backend)
-        self._normals = VertexNormals(triangles, self.n_vertices)
-        self._normal_out = np.empty((self.n_vertices, 3))
-        self._staging = np.empty((self.n_vertices, 6), dtype="f4")
         self.camera: Camera | None = None
         self._uniform_camera: Camera | None = None  # the camera whose uniforms the mesh program holds
         with self._current():
             samples, self.antialias = choose_antialias(self.ctx, samples, antialias)
             self.shading = choose_shading(self.ctx, shading, cull=cull)
+            self.gpu_normals = choose_normals(self.ctx, gpu_normals)
+            self._normals = None if self.gpu_normals else VertexNormals(triangles, self.n_vertices)
+            self._normal_out = np.empty((self.n_vertices, 3))
+            self._staging = np.empty((self.n_vertices, 3 if self.gpu_normals else 6), dtype="f4")
             self._create_texture(uv, texture, texture_weight)
             self._create_gl_objects(triangles, colors, materials, samples)
 
@@ -566,7 +626,8 @@ class Renderer:
     ) -> None:
         """Programs, static and dynamic buffers, vertex arrays, constant uniforms, targets
         (after ``_create_texture``: the mesh's shader variant follows whether there is one)."""
-        header = "#version 330\n" + ("#define TEXTURED\n" if self._texture is not None else "")
+        header = "#version 430\n#define GPU_NORMALS\n" if self.gpu_normals else "#version 330\n"
+        header += "#define TEXTURED\n" if self._texture is not None else ""
         header += ("#define PER_VERTEX\n" if self.shading == "vertex" else "") + _LIGHTING
         self._mesh_program = self.ctx.program(
             vertex_shader=header + _MESH_VERTEX_SHADER, fragment_shader=header + _MESH_FRAGMENT_SHADER
@@ -580,10 +641,14 @@ class Renderer:
         self._dynamic = self.ctx.buffer(reserve=self._staging.nbytes, dynamic=True)
         self._static = self.ctx.buffer(_material_data(self.n_vertices, colors, materials))
         self._indices = self.ctx.buffer(np.ascontiguousarray(triangles, dtype="u4"))
-        attributes = [
-            (self._dynamic, "3f 3f", "in_position", "in_normal"),
-            (self._static, "4f", "in_material"),
-        ]
+        self._rings: tuple[moderngl.Buffer, ...] = ()
+        if self.gpu_normals:
+            starts, others = vertex_rings(triangles, self.n_vertices)
+            self._rings = (self._dynamic, self.ctx.buffer(starts), self.ctx.buffer(others))
+            attributes = [(self._dynamic, "3f", "in_position")]
+        else:
+            attributes = [(self._dynamic, "3f 3f", "in_position", "in_normal")]
+        attributes.append((self._static, "4f", "in_material"))
         if self._surface is not None:
             attributes.append((self._surface, "3f", "in_surface"))
         self._mesh = self.ctx.vertex_array(
@@ -692,7 +757,8 @@ class Renderer:
     def render(self, vertices: np.ndarray, normals: np.ndarray | None = None) -> np.ndarray:
         """Render one frame and return it as (height, width, 3) uint8 sRGB, top row first.
 
-        ``normals`` None computes unit vertex normals from ``vertices``.
+        ``normals`` None computes unit vertex normals from ``vertices``; a renderer whose draw
+        sums them (``gpu_normals``) ignores any given.
         """
         self.draw(vertices, normals)
         return self.read()
@@ -725,6 +791,7 @@ class Renderer:
                 self._dynamic,
                 self._static,
                 self._indices,
+                *self._rings[1:],
                 self._mesh_program,
                 self._background_program,
                 self._fxaa_program,
@@ -849,12 +916,19 @@ class Renderer:
         self.ctx.enable(moderngl.DEPTH_TEST | (moderngl.CULL_FACE if self.cull else 0))
         if self._texture is not None:
             self._texture.use(location=0)
+        for buffer, binding in zip(self._rings, _RING_BINDINGS):  # bindings are the context's: rebind
+            buffer.bind_to_storage_buffer(binding)
         draw_triangles(self._mesh)
         self.ctx.disable(moderngl.CULL_FACE)
 
     def _upload(self, vertices: np.ndarray, normals: np.ndarray | None) -> None:
-        """Write positions and normals into the dynamic vertex buffer in place."""
+        """Write positions and normals (positions alone where the draw sums the normals) into
+        the dynamic vertex buffer in place."""
         vertices = np.asarray(vertices)
+        if self.gpu_normals:
+            self._staging[:] = vertices
+            self._dynamic.write(self._staging)
+            return
         if normals is None:
             normals = self._normals(vertices, out=self._normal_out)
         self._staging[:, :3] = vertices
