@@ -4,13 +4,16 @@ draws the same face, a GL that cannot is told so, and the live loop then compute
 from __future__ import annotations
 
 import time
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from test_session import JOYSTICK, MAPPING
 
+import puppet
 from devices import State, open_device
 from puppet.fap.pose import Pose
 from puppet.live.session import LiveSession
@@ -18,17 +21,22 @@ from puppet.runtime.normals import VertexNormals, vertex_rings
 from puppet.view.renderer import Renderer, choose_normals, gpu_normals_supported
 from puppet.view.rendertake import aim_at_head
 
-from test_session import JOYSTICK, MAPPING
 
-
-def _ring_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
-    """Unit normals summed vertex by vertex over ``vertex_rings``, as the shader sums them."""
+def _ring_sums(vertices: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per vertex, the sum over ``vertex_rings`` of the corner's cross products (as the shader
+    sums them) and the sum of their lengths."""
     starts, others = vertex_rings(triangles, len(vertices))
     owner = np.repeat(np.arange(len(vertices)), np.diff(starts.astype(np.int64)))
     x = vertices[owner]
     crosses = np.cross(vertices[others[:, 0]] - x, vertices[others[:, 1]] - x)
-    sums = np.zeros_like(vertices)
+    sums, lengths = np.zeros_like(vertices), np.zeros(len(vertices))
     np.add.at(sums, owner, crosses)
+    np.add.at(lengths, owner, np.linalg.norm(crosses, axis=1))
+    return sums, lengths
+
+
+def _ring_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    sums, _ = _ring_sums(vertices, triangles)
     return sums / np.maximum(np.linalg.norm(sums, axis=1, keepdims=True), 1e-30)
 
 
@@ -41,10 +49,13 @@ def test_vertex_rings_sum_the_cpu_normals_of_any_mesh(case):
     n, triangles, seed = case
     triangles = np.array(triangles)
     vertices = np.random.default_rng(seed).normal(size=(n, 3))
-    starts, others = vertex_rings(triangles, n)
+    starts, _ = vertex_rings(triangles, n)
     assert starts[0] == 0 and starts[-1] == 3 * len(triangles) and np.all(np.diff(starts.astype(int)) >= 0)
-    np.testing.assert_allclose(_ring_normals(vertices, triangles), VertexNormals(triangles, n)(vertices),
-                               atol=1e-9)
+    sums, lengths = _ring_sums(vertices, triangles)
+    defined = np.linalg.norm(sums, axis=1) > 1e-9 * lengths  # not a ring whose triangles cancel out
+    np.testing.assert_allclose(_ring_normals(vertices, triangles)[defined],
+                               VertexNormals(triangles, n)(vertices)[defined], atol=1e-9)
+    assert np.all(sums[lengths == 0] == 0)  # a vertex on no triangle has no normal either way
 
 
 def test_vertex_rings_of_the_default_face(face):
@@ -133,3 +144,19 @@ def test_pose_vertices_are_deform_poses_positions(runtime):
     pose = Pose(fap, muscles={runtime.muscle_names[0]: 0.5})
     vertices, _ = runtime.deform_pose(pose)
     np.testing.assert_array_equal(runtime.pose_vertices(pose), vertices)
+
+
+def test_a_take_played_without_normals_gives_the_same_vertices_and_none(face, runtime):
+    from itertools import islice
+
+    from puppet.view.rendertake import FapPlayback
+
+    take = Path(puppet.__file__).parent / "data" / "demo_take.fap"
+    playback = FapPlayback(take, face, runtime)
+    with_normals = [v.copy() for v, _ in islice(playback, 40)]
+    playback.normals = False
+    bare = list(islice(playback, 40))
+    assert all(n is None for _, n in bare)
+    for (v, _), expected in zip(bare, with_normals):
+        np.testing.assert_array_equal(v, expected)
+    assert not np.array_equal(with_normals[0], with_normals[-1])  # the take moves the face

@@ -27,7 +27,8 @@ VIEWS = tuple(VIEW_DIRECTIONS)
 
 
 class FapPlayback:
-    """Streams a .fap take (the file, or a take folder) as (vertices, normals) per frame on a face."""
+    """Streams a .fap take (the file, or a take folder) as (vertices, normals) per frame on a face;
+    with ``normals`` off, (vertices, None): for a renderer whose draw sums them (``gpu_normals``)."""
 
     def __init__(self, path: str | os.PathLike, face: Face | None = None,
                  runtime: Runtime | None = None) -> None:
@@ -36,6 +37,7 @@ class FapPlayback:
             self.header = reader.header
         self.face = face if face is not None else load_face()
         self.runtime = runtime if runtime is not None else Runtime(self.face)
+        self.normals = True
 
     @property
     def fps(self) -> float:
@@ -44,7 +46,10 @@ class FapPlayback:
     def __iter__(self) -> Iterator[tuple[np.ndarray, np.ndarray]]:
         with iter_fap(self.path) as reader:
             for values in held_low_level(reader):
-                yield self.runtime.deform_pose(Pose(values))
+                if self.normals:
+                    yield self.runtime.deform_pose(Pose(values))
+                else:
+                    yield self.runtime.pose_vertices(Pose(values)), None
 
 
 def render_take(path: str | os.PathLike, out: str | os.PathLike, *, face: Face | None = None,
@@ -64,6 +69,7 @@ def render_take(path: str | os.PathLike, out: str | os.PathLike, *, face: Face |
     try:
         with Renderer.for_face(playback.face, width=size[0], height=size[1], antialias=antialias) as renderer:
             aim_at_head(renderer, playback.face, view)
+            playback.normals = not renderer.gpu_normals
             total = playback.header.declared_frames
             frames = _progress((renderer.render(v, n) for v, n in playback), total, progress)
             count = write_video(_not_empty(frames, path), partial, playback.fps if fps is None else fps)
