@@ -16,7 +16,10 @@ Then each Sample's latency (its timestamp to its frame read back) is split into 
 the frame being drawn when it came and its own frame. Medians and 99th percentiles; the process's
 CPU time per frame, llvmpipe's threads included, shows how much of the two cores a frame takes.
 
-    OPENBLAS_NUM_THREADS=1 python tools/latency_profile.py [--seconds 20] [--size 640x480]
+``--leave-out teeth_upper,teeth_lower,tongue`` draws the face without those parts (the rest as
+the live window draws it): what drawing them costs a frame and a Sample's latency.
+
+    OPENBLAS_NUM_THREADS=1 python tools/latency_profile.py [--seconds 20] [--size 640x480] [--leave-out PARTS]
 
 The default, 20 s, is one whole cycle of the box's sliders (``pipeline.BOX_CYCLE_S``), as the bench's run.
 """
@@ -24,17 +27,22 @@ The default, 20 s, is one whole cycle of the box's sliders (``pipeline.BOX_CYCLE
 from __future__ import annotations
 
 import argparse
+import contextlib
 import statistics
 import sys
 import time
 from collections import defaultdict
 from pathlib import Path
 
+import numpy as np
+
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from puppet.bench.pipeline import BOX_CYCLE_S, live_box
 from puppet.face.load import load_face
 from puppet.runtime.runtime import Runtime
+from puppet.view.renderer import Renderer
+from puppet.view.rendertake import aim_at_head
 
 
 class Stopwatch:
@@ -64,18 +72,35 @@ class Stopwatch:
         return wrapper
 
 
-def profile(seconds: float, size: tuple[int, int]) -> None:
+def profile(seconds: float, size: tuple[int, int], leave_out: tuple[str, ...] = ()) -> None:
     runtime = Runtime(load_face())
     watch = Stopwatch()
     runtime.fap_controls = watch.timed("controls", runtime.fap_controls)
     runtime._deform = watch.timed("deform", runtime._deform)
     runtime._normals = watch.timed("normals", runtime._normals)
     runtime._slivers = watch.timed("sliver guard", watch.fixing(runtime._slivers))
-    with live_box(runtime, size) as (session, renderer):
+    with live_box(runtime, size) as (session, renderer), contextlib.ExitStack() as stack:
+        if leave_out:
+            renderer = stack.enter_context(_drawn_without(runtime.face, leave_out, size))
         frames, latencies, process_cpu = _loop(session, renderer, watch, seconds)
     _report(frames, latencies, process_cpu)
     print(f"the sliver guard fixed the eye corners in {watch.fixed} of {len(frames)} frames "
           f"({100 * watch.fixed / max(len(frames), 1):.1f}%)")
+
+
+def _drawn_without(face, parts: tuple[str, ...], size: tuple[int, int]) -> Renderer:
+    """A renderer with the live window's settings that leaves ``parts`` of ``face`` out."""
+    keep = np.ones(len(face.vertices), bool)
+    for part in parts:
+        if part not in face.parts:
+            raise SystemExit(f"--leave-out: the face has no part {part!r} (it has {', '.join(face.parts)})")
+        keep[face.parts[part]] = False
+    triangles = np.asarray(face.triangles)
+    drawn = triangles[keep[triangles].all(axis=1)]
+    print(f"drawn without {', '.join(parts)}: {len(drawn)} of {len(triangles)} triangles")
+    renderer = Renderer(drawn, len(face.vertices), face.colors, width=size[0], height=size[1])
+    aim_at_head(renderer, face, "front")
+    return renderer
 
 
 def _loop(session, renderer, watch: Stopwatch, seconds: float):
@@ -131,8 +156,10 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=BOX_CYCLE_S)
     parser.add_argument("--size", default="640x480")
+    parser.add_argument("--leave-out", default="", help="parts not drawn, comma-separated (e.g. teeth_upper)")
     args = parser.parse_args()
-    profile(args.seconds, tuple(int(x) for x in args.size.split("x")))
+    leave_out = tuple(part for part in args.leave_out.split(",") if part)
+    profile(args.seconds, tuple(int(x) for x in args.size.split("x")), leave_out)
 
 
 if __name__ == "__main__":
