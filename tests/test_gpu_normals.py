@@ -7,6 +7,7 @@ import time
 from pathlib import Path
 from types import SimpleNamespace
 
+import moderngl
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -160,3 +161,20 @@ def test_a_take_played_without_normals_gives_the_same_vertices_and_none(face, ru
     for (v, _), expected in zip(bare, with_normals):
         np.testing.assert_array_equal(v, expected)
     assert not np.array_equal(with_normals[0], with_normals[-1])  # the take moves the face
+
+
+def test_a_driver_that_cannot_build_the_normals_shader_falls_back_to_the_cpu(face, posed, egl, monkeypatch):
+    from puppet.view import renderer as render
+
+    broken = render._MESH_VERTEX_SHADER.replace("#ifdef GPU_NORMALS\n", "#ifdef GPU_NORMALS\n#error no storage blocks here\n")
+    monkeypatch.setattr(render, "_MESH_VERTEX_SHADER", broken)
+    monkeypatch.setattr(render, "software_rasteriser", lambda ctx: False)  # chosen by default, as on a GPU
+    with pytest.warns(RuntimeWarning, match="did not build; the CPU computes them"):
+        renderer = Renderer.for_face(face, width=160, height=120)
+    with renderer:
+        assert renderer.gpu_normals is False
+        aim_at_head(renderer, face, "front")
+        image = renderer.render(*posed)
+    assert image.std() > 10  # a face was drawn
+    with pytest.raises(moderngl.Error, match="no storage blocks"):  # asked for outright: the driver's error
+        Renderer.for_face(face, width=160, height=120, gpu_normals=True)

@@ -38,6 +38,7 @@ import ctypes
 import ctypes.util
 import functools
 import itertools
+import warnings
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -573,7 +574,8 @@ class Renderer:
         texture over the vertex colours. ``samples`` (MSAA, > 1 where supported) and
         ``antialias`` (``ANTIALIAS_MODES``) default to ``choose_antialias``'s choice for the GL,
         ``shading`` (``SHADING_MODES``) to ``choose_shading``'s, ``gpu_normals`` to
-        ``choose_normals``'s (True: the draw sums the normals, ``draw`` ignores any given).
+        ``choose_normals``'s (True: the draw sums the normals, ``draw`` ignores any given; chosen
+        by default and not built by the driver: a warning, and the CPU computes them).
         ``cull`` False draws back faces too (a mesh seen from inside), always shaded per pixel.
         """
         self.n_vertices = int(n_vertices)
@@ -583,21 +585,44 @@ class Renderer:
         self.ctx = ctx or moderngl.create_context(standalone=True, backend=backend)
         self.camera: Camera | None = None
         self._uniform_camera: Camera | None = None  # the camera whose uniforms the mesh program holds
-        with self._current():
-            samples, self.antialias = choose_antialias(self.ctx, samples, antialias)
-            self.shading = choose_shading(self.ctx, shading, cull=cull)
-            self.gpu_normals = choose_normals(self.ctx, gpu_normals)
-            self._normals = None if self.gpu_normals else VertexNormals(triangles, self.n_vertices)
-            self._normal_out = np.empty((self.n_vertices, 3))
-            self._staging = np.empty((self.n_vertices, 3 if self.gpu_normals else 6), dtype="f4")
-            self._create_texture(uv, texture, texture_weight)
-            self._create_gl_objects(triangles, colors, materials, samples)
+        try:
+            with self._current():
+                samples, self.antialias = choose_antialias(self.ctx, samples, antialias)
+                self.shading = choose_shading(self.ctx, shading, cull=cull)
+                self._create_texture(uv, texture, texture_weight)
+                self._build(triangles, colors, materials, samples, gpu_normals)
+        except BaseException:
+            if self._owns_ctx:  # nothing else holds it
+                self.ctx.release()
+            raise
 
     @classmethod
     def for_face(cls, face: FaceLike, **options) -> Renderer:
         """A renderer for ``face``: its triangles, vertex colours and, when it has one, its
         texture (``texture_kwargs``); ``options`` as for the constructor (size, ctx, samples...)."""
         return cls(face.triangles, len(face.vertices), face.colors, **texture_kwargs(face), **options)
+
+    def _build(self, triangles: np.ndarray, colors: np.ndarray | None, materials: np.ndarray | None,
+               samples: int, gpu_normals: bool | None) -> None:
+        """``_create_gl_objects`` with the normals from ``choose_normals``; where that chose the
+        draw and the driver cannot build its shader, with a warning, from the CPU."""
+        self._set_normals(triangles, choose_normals(self.ctx, gpu_normals))
+        try:
+            self._create_gl_objects(triangles, colors, materials, samples)
+        except moderngl.Error:
+            if gpu_normals is not None or not self.gpu_normals:
+                raise
+            warnings.warn(f"{self.ctx.info.get('GL_RENDERER')}: the shader that sums normals in the draw "
+                          "did not build; the CPU computes them", RuntimeWarning, stacklevel=3)
+            self._set_normals(triangles, False)
+            self._create_gl_objects(triangles, colors, materials, samples)
+
+    def _set_normals(self, triangles: np.ndarray, gpu: bool) -> None:
+        """Where this renderer's normals come from (``choose_normals``) and the buffers for it."""
+        self.gpu_normals = gpu
+        self._normals = None if gpu else VertexNormals(triangles, self.n_vertices)
+        self._normal_out = None if gpu else np.empty((self.n_vertices, 3))
+        self._staging = np.empty((self.n_vertices, 3 if gpu else 6), dtype="f4")
 
     def _create_texture(
         self, uv: np.ndarray | None, texture: np.ndarray | None, weight: np.ndarray | None
