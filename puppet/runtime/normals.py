@@ -11,6 +11,9 @@ gathering from the raveled (N, 3) positions: 2.4x faster at 75k vertices (1.82 -
 
 ``rows`` restricts the work to some vertices (and the triangles around them): the runtime only
 recomputes normals where the skin can bend.
+
+``vertex_rings`` lays the same sums out vertex by vertex, for a renderer whose vertex shader
+sums each vertex's normal itself (``puppet.view.renderer.choose_normals``).
 """
 
 from __future__ import annotations
