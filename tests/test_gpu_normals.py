@@ -178,3 +178,17 @@ def test_a_driver_that_cannot_build_the_normals_shader_falls_back_to_the_cpu(fac
     assert image.std() > 10  # a face was drawn
     with pytest.raises(moderngl.Error, match="no storage blocks"):  # asked for outright: the driver's error
         Renderer.for_face(face, width=160, height=120, gpu_normals=True)
+
+
+def test_the_latency_bench_with_normals_in_the_draw_computes_none_on_the_cpu(runtime, face, tmp_path, egl):
+    from puppet.live.session import measure_latency
+
+    session = LiveSession(MAPPING, face=runtime, devices={"box": open_device(JOYSTICK, "box")}, record_root=tmp_path)
+    renderer = Renderer.for_face(face, width=160, height=120, gpu_normals=True)
+    try:
+        result = measure_latency(session, renderer, 0.5)
+        assert result["normals"] == "draw" and result["samples"] > 0
+        assert not session.normals and session.frame().normals is None
+    finally:
+        renderer.release()
+        session.close()

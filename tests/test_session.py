@@ -112,6 +112,8 @@ def test_measure_latency_offscreen_counts_every_sample(session, face, egl):
     drawn, mesh = result["sample_to_drawn_ms"], result["sample_to_mesh_ms"]
     assert 0 < drawn["median"] <= drawn["p99"] and 0 < mesh["median"] <= mesh["p99"]
     assert mesh["median"] <= drawn["median"] and 0 < result["frame_work_ms"]["median"] <= mesh["median"]
+    assert result["normals"] == "cpu" and session.normals  # this GL draws on the CPU: normals from the runtime
+    assert result["gl_renderer"]
 
 
 # -- faults ------------------------------------------------------------------------------------

@@ -112,7 +112,8 @@ def _print_live(report: dict) -> None:
               f"every sample to the first frame that shows it): frame work {work['median']:.2f} ms median / "
               f"{work['p99']:.2f} p99; draw and read-back {lat['draw_ms']['median']:.2f} ms median; sample->mesh {mesh['median']:.2f} / {mesh['p99']:.2f}; "
               f"sample->drawn {drawn['median']:.2f} ms median / {drawn['p99']:.2f} p99 at {lat['fps']:.0f} fps "
-              f"({lat['samples']} samples; {lat['samples_before']} queued before the loop, not timed)")
+              f"({lat['samples']} samples; {lat['samples_before']} queued before the loop, not timed; "
+              f"drawn by {lat['gl_renderer']}, normals on the {'GPU, in the draw' if lat['normals'] == 'draw' else 'CPU'})")
     if "flood" in report:
         flood = report["flood"]
         print(f"flood {flood['rate']:,.0f} readings/s for {flood['seconds']:g} s, recording: {flood['fps']:.1f} fps "
