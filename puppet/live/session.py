@@ -224,8 +224,9 @@ class LiveSession:
         # else: nothing changed since the last frame (a held pose): the buffers already hold it
         self._last_pose_ns = pose_ns
         self.frames += 1
-        return LiveFrame(self._vertices, self._normals if self._with_normals else None, pose, now, self.newest_sample_ns, states, len(samples),
-                     tuple(sample.t_ns for sample in samples))
+        normals = self._normals if self._with_normals else None
+        return LiveFrame(self._vertices, normals, pose, now, self.newest_sample_ns, states, len(samples),
+                         tuple(sample.t_ns for sample in samples))
 
     def wait_for_input(self, timeout: float) -> bool:
         """Wait until some device has a Sample queued (at most ``timeout`` seconds): a loop that
