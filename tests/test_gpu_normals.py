@@ -74,12 +74,24 @@ def posed(face, runtime):
     return runtime.deform_with_normals(*runtime.fap_controls(fap))
 
 
+def _painted(face) -> dict:
+    """A texture over the whole face (uv from x, y; a smooth colour ramp), as a face from a photo has."""
+    x, y = face.vertices[:, 0], face.vertices[:, 1]
+    uv = np.stack([(x - x.min()) / np.ptp(x), (y - y.min()) / np.ptp(y)], axis=1)
+    ramp = np.linspace(0, 255, 64).astype(np.uint8)
+    texture = np.stack(np.broadcast_arrays(ramp[None, :], ramp[:, None], np.uint8(128)), axis=-1)
+    return {"uv": uv, "texture": np.ascontiguousarray(texture)}
+
+
 @pytest.mark.parametrize("shading", ["vertex", "pixel"])
-def test_a_renderer_summing_normals_in_the_draw_draws_the_face_the_cpu_normals_draw(face, posed, egl, shading):
+@pytest.mark.parametrize("textured", [False, True])
+def test_a_renderer_summing_normals_in_the_draw_draws_the_face_the_cpu_normals_draw(face, posed, egl, shading,
+                                                                                    textured):
     vertices, normals = posed
+    paint = _painted(face) if textured else {}
     images = []
     for gpu in (False, True):
-        with Renderer.for_face(face, width=320, height=240, shading=shading, gpu_normals=gpu) as renderer:
+        with Renderer.for_face(face, width=320, height=240, shading=shading, gpu_normals=gpu, **paint) as renderer:
             assert renderer.gpu_normals is gpu
             aim_at_head(renderer, face, "three_quarter")
             images.append(renderer.render(vertices, normals).astype(int))
@@ -88,7 +100,7 @@ def test_a_renderer_summing_normals_in_the_draw_draws_the_face_the_cpu_normals_d
     cpu, gpu = images
     difference = np.abs(cpu - gpu)
     assert difference.mean() < 0.01 and difference.max() <= 2  # float32 sums against float64
-    rest = Renderer.for_face(face, width=320, height=240, shading=shading, gpu_normals=True)
+    rest = Renderer.for_face(face, width=320, height=240, shading=shading, gpu_normals=True, **paint)
     with rest:
         aim_at_head(rest, face, "three_quarter")
         moved = np.abs(rest.render(face.vertices).astype(int) - gpu).max(axis=-1) > 8
