@@ -8,18 +8,12 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from puppet.fap.highlevel import fap_values
 from puppet.runtime.lidclosure import ONSET, LidClosure
 from puppet.runtime.musclesolver import folded_triangles
 from tools.eye_closure import opening
 
 SIDES = [("l", 19, 21), ("r", 20, 22)]  # the eye, its upper and lower lid FAPs
-
-
-def _values(pose: dict[int, float]) -> np.ndarray:
-    values = np.zeros(68)
-    for number, value in pose.items():
-        values[number - 1] = value
-    return values
 
 
 @pytest.mark.parametrize("side, upper, lower", SIDES)
@@ -30,7 +24,7 @@ def test_a_blink_closes_the_whole_eye_and_folds_nothing(runtime, face, side, upp
     rest = opening(runtime, face.vertices, side)
     triangles = np.asarray(face.triangles)
     for pose, left in (({upper: 1024.0}, 0.04), ({upper: 800.0, lower: 224.0}, 0.01)):
-        closed = runtime.deform_faps(_values(pose))
+        closed = runtime.deform_faps(pose)
         assert opening(runtime, closed, side) < left * rest, pose
         assert folded_triangles(face.vertices, closed, triangles).sum() == 0, pose
 
@@ -40,7 +34,7 @@ def test_below_the_onset_a_lid_moves_as_its_faps_say(runtime, side, upper, lower
     """Under ``ONSET`` of the closing the shape adds nothing; above it, it moves only its rows."""
     engine = runtime.faps
     for closing, shaped in ((ONSET - 0.01, False), (ONSET + 0.2, True)):
-        values = _values({upper: 0.8 * closing * 1024.0, lower: 0.2 * closing * 1024.0})
+        values = fap_values({upper: 0.8 * closing * 1024.0, lower: 0.2 * closing * 1024.0})
         d = engine.controls(values)[0]
         plain = engine._shown_controls(engine.shown(values))[0]
         moved = np.flatnonzero(np.any(d != plain, axis=1))
@@ -55,7 +49,7 @@ def test_the_closing_shapes_move_upper_margins_only_and_no_feature_point(runtime
     attach = {p.name: p.attach for p in runtime.rig.control_points}
     assert names and not set(names) & set(face.feature_points)
     assert {attach[name] for name in names} == {"upper_lid_l", "upper_lid_r"}
-    closed = runtime.deform_faps(_values({19: 1024.0}))
+    closed = runtime.deform_faps({19: 1024.0})
     lid = face.feature_vertices["3.1"]
     assert face.vertices[lid, 1] - closed[lid, 1] == pytest.approx(1024.0 * face.fapu["IRISD0"], abs=1e-9)
 
@@ -67,7 +61,7 @@ def test_the_margin_closes_smoothly_through_the_onset(runtime):
     unguarded = copy.copy(runtime)
     unguarded._slivers = None
     rows = [p.vertex for p in runtime.rig.control_points if p.attach == "upper_lid_l"]
-    frames = np.array([unguarded.deform_faps(_values({19: value}))[rows] for value in np.arange(500.0, 1025.0, 4.0)])
+    frames = np.array([unguarded.deform_faps({19: value})[rows] for value in np.arange(500.0, 1025.0, 4.0)])
     steps = np.linalg.norm(np.diff(frames, axis=0), axis=2)
     assert (steps.max(axis=0) < 2.5 * np.median(steps, axis=0)).all()
 

@@ -49,10 +49,7 @@ def main() -> None:
     runtime = puppet.Runtime(puppet.load_face())
     print(f"puppet from {Path(puppet.__file__).parent}: the share of each eye's opening left")
     for name, pose in POSES.items():
-        values = np.zeros(68)
-        for number, value in pose.items():
-            values[number - 1] = value
-        closed = runtime.deform_faps(values)
+        closed = runtime.deform_faps(pose)
         left = [opening(runtime, closed, side) / opening(runtime, runtime.rest, side) for side in "lr"]
         print(f"{name:45s} left eye {100 * left[0]:5.2f}%   right eye {100 * left[1]:5.2f}%")
 

@@ -30,6 +30,8 @@ from collections.abc import Callable
 
 import numpy as np
 
+from puppet.fap.highlevel import fap_values
+
 ONSET = 0.6
 """The share of the closing (upper drop + lower rise over ``LIDS_MEET``) where the shape starts."""
 SPLITS = (0.0, 0.25, 0.5)
@@ -93,9 +95,7 @@ class _ClosingShape:
         shares = runtime.muscle_shares
         motions = []
         for split in SPLITS:
-            values = np.zeros(68)
-            values[[number - 1, lower_number - 1]] = (1.0 - split) * meet, split * meet
-            d, rigid = controls(values)
+            d, rigid = controls(fap_values({number: (1.0 - split) * meet, lower_number: split * meet}))
             positions = runtime.control_positions(d, rigid)
             moves = shares[upper, None] * (_onto(positions[upper], positions[lower]) - positions[upper])
             motions.append(_uncarried(moves, rigid.get(upper_part), shares[upper]))
