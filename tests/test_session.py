@@ -3,6 +3,7 @@ records a take at its frame rate, and can be timed from input to drawn frame."""
 
 from __future__ import annotations
 
+import os
 import time
 from pathlib import Path
 
@@ -114,6 +115,8 @@ def test_measure_latency_offscreen_counts_every_sample(session, face, egl):
     assert mesh["median"] <= drawn["median"] and 0 < result["frame_work_ms"]["median"] <= mesh["median"]
     assert result["normals"] == "cpu" and session.normals  # this GL draws on the CPU: normals from the runtime
     assert result["gl_renderer"]
+    if len(os.sched_getaffinity(0)) >= 2 and "LP_NUM_THREADS" not in os.environ:  # llvmpipe: a thread a core
+        assert len(result["rasteriser_cores"]) >= 2  # ... each on a core of its own
 
 
 # -- faults ------------------------------------------------------------------------------------

@@ -113,7 +113,8 @@ def _print_live(report: dict) -> None:
               f"{work['p99']:.2f} p99; draw and read-back {lat['draw_ms']['median']:.2f} ms median; sample->mesh {mesh['median']:.2f} / {mesh['p99']:.2f}; "
               f"sample->drawn {drawn['median']:.2f} ms median / {drawn['p99']:.2f} p99 at {lat['fps']:.0f} fps "
               f"({lat['samples']} samples; {lat['samples_before']} queued before the loop, not timed; "
-              f"drawn by {lat['gl_renderer']}, normals on the {'GPU, in the draw' if lat['normals'] == 'draw' else 'CPU'})")
+              f"drawn by {lat['gl_renderer']}{_cores(lat['rasteriser_cores'])}, "
+              f"normals on the {'GPU, in the draw' if lat['normals'] == 'draw' else 'CPU'})")
     if "flood" in report:
         flood = report["flood"]
         print(f"flood {flood['rate']:,.0f} readings/s for {flood['seconds']:g} s, recording: {flood['fps']:.1f} fps "
@@ -126,6 +127,12 @@ def _print_live(report: dict) -> None:
         print(f"long take {f'{length / 3600:g} h' if length >= 3600 else f'{length:g} s'} at an accelerated clock: {take['frames']:,} frames, "
               f"{take['samples']:,} samples in {take['wall_s']:.1f} s, memory growth {take['rss_growth_mb']:.2f} MiB, "
               f"take {take['take_mb']:.0f} MiB on disk")
+
+
+def _cores(cores: list[int]) -> str:
+    """Where the latency's rasteriser threads ran: a core each (``rasterthreads.spread``), or
+    wherever the scheduler put them (nothing to say)."""
+    return f" on cores {', '.join(map(str, cores))}, a thread each" if cores else ""
 
 
 class Steps:

@@ -374,8 +374,9 @@ def measure_latency(session: LiveSession, renderer, seconds: float = 3.0) -> dic
     the loop starts (while the device was opened and the shaders compiled, up to 100 ms old)
     are taken in by a frame of their own, not timed (``samples_before``): they were 1.3% of a 3 s
     run, and all of its p99. Medians and 99th percentiles. The device's own transport (USB, the
-    pty) comes before the Sample's timestamp and is not included. ``gl_renderer`` and ``normals``
-    (``cpu``, or ``draw`` where the renderer sums them) say what drew.
+    pty) comes before the Sample's timestamp and is not included. ``gl_renderer``, ``normals``
+    (``cpu``, or ``draw`` where the renderer sums them) and ``rasteriser_cores`` (the cores a
+    software rasteriser's threads were given, one each; none on a GPU) say what drew.
     """
     session.normals = not renderer.gpu_normals
     if renderer.camera is None:
@@ -403,4 +404,5 @@ def measure_latency(session: LiveSession, renderer, seconds: float = 3.0) -> dic
             "frame_work_ms": _ms_stats(work), "draw_ms": _ms_stats(draw), "fps": frames / elapsed if elapsed else 0.0,
             "frames": frames, "samples": len(drawn), "samples_before": before,
             "gl_renderer": str(renderer.ctx.info.get("GL_RENDERER", "")),
-            "normals": "draw" if renderer.gpu_normals else "cpu"}
+            "normals": "draw" if renderer.gpu_normals else "cpu",
+            "rasteriser_cores": sorted(set(renderer.rasteriser_cores.values()))}

@@ -48,6 +48,7 @@ import moderngl
 import numpy as np
 
 from puppet.runtime.normals import VertexNormals, vertex_rings
+from puppet.view import rasterthreads
 
 SKIN_SRGB = (0.80, 0.62, 0.53)
 """Albedo (sRGB, 0-1) used where a mesh has no colours."""
@@ -577,6 +578,8 @@ class Renderer:
         ``choose_normals``'s (True: the draw sums the normals, ``draw`` ignores any given; chosen
         by default and not built by the driver: a warning, and the CPU computes them).
         ``cull`` False draws back faces too (a mesh seen from inside), always shaded per pixel.
+        On a software rasteriser its threads get a core each (``rasterthreads.spread``;
+        ``rasteriser_cores``: {thread id: core} of those pinned).
         """
         self.n_vertices = int(n_vertices)
         self.cull = cull
@@ -589,6 +592,7 @@ class Renderer:
             with self._current():
                 samples, self.antialias = choose_antialias(self.ctx, samples, antialias)
                 self.shading = choose_shading(self.ctx, shading, cull=cull)
+                self.rasteriser_cores = rasterthreads.spread() if software_rasteriser(self.ctx) else {}
                 self._create_texture(uv, texture, texture_weight)
                 self._build(triangles, colors, materials, samples, gpu_normals)
         except BaseException:
@@ -889,7 +893,7 @@ class Renderer:
         """(x, y, width, height), y up as GL counts it, of a pixel box holding the projection
         of ``vertices``: that of their bounding box's corners (which contains it), widened by
         ``margin``; the whole image when a corner lies behind the camera."""
-        low, high = np.min(vertices, axis=0), np.max(vertices, axis=0)
+        low, high = _bounds(vertices)
         corners = np.array(list(itertools.product(*zip(low, high))))
         local = (corners - self.camera.eye) @ self.camera.basis().T
         width, height = self.size
@@ -1061,6 +1065,15 @@ def _material_data(
     data[:, :3] = _srgb_to_linear(np.clip(srgb, 0.0, 1.0))
     data[:, 3] = SKIN_SPECULAR if materials is None else np.asarray(materials)
     return data
+
+
+def _bounds(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The (low, high) corners of the box around ``points`` (N, 3): one strided pass per
+    coordinate, since numpy's ``min(axis=0)`` of an (N, 3) array steps three values at a time
+    (0.26 ms for the default face's 10k vertices against 0.016)."""
+    flat = np.ascontiguousarray(points).reshape(-1)
+    columns = [flat[i::3] for i in range(3)]
+    return np.array([c.min() for c in columns]), np.array([c.max() for c in columns])
 
 
 def _srgb_to_linear(c: np.ndarray) -> np.ndarray:
