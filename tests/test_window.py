@@ -155,6 +155,8 @@ def test_any_frame_deforms_as_streaming_playback_does(tmp_path, runtime):
         vertices, normals = table.mesh(k)
         assert np.allclose(vertices, streamed[k], atol=1e-5), k
         assert np.allclose(np.linalg.norm(normals, axis=1), 1.0, atol=1e-3)
+        alone, none = table.mesh(k, normals=False)  # for a renderer that sums normals in its draw
+        assert none is None and np.array_equal(alone, vertices)
     assert not np.allclose(streamed[4], streamed[5], atol=1e-4)  # the frames do differ
     with pytest.raises(IndexError):
         table.mesh(12)

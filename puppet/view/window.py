@@ -271,9 +271,13 @@ class HeldTable:
             raise IndexError(f"frame {k}: the take has {self._count} frames")
         return self._chunks[k // self.CHUNK][k % self.CHUNK]
 
-    def mesh(self, k: int) -> tuple[np.ndarray, np.ndarray]:
-        """Vertices and normals of frame ``k``."""
-        return self.runtime.deform_pose(Pose(self.low_level(k).astype(np.float64)))
+    def mesh(self, k: int, normals: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
+        """Vertices and normals of frame ``k``; with ``normals`` off, (vertices, None): for a
+        renderer whose draw sums them (``gpu_normals``)."""
+        pose = Pose(self.low_level(k).astype(np.float64))
+        if normals:
+            return self.runtime.deform_pose(pose)
+        return self.runtime.pose_vertices(pose), None
 
     def close(self) -> None:
         if self._reader is not None:
@@ -426,7 +430,7 @@ class Player:
         if self.renderer is None or self.renderer.size != size:
             self._make_renderer(size)
         if k != self._shown:
-            self._pose, self._shown = self.table.mesh(k), k
+            self._pose, self._shown = self.table.mesh(k, normals=not self.renderer.gpu_normals), k
         self.renderer.draw(*self._pose, framebuffer=self.window.fbo)
         self._drawn_at = now
         self.window.swap_buffers()  # also handles the window's events
