@@ -5,8 +5,9 @@ woken when the frame is flushed. On the two-core machines the project is measure
 the kernel, both threads often ended up sharing one core for whole runs (the waking thread's
 core is the scheduler's first choice for a thread it wakes), and a 640x480 live frame then
 rasterised at one core's speed: 2.1-2.3 ms instead of 1.2, in about half the processes started
-(``tools/latency_profile.py``). Given a core each, they rasterise in 1.2 ms in every run, and a
-Sample's latency in the live loop fell from 7.8-8.8 ms to 4.6-5.6 (median).
+(``tools/latency_profile.py``). Given a core each, they rasterise in 1.2-1.3 ms in every run,
+and a Sample's latency in the live loop fell from 7.5-9.0 ms median to 4.4-5.2 (``puppet bench
+--only latency``, four runs each).
 
 ``spread`` pins thread k to the k-th core this process may run on (round robin); the Python
 threads are left to the scheduler. Where there is a single rasteriser thread (a batch worker,
