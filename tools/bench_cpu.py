@@ -75,18 +75,14 @@ def scaling(frames: int, subdivided: bool) -> None:
     import numpy as np
 
     import puppet
-    from puppet.bench.deform import performance
-    from puppet.face import rigid
+    from puppet.bench.deform import smooth_take
     from puppet.face.subdivide import subdivide
 
     face = puppet.load_face()
     for times in (0, 1, 2) if subdivided else (0,):
         mesh = subdivide(face, times) if times else face
         runtime = puppet.Runtime(mesh)
-        d, angles = performance(np.random.default_rng(7), frames, len(runtime.control_points),
-                                0.03 * float(np.ptp(mesh.vertices[:, 1])))
-        jaw = runtime.rig.rigid_parts["jaw"]
-        motions = [{"jaw": rigid.about(jaw.pivot, rigid.rotation(jaw.axis, a))} for a in angles]
+        d, motions = smooth_take(runtime, frames, np.random.default_rng(7))
         out, normals = np.empty_like(runtime.rest), np.empty_like(runtime.rest)
         positions = cpu_ms(lambda i: runtime.deform(d[i % frames], motions[i % frames], out=out), frames)
         both = cpu_ms(lambda i: runtime.deform_with_normals(d[i % frames], motions[i % frames], out=out,

@@ -24,8 +24,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from puppet.bench.deform import performance
-from puppet.face import rigid
+from puppet.bench.deform import smooth_take
 from puppet.face.load import load_face
 from puppet.face.subdivide import subdivide
 from puppet.runtime.runtime import Runtime
@@ -49,10 +48,7 @@ def _medians(frame, frames: int) -> tuple[float, float, float]:
 def measure(mesh, frames: int, rounds: int = 3) -> dict[str, tuple[float, float, float]]:
     """Both ways of one mesh, ``rounds`` turns each (see the module docstring)."""
     runtime = Runtime(mesh)
-    d, angles = performance(np.random.default_rng(7), frames, len(runtime.control_points),
-                            0.03 * float(np.ptp(mesh.vertices[:, 1])))
-    jaw = runtime.rig.rigid_parts["jaw"]
-    motions = [{"jaw": rigid.about(jaw.pivot, rigid.rotation(jaw.axis, a))} for a in angles]
+    d, motions = smooth_take(runtime, frames, np.random.default_rng(7))
     out, normals = np.empty_like(runtime.rest), np.empty_like(runtime.rest)
     renderers = {gpu: Renderer.for_face(mesh, width=640, height=480, gpu_normals=gpu) for gpu in (False, True)}
     for renderer in renderers.values():

@@ -101,11 +101,8 @@ def bench_face(face: Face, frames: int, rig=None, label: str | None = None) -> d
         load_s = median_time(lambda: Runtime(face, rig), 3)
         runtime = Runtime(face, rig)
         realtime = Runtime(face, rig, mode="realtime")
-    k = len(runtime.control_points)
     rng = np.random.default_rng(7)
-    displacements, angles = performance(rng, frames, k, 0.03 * float(np.ptp(face.vertices[:, 1])))
-    jaw = runtime.rig.rigid_parts["jaw"]
-    motions = [{"jaw": rigid.about(jaw.pivot, rigid.rotation(jaw.axis, a))} for a in angles]
+    displacements, motions = smooth_take(runtime, frames, rng)
     out = np.empty_like(runtime.rest)
     normals = np.empty_like(runtime.rest)
     frame = iter(range(10**9))
@@ -135,7 +132,7 @@ def bench_face(face: Face, frames: int, rig=None, label: str | None = None) -> d
         "face": label or face.name,
         "vertices": len(face.vertices),
         "triangles": len(face.triangles),
-        "control_points": k,
+        "control_points": len(runtime.control_points),
         "rig_s": rig_s,
         "precompute_s": precompute_s,
         "load_s": load_s,
@@ -157,6 +154,16 @@ def performance(rng: np.random.Generator, frames: int, k: int, amplitude: float)
     displacements = size * np.sin(2 * np.pi * freq * t[:, None, None] + phase)
     angles = np.radians(7.5) * (1 - np.cos(2 * np.pi * 0.7 * t))
     return displacements, angles
+
+
+def smooth_take(runtime: Runtime, frames: int, rng: np.random.Generator
+                ) -> tuple[np.ndarray, list[dict[str, np.ndarray]]]:
+    """``performance`` on a runtime's face, as the benches deform it: each frame's active point
+    displacements (up to 3% of the face's height) and the jaw's rigid motion."""
+    amplitude = 0.03 * float(np.ptp(runtime.face.vertices[:, 1]))
+    displacements, angles = performance(rng, frames, len(runtime.control_points), amplitude)
+    jaw = runtime.rig.rigid_parts["jaw"]
+    return displacements, [{"jaw": rigid.about(jaw.pivot, rigid.rotation(jaw.axis, a))} for a in angles]
 
 
 def bench_frame_split(face: Face, frames: int, rig=None, size: tuple[int, int] = (640, 480),
@@ -235,10 +242,8 @@ def _frame_inputs(runtime: Runtime, frames: int):
         with iter_fap(demo_take()) as reader:
             take = list(held_low_level(reader))
         return (lambda i: runtime.faps.controls(take[i % len(take)])), "FAP"
-    rng = np.random.default_rng(7)
-    d, angles = performance(rng, frames + 1, len(runtime.control_points), 0.03 * float(np.ptp(runtime.rest[:, 1])))
-    jaw = runtime.rig.rigid_parts["jaw"]
-    return (lambda i: (d[i], {"jaw": rigid.about(jaw.pivot, rigid.rotation(jaw.axis, angles[i]))})), "displacements"
+    d, motions = smooth_take(runtime, frames + 1, np.random.default_rng(7))
+    return (lambda i: (d[i], motions[i])), "displacements"
 
 
 def _dense_baseline(runtime: Runtime) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
