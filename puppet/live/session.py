@@ -216,10 +216,8 @@ class LiveSession:
             warnings.warn(self.pose_error, RuntimeWarning, stacklevel=2)
         if samples or pose_ns != self._last_pose_ns or not self._have_mesh or self.layer is not None:
             shown = pose if self.layer is None else Pose(*self._layered(now, pose), pose.muscles)
-            if self._with_normals:
-                self.runtime.deform_pose(shown, out=self._vertices, normals_out=self._normals)
-            else:
-                self.runtime.pose_vertices(shown, out=self._vertices)
+            self.runtime.deform_pose(shown, out=self._vertices, normals_out=self._normals,
+                                     normals=self._with_normals)
             self._have_mesh = True
         # else: nothing changed since the last frame (a held pose): the buffers already hold it
         self._last_pose_ns = pose_ns

@@ -511,18 +511,15 @@ class Runtime:
         return FapEngine(self)
 
     def deform_pose(self, pose: Pose, *, out: np.ndarray | None = None, normals_out: np.ndarray | None = None,
-                    mode: str = "control") -> tuple[np.ndarray, np.ndarray]:
+                    mode: str = "control", normals: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
         """Positions and unit vertex normals of the face showing ``pose``: its FAPs, FAP 1 / 2
         blends and muscle contractions (in ``mode``), written into ``out`` and ``normals_out``
-        when given (what a live loop or a player does every frame)."""
+        when given (what a live loop or a player does every frame). ``normals`` False gives
+        (positions, None): for a renderer that sums its own in the draw (``Renderer.gpu_normals``)."""
         d, motions = self.fap_controls(pose.fap, viseme=pose.viseme, expression=pose.expression)
-        return self._deform_with_normals(d, motions, out, normals_out, pose.muscles, mode, pose=True)
-
-    def pose_vertices(self, pose: Pose, *, out: np.ndarray | None = None, mode: str = "control") -> np.ndarray:
-        """The positions ``deform_pose`` gives, without the normals: for a renderer that sums
-        its own in the draw (``Renderer.gpu_normals``)."""
-        d, motions = self.fap_controls(pose.fap, viseme=pose.viseme, expression=pose.expression)
-        return self._deform(d, self._checked(motions), out, pose.muscles, mode, pose=True)
+        if normals:
+            return self._deform_with_normals(d, motions, out, normals_out, pose.muscles, mode, pose=True)
+        return self._deform(d, self._checked(motions), out, pose.muscles, mode, pose=True), None
 
     def deform_faps(self, fap: Mapping[int | str, float] | np.ndarray | None = None, *,
              viseme: tuple | None = None, expression: tuple | None = None,

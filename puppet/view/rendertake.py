@@ -46,10 +46,7 @@ class FapPlayback:
     def __iter__(self) -> Iterator[tuple[np.ndarray, np.ndarray]]:
         with iter_fap(self.path) as reader:
             for values in held_low_level(reader):
-                if self.normals:
-                    yield self.runtime.deform_pose(Pose(values))
-                else:
-                    yield self.runtime.pose_vertices(Pose(values)), None
+                yield self.runtime.deform_pose(Pose(values), normals=self.normals)
 
 
 def render_take(path: str | os.PathLike, out: str | os.PathLike, *, face: Face | None = None,

@@ -274,10 +274,7 @@ class HeldTable:
     def mesh(self, k: int, normals: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
         """Vertices and normals of frame ``k``; with ``normals`` off, (vertices, None): for a
         renderer whose draw sums them (``gpu_normals``)."""
-        pose = Pose(self.low_level(k).astype(np.float64))
-        if normals:
-            return self.runtime.deform_pose(pose)
-        return self.runtime.pose_vertices(pose), None
+        return self.runtime.deform_pose(Pose(self.low_level(k).astype(np.float64)), normals=normals)
 
     def close(self) -> None:
         if self._reader is not None:
