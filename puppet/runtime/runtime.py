@@ -86,6 +86,7 @@ from puppet.face.rig import Rig, rig_geometry_to_dict
 from puppet.face.rigid import IDENTITY, compose
 from puppet.fap.pose import Pose
 from puppet.runtime import coefcache
+from puppet.runtime.carry import Carry
 from puppet.runtime.dffd import DffdError, RegionDeformer
 from puppet.runtime.fapengine import FapEngine, lid_shares
 from puppet.runtime.lastmade import LastMade
@@ -136,11 +137,12 @@ class Runtime:
         self._inputs = np.array([index[n] for n in inputs], dtype=np.int64)
         points = [rig.control_points[index[n]] for n in inputs]
         weight = np.array([[p.attach_weight] for p in points])
-        self._carry = {}  # part -> (its attached inputs, their rest positions, their weights)
+        carried = {}  # part -> (its attached inputs, their rest positions, their weights)
         for part in rig.rigid_parts:
             idx = np.array([i for i, p in enumerate(points) if p.attach == part], dtype=np.int64)
             if part != "head" and len(idx):
-                self._carry[part] = (idx, self._p0[self._inputs[idx]], weight[idx])
+                carried[part] = (idx, self._p0[self._inputs[idx]], weight[idx])
+        self._carry = Carry(carried)
 
     def _init_regions(self, cache: bool) -> None:
         rig = self.rig
@@ -443,7 +445,7 @@ class Runtime:
         carrying part's motion changes: held sliders and a held jaw cost no muscle work."""
         muscles = self._control_muscles
         c = muscles.contractions(contracting)
-        key = c.tobytes() + b"".join(part.encode() + rigid[part].tobytes() for part in self._carry if part in rigid)
+        key = c.tobytes() + self._carry.key(rigid)
         return self._last_muscles.get("share", key, lambda: self._carried(muscles.displaced(c), rigid))
 
     def _guarded(self, moving: np.ndarray) -> np.ndarray:
@@ -605,12 +607,7 @@ class Runtime:
             raise ValueError(f"displacements must be ({k}, 3), got {d.shape}")
         out = np.zeros((len(self._inputs), 3))
         out[:k] = d
-        for part, (idx, p0, w) in self._carry.items():
-            motion = rigid.get(part)
-            if motion is not None:
-                own = out[idx]
-                carried = (p0 + own) @ motion[:, :3].T + motion[:, 3] - p0
-                out[idx] = w * carried + (1 - w) * own
+        self._carry.carry(out, rigid)
         return out
 
     def _carried(self, extra: np.ndarray, rigid: Mapping[str, np.ndarray]) -> np.ndarray:
@@ -618,11 +615,7 @@ class Runtime:
         in the displacements, so an addition is carried by the rotations alone."""
         out = np.zeros((len(self._inputs), 3))
         out[: len(extra)] = extra
-        for part, (idx, _, w) in self._carry.items():
-            motion = rigid.get(part)
-            if motion is not None:
-                own = out[idx]
-                out[idx] = w * (own @ motion[:, :3].T) + (1 - w) * own
+        self._carry.turn(out, rigid)
         return out
 
     def _turn_head(self, motion: np.ndarray, out: np.ndarray) -> None:
