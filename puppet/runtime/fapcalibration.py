@@ -62,7 +62,7 @@ from puppet.face.autorig import build_rig
 from puppet.face.rig import Rig
 from puppet.fap.table import N_FAPS, clamp_ranges, fap, faps
 from puppet.runtime import follow
-from puppet.runtime.fapengine import LID_FAPS
+from puppet.runtime.lids import LID_FAPS
 from puppet.runtime.musclesolver import folded_triangles
 from puppet.runtime.runtime import Runtime
 

@@ -67,11 +67,9 @@ from puppet.fap.table import N_FAPS, fap, faps
 from puppet.runtime import follow
 from puppet.runtime.lastmade import LastMade
 from puppet.runtime.lidclosure import LidClosure
+from puppet.runtime.lids import LID_FAPS, LID_PAIRS, LID_PARTS
 
 JAW_FAPS = (3, 14, 15)
-LID_FAPS = {19: ("upper_lid_l", "3.1", 1), 20: ("upper_lid_r", "3.2", 1),  # +: the point drops
-            21: ("lower_lid_l", "3.3", -1), 22: ("lower_lid_r", "3.4", -1)}  # +: the point rises
-LID_PARTS = frozenset(part for part, _, _ in LID_FAPS.values())
 EYE_FAPS = {"eye_l": (23, 25, 27), "eye_r": (24, 26, 28)}
 GAZE_FAPS = (23, 24, 25, 26)
 HEAD_FAPS = (48, 49, 50)
@@ -137,7 +135,7 @@ class FapEngine:
         """The 68 low-level values this face shows for ``values`` (a new array): each within its
         reach, lids not crossing, then each follow pair within its range (module docstring)."""
         v = np.clip(np.asarray(values, dtype=float), self.reach[0], self.reach[1])
-        for upper, lower in ((19, 21), (20, 22)):
+        for upper, lower in LID_PAIRS:
             excess = v[upper - 1] + v[lower - 1] - LIDS_MEET
             if excess > 0:
                 closing = np.maximum(v[[upper - 1, lower - 1]], 0.0)

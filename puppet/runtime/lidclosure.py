@@ -31,13 +31,12 @@ from collections.abc import Callable
 import numpy as np
 
 from puppet.fap.highlevel import fap_values
+from puppet.runtime.lids import LID_FAPS, LID_PAIRS
 
 ONSET = 0.6
 """The share of the closing (upper drop + lower rise over ``LIDS_MEET``) where the shape starts."""
 SPLITS = (0.0, 0.25, 0.5)
 """The lower lid's shares of the closing at which the shape is sampled (beyond them, the last)."""
-SIDES = {19: ("upper_lid_l", "lower_lid_l", 21), 20: ("upper_lid_r", "lower_lid_r", 22)}
-"""Upper lid FAP: (its lid, the lower lid, the lower lid's FAP)."""
 
 Controls = Callable[[np.ndarray], tuple[np.ndarray, dict[str, np.ndarray]]]
 
@@ -48,8 +47,9 @@ class LidClosure:
 
     def __init__(self, runtime, controls: Controls, meet: float) -> None:
         self.meet = meet
-        self.sides = [side for side in (_ClosingShape.sampled(runtime, controls, meet, number, *parts)
-                                        for number, parts in SIDES.items()) if side is not None]
+        self.sides = [side for side in (_ClosingShape.sampled(runtime, controls, meet, upper, LID_FAPS[upper][0],
+                                                              LID_FAPS[lower][0], lower)
+                                        for upper, lower in LID_PAIRS) if side is not None]
 
     def add(self, values: np.ndarray, d: np.ndarray) -> None:
         """Add each closing lid's shape, faded in by how far it closes, to ``d`` in place."""

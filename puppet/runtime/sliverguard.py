@@ -54,7 +54,7 @@ import scipy.sparse as sp
 
 from puppet.face.rigid import IDENTITY
 from puppet.fap.table import clamp_ranges
-from puppet.runtime.fapengine import LID_FAPS
+from puppet.runtime.lids import LID_FAPS
 from puppet.runtime.lastmade import LastMade
 from puppet.runtime.musclesolver import EdgeConstraints, folded_triangles
 
