@@ -5,6 +5,7 @@ measured by ``puppet bench``, not asserted here."""
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from devices.base import Device
@@ -34,3 +35,14 @@ def test_a_long_take_records_in_bounded_memory():
     result = loadbench.long_take(take_seconds=300.0, rate=100.0, fps=30)
     assert result["frames"] == 300 * 30 + 1 and result["samples"] == 30_000
     assert result["rss_growth_mb"] < 2
+
+
+def test_the_slider_boxs_poses_work_every_slider_through_the_mapping():
+    """``box_poses``: what the latency run's frames show, made without a pty; the same every call."""
+    poses = loadbench.box_poses(seconds=4.0, fps=50.0)
+    assert len(poses) == 200
+    jaw = np.array([p.fap[2] for p in poses])  # open_jaw, from slider ch0
+    assert jaw.max() - jaw.min() > 100
+    assert any(p.muscles.get("zygomatic_major_l", 0) > 0.3 for p in poses)
+    again = loadbench.box_poses(seconds=4.0, fps=50.0)
+    assert all(np.array_equal(a.fap, b.fap) and a.muscles == b.muscles for a, b in zip(poses, again))

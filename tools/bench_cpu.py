@@ -5,7 +5,8 @@ right on a quiet one).
 * frame work on the default face, median CPU ms of this thread: a FAP frame (controls + deform),
   every muscle at 0.5 (controls + deform; then + normals), every muscle swinging 0.45-0.55 with
   the jaw working (+ normals), the zygomatic pair at 3, both upper lids blinking (496-1024 IRISD:
-  the sliver guard's range);
+  the sliver guard's range), and the poses of one whole cycle of the latency run's slider box,
+  frame after frame (``puppet.bench.pipeline.box_poses``: its mapping, muscles and guards);
 * deform and deform + normals of the smooth take ``puppet bench`` uses, on the default face and
   it subdivided once and twice (10k, 23k, 75k vertices; ``--no-subdivided`` skips those).
 
@@ -38,6 +39,7 @@ def frame_work(frames: int) -> None:
     import numpy as np
 
     import puppet
+    from puppet.bench.pipeline import box_poses
 
     runtime = puppet.Runtime(puppet.load_face())
     fap = np.zeros(68)
@@ -57,6 +59,11 @@ def frame_work(frames: int) -> None:
         values[[18, 19]] = 760 + 264 * np.sin(i / 10)
         runtime.deform_faps(values, out=out)
 
+    poses = box_poses()
+
+    def box(i: int) -> None:
+        runtime.deform_pose(poses[i % len(poses)], out=out, normals_out=normals)
+
     cases = {
         "FAP frame: controls + deform": lambda i: runtime.deform(*runtime.fap_controls(fap), out=out),
         "every muscle 0.5: controls + deform": lambda i: runtime.deform_faps(fap, muscles=every, out=out),
@@ -69,6 +76,7 @@ def frame_work(frames: int) -> None:
     }
     for name, frame in cases.items():
         print(f"{name:55s} {cpu_ms(frame, frames):7.3f} ms CPU")
+    print(f"{'the slider box, one cycle (the latency run): + normals':55s} {cpu_ms(box, len(poses)):7.3f} ms CPU")
 
 
 def scaling(frames: int, subdivided: bool) -> None:

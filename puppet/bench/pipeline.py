@@ -29,6 +29,8 @@ import numpy as np
 
 from devices import open_device
 from devices.base import Sample, State
+from devices.simulated_serial import sine_sliders
+from puppet.fap.pose import Pose
 from puppet.io.samplelog import LogEvent
 from puppet.io.shipped import shipped_mapping
 from puppet.io.takes import TakeRecorder
@@ -168,6 +170,25 @@ def flood(runtime: Runtime, seconds: float = 60.0, rate: float = 10_000.0,
             "fps_ratio": loaded["fps"] / baseline["fps"], "samples_s": loaded["samples_s"],
             "rss_start_mb": settled[0], "rss_end_mb": rss[-1], "rss_growth_mb": rss[-1] - settled[0],
             "backlog_max": loaded["backlog_max"], "dropped": loaded["dropped"], "take_mb": take_mb}
+
+
+def box_poses(seconds: float = BOX_CYCLE_S, rate: float = 200.0, fps: float = 190.0) -> list[Pose]:
+    """The Poses a live loop drawing ``fps`` frames a second shows over ``seconds`` of the slider
+    box of ``latency`` (``sine_sliders`` sending ``rate`` readings a second, through the shipped
+    mapping, its filters and muscles included): that run's frame work without its pty, GL or
+    clock, to time in CPU time (``tools/bench_cpu.py``)."""
+    mapping = load_mapping(MAPPING)
+    signal = sine_sliders(6)
+    step, frame = 1e9 / rate, 1e9 / fps
+    poses, fed = [], 0
+    for k in range(int(seconds * fps)):
+        now = int(k * frame)
+        while fed * step <= now:
+            values = signal(fed * step / 1e9)
+            mapping.feed(Sample(int(fed * step), "box", {f"ch{c}": v for c, v in enumerate(values)}))
+            fed += 1
+        poses.append(mapping.pose(now))
+    return poses
 
 
 def long_take(take_seconds: float = 3600.0, rate: float = 100.0, fps: int = 30, checkpoints: int = 6) -> dict:
