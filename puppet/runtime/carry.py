@@ -2,10 +2,10 @@
 on the lids): each moves with its part's motion by its attach weight, on top of its own
 displacement.
 
-Every frame carries a few hundred such points on up to five parts. Carried part by part, that
-was five rounds of small numpy calls (a tenth of a millisecond, as much as the DFFD product);
-here the points of the parts that move are one batch, each row picking its part's motion, so a
-frame costs the same handful of calls however many parts move.
+Every frame carries a few hundred such points on up to five parts (the live slider box moves
+all five). Carried part by part, that was five rounds of small numpy calls, whose overhead, not
+their arithmetic, was the cost; here the points of the parts that move are one batch, each row
+picking its part's motion, so a frame costs the same handful of calls however many parts move.
 """
 
 from __future__ import annotations

@@ -54,8 +54,8 @@ import scipy.sparse as sp
 
 from puppet.face.rigid import IDENTITY
 from puppet.fap.table import clamp_ranges
-from puppet.runtime.lids import LID_FAPS
 from puppet.runtime.lastmade import LastMade
+from puppet.runtime.lids import LID_FAPS
 from puppet.runtime.musclesolver import EdgeConstraints, folded_triangles
 
 PROBED = (19, 20)
