@@ -62,3 +62,4 @@ def test_the_key_follows_the_carrying_parts_motions_only():
     jaw = _motion(0.2, (1, 0, 0), (0, 0, 0))
     assert carry.key({"jaw": jaw}) == carry.key({"jaw": jaw, "head": _motion(0.1, (0, 1, 1), (0, 0, 0))})
     assert carry.key({"jaw": jaw}) != carry.key({"jaw": _motion(0.3, (1, 0, 0), (0, 0, 0))})
+

@@ -24,6 +24,23 @@ def rotation(axis: np.ndarray, angle: float) -> np.ndarray:
     ])
 
 
+def turn(pivot: tuple[float, float, float], axis: tuple[float, float, float], angle: float,
+         shift: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> np.ndarray:
+    """``about(pivot, rotation(axis, angle), shift)``: the turn by ``angle`` radians about the line
+    through ``pivot`` along ``axis``, then the shift. Scalar math on Python floats, one array made:
+    the jaw's and the lids' motions are made again every frame they move."""
+    x, y, z = axis
+    n = math.sqrt(x * x + y * y + z * z)
+    x, y, z = x / n, y / n, z / n
+    c, s = math.cos(angle), math.sin(angle)
+    C = 1.0 - c
+    rows = ((c + x * x * C, x * y * C - z * s, x * z * C + y * s),
+            (y * x * C + z * s, c + y * y * C, y * z * C - x * s),
+            (z * x * C - y * s, z * y * C + x * s, c + z * z * C))
+    px, py, pz = pivot
+    return np.array([(a, b, e, p - (a * px + b * py + e * pz) + t) for (a, b, e), p, t in zip(rows, pivot, shift)])
+
+
 def about(pivot: np.ndarray, R: np.ndarray, translation: np.ndarray | None = None) -> np.ndarray:
     """Motion rotating by R about ``pivot``, then translating: x' = R (x - pivot) + pivot + t."""
     pivot = np.asarray(pivot, dtype=float)

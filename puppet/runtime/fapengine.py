@@ -272,16 +272,20 @@ class FapEngine:
         return self._lid(part, point, sign * v[index] * self.fapu["IRISD0"])
 
     def _jaw(self, v: np.ndarray) -> np.ndarray:
-        jaw = self.rig.rigid_parts["jaw"]
-        drop = v[2] * self.fapu["MNS0"]
+        drop = float(v[2]) * self.fapu["MNS0"]
         angle = _angle_for_drop(self._arc("jaw", "2.1"), drop)
-        shift = v[13] * self.fapu["MNS0"] * Z - v[14] * self.fapu["MW0"] * X
-        return rigid.about(jaw.pivot, rigid.rotation(jaw.axis, angle), shift)
+        shift = (-float(v[14]) * self.fapu["MW0"], 0.0, float(v[13]) * self.fapu["MNS0"])  # along -x and +z
+        return rigid.turn(*self._hinges["jaw"], angle, shift)
 
     def _lid(self, part: str, point: str, drop: float) -> np.ndarray:
-        lid = self.rig.rigid_parts[part]
         angle = _angle_for_drop(self._arc(part, point), drop)
-        return rigid.about(lid.pivot, rigid.rotation(lid.axis, angle))
+        return rigid.turn(*self._hinges[part], angle)
+
+    @functools.cached_property
+    def _hinges(self) -> dict[str, tuple[tuple[float, ...], tuple[float, ...]]]:
+        """{hinged rigid part (the jaw, the lids): (its pivot, its axis)} as Python floats, for ``rigid.turn``."""
+        return {name: (tuple(map(float, part.pivot)), tuple(map(float, part.axis)))
+                for name, part in self.rig.rigid_parts.items() if part.axis is not None}
 
     def _arc(self, part: str, point: str) -> tuple[float, float, float]:
         """``_arc`` of a feature point about a rigid part's axis, made once."""
