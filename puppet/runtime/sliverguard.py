@@ -85,7 +85,7 @@ class Frown:
 
     def depth(self, displacements: np.ndarray) -> float:
         """0 to 1 for the active control points' ``displacements`` (K, 3)."""
-        along = float(np.asarray(displacements, dtype=float).ravel().take(self._flat) @ self._flat_weights)
+        along = float(np.asarray(displacements).ravel().take(self._flat) @ self._flat_weights)  # the rows, then float64
         return min(max(along, 0.0), 1.0)
 
 
