@@ -12,16 +12,7 @@ IDENTITY.setflags(write=False)
 
 def rotation(axis: np.ndarray, angle: float) -> np.ndarray:
     """3x3 rotation by ``angle`` radians about the unit vector ``axis`` (right-hand rule)."""
-    x, y, z = (float(v) for v in axis)   # scalar math: this runs a dozen times a frame
-    n = math.sqrt(x * x + y * y + z * z)
-    x, y, z = x / n, y / n, z / n
-    c, s = math.cos(angle), math.sin(angle)
-    C = 1.0 - c
-    return np.array([
-        [c + x * x * C, x * y * C - z * s, x * z * C + y * s],
-        [y * x * C + z * s, c + y * y * C, y * z * C - x * s],
-        [z * x * C - y * s, z * y * C + x * s, c + z * z * C],
-    ])
+    return np.array(_rotation_rows(tuple(float(v) for v in axis), angle))
 
 
 def turn(pivot: tuple[float, float, float], axis: tuple[float, float, float], angle: float,
@@ -29,16 +20,22 @@ def turn(pivot: tuple[float, float, float], axis: tuple[float, float, float], an
     """``about(pivot, rotation(axis, angle), shift)``: the turn by ``angle`` radians about the line
     through ``pivot`` along ``axis``, then the shift. Scalar math on Python floats, one array made:
     the jaw's and the lids' motions are made again every frame they move."""
+    px, py, pz = pivot
+    return np.array([(a, b, c, p - (a * px + b * py + c * pz) + t)
+                     for (a, b, c), p, t in zip(_rotation_rows(axis, angle), pivot, shift)])
+
+
+def _rotation_rows(axis: tuple[float, float, float], angle: float) -> tuple[tuple[float, ...], ...]:
+    """The rows of ``rotation``, in scalar math (numpy's calls on 3x3 arrays cost more than the
+    arithmetic, and motions are made a dozen times a frame)."""
     x, y, z = axis
     n = math.sqrt(x * x + y * y + z * z)
     x, y, z = x / n, y / n, z / n
     c, s = math.cos(angle), math.sin(angle)
     C = 1.0 - c
-    rows = ((c + x * x * C, x * y * C - z * s, x * z * C + y * s),
+    return ((c + x * x * C, x * y * C - z * s, x * z * C + y * s),
             (y * x * C + z * s, c + y * y * C, y * z * C - x * s),
             (z * x * C - y * s, z * y * C + x * s, c + z * z * C))
-    px, py, pz = pivot
-    return np.array([(a, b, e, p - (a * px + b * py + e * pz) + t) for (a, b, e), p, t in zip(rows, pivot, shift)])
 
 
 def about(pivot: np.ndarray, R: np.ndarray, translation: np.ndarray | None = None) -> np.ndarray:
