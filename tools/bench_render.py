@@ -1,8 +1,9 @@
 """Median milliseconds per rendered frame (draw + RGB read-back) of the default face, for the
 renderer as it was (``--old-rev``'s renderer module, loaded from git: the studio shader, 4x MSAA
 by default), as it was at ``--base-rev`` (its default for this GL), the renderer now (no AA, the
-default for this GL, the default drawing both sides, 4x MSAA) and a minimal Lambert draw of the
-same triangles without MSAA (the floor). Configurations take turns, a few frames each, so a load
+default for this GL, the default drawing both sides or every triangle of the eyeballs and teeth
+(``Renderer.for_face(detail=False)``), 4x MSAA) and a minimal Lambert draw of every triangle
+without MSAA (the floor). Configurations take turns, a few frames each, so a load
 that comes and goes on a shared machine hits them alike. The CPU column is the process's CPU
 time a frame, the software rasteriser's threads included: on a busy machine it moves less than
 the wall time, and on an idle one, wall >= CPU / cores.
@@ -127,6 +128,7 @@ def main() -> None:
         "new, no antialiasing": render.Renderer.for_face(face, samples=0, antialias="none", **options),
         "new default, both sides drawn": render.Renderer.for_face(face, cull=False, **options),
         "new, lit per pixel, FXAA pass": render.Renderer.for_face(face, shading="pixel", antialias="fxaa", **options),
+        "new default, every triangle drawn": render.Renderer.for_face(face, detail=False, **options),
     }
     new_default = render.Renderer.for_face(face, **options)
     renderers[f"new default ({new_default.samples}x MSAA, {new_default.antialias}, lit per {new_default.shading})"] = new_default

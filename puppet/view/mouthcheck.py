@@ -62,7 +62,7 @@ def mouth_pixels(face, runtime, open_jaw: float = 400.0, *, view: str = "front",
     for part in TEETH_PARTS:
         teeth[face.parts.get(part, [])] = True
     without = face.triangles[~teeth[face.triangles].all(axis=1)]
-    with Renderer.for_face(face, width=size, height=size, **EXACT) as r:
+    with Renderer.for_face(face, width=size, height=size, detail=False, **EXACT) as r:
         r.aim(face.vertices, view=view)
         image = r.render(vertices, normals)
         polygon = r.project(vertices[face.contours["mouth_opening"]])
