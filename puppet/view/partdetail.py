@@ -1,16 +1,16 @@
 """Levels of detail for a face's inner parts: as many triangles as the screen can show.
 
 The default face's eyeballs and teeth hold 10,876 of its 19,932 triangles, most of them behind
-the lids and lips, with edges of 2-3 pixels at the live window's 640x480: on a software
-rasteriser they were a quarter of the frame's drawing. A part whose edges would be drawn
-shorter than ``FINE_EDGE_PX`` is drawn from a quarter of its triangles instead
+the lids and lips, with edges of 3-4 pixels at the live window's 640x480: on a software
+rasteriser they were a quarter of the frame's drawing (0.8 of 3.1 ms, with the tongue). A part
+whose mean edge, seen face-on at its distance, would be drawn shorter than ``FINE_EDGE_PX`` is drawn from a quarter of its triangles instead
 (``puppet.face.decimate``: the same vertices, so the runtime's motions and normals carry over,
 and colour borders such as the iris's kept). The skin, whose every vertex the DFFD moves, is
 always drawn whole. The choice follows the camera (its distance and field of view, the image
 height) and is made again only when the camera changes; a close-up draws every triangle.
 
-Coarse levels are built on first use (about a second for the default face) and kept for the
-process, keyed by the part's geometry and colours.
+Coarse levels are built on first use (0.3 s for the default face) and kept for the process,
+keyed by the part's geometry and colours.
 """
 
 from __future__ import annotations

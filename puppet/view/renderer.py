@@ -19,7 +19,7 @@ the image hardly changes and the draw costs a third less.
 
 Eyeballs and teeth seen small are drawn from a quarter of their triangles (``PartDetail``,
 chosen from the camera): at the live window's 640x480 they were 10,876 of the default face's
-19,932 triangles, edges of 2-3 pixels mostly behind the lids and lips, and a sixth of a
+19,932 triangles, edges of 3-4 pixels mostly behind the lids and lips, and a sixth of a
 software rasteriser's frame; the image changes by under 0.1 of a level on average.
 
 Back faces are culled: they cost a software rasteriser a fifth of the frame (the back of the
