@@ -83,3 +83,25 @@ def test_a_small_closed_part_never_collapses_past_a_closed_surface():
     coarse = decimate(box.vertices, box.faces, 0.01)
     assert set(_edge_counts(coarse).values()) == {2}
     assert len(coarse) >= 4
+
+
+def test_the_coarse_surface_stays_within_a_fraction_of_an_edge_of_the_fine_one():
+    n = 31
+    x, y = np.meshgrid(np.linspace(0, 1, n), np.linspace(0, 1, n))
+    vertices = np.stack([x.ravel(), y.ravel(), 0.03 * np.sin(25 * x.ravel()) * np.sin(21 * y.ravel())], axis=1)
+    k = np.arange(n * n).reshape(n, n)[:-1, :-1].ravel()
+    triangles = np.concatenate([np.stack([k, k + 1, k + n + 1], 1), np.stack([k, k + n + 1, k + n], 1)])
+    coarse = decimate(vertices, triangles, 0.05)
+    assert len(coarse) < 0.5 * len(triangles)
+    a, b, c = (vertices[coarse[:, i], :2] for i in range(3))  # a height field: find each point's coarse triangle
+    p = vertices[:, None, :2]
+    det = (b - a)[:, 0] * (c - a)[:, 1] - (b - a)[:, 1] * (c - a)[:, 0]
+    s = ((p - a)[..., 0] * (c - a)[:, 1] - (p - a)[..., 1] * (c - a)[:, 0]) / det
+    t = ((b - a)[:, 0] * (p - a)[..., 1] - (b - a)[:, 1] * (p - a)[..., 0]) / det
+    inside = (s >= -1e-9) & (t >= -1e-9) & (s + t <= 1 + 1e-9)
+    assert inside.any(axis=1).all()
+    which = inside.argmax(axis=1)
+    rows = np.arange(len(vertices))
+    height = ((1 - s - t)[rows, which] * vertices[coarse[which, 0], 2] + s[rows, which] * vertices[coarse[which, 1], 2]
+              + t[rows, which] * vertices[coarse[which, 2], 2])
+    assert np.abs(height - vertices[:, 2]).max() < 0.5 / (n - 1)  # half the fine mesh's edge

@@ -9,13 +9,14 @@ Each collapse takes a vertex ``u`` into a neighbour ``w`` (a half-edge collapse:
 where it is) and is priced by Garland and Heckbert's quadric error, the summed squared distance
 from ``w`` to the planes of the triangles that met at both. Collapses run in rounds of many at
 once, so the work is numpy over edges rather than a loop over vertices: in a round each
-vertex's cheapest allowed collapse competes, and one is taken only where its rank is the lowest
-within two edges of its ``u`` (then again among those left, as in Luby's algorithm), so no two
-taken collapses touch the same triangles and each round's checks stay valid. A collapse is allowed when ``u`` is not on an open border or a
-non-manifold edge, nor (given colours) where one colour meets another (the edge of an iris stays
-where it is), when ``u`` and ``w`` share only the neighbours of the edge's own triangles (no
-pinched surface), and when no triangle around ``u`` turns by more than 60 degrees or lands on
-another.
+vertex's cheapest allowed collapse among the round's cheaper half competes, and one is taken
+only where its rank is the lowest within two edges of its ``u`` (then again among those left,
+as in Luby's algorithm), so no two taken collapses touch the same triangles and each round's
+checks stay valid. A collapse is allowed when its error stays within ``MAX_ERROR``, when ``u``
+is not on an open border or a non-manifold edge, nor (given colours) where one colour meets
+another (the edge of an iris stays where it is), when ``u`` and ``w`` share only the neighbours
+of the edge's own triangles (no pinched surface), and when no triangle around ``u`` turns by
+more than 60 degrees or lands on another.
 """
 
 from __future__ import annotations
@@ -25,6 +26,11 @@ import scipy.sparse as sp
 
 MAX_TURN_COS = 0.5
 """A collapse may turn a triangle's normal by at most 60 degrees."""
+
+MAX_ERROR = 0.2
+"""A collapse may leave ``w`` at most this share of the part's mean edge length from the planes
+it takes over (root mean square, by area): a lash or a tear line lying on an eyeball keeps
+its side of it."""
 
 CHOICES = 2
 """Per vertex and round, how many of its cheapest collapses are checked for turned triangles."""
@@ -52,10 +58,12 @@ def decimate(vertices: np.ndarray, triangles: np.ndarray, keep: float = 0.25,
     if colors is not None:
         pinned |= _colour_borders(tri, np.asarray(colors, dtype=np.float64)[used], color_tolerance)
     quadrics = _quadrics(positions, tri)
+    edges = positions[tri[:, [1, 2, 0]]] - positions[tri]
+    limit = MAX_ERROR * float(np.linalg.norm(edges, axis=2).mean())
     for _ in range(max_rounds):
         if len(tri) <= target:
             break
-        taken_u, taken_w = _round(positions, tri, quadrics, pinned, (len(tri) - target + 1) // 2)
+        taken_u, taken_w = _round(positions, tri, quadrics, pinned, (len(tri) - target + 1) // 2, limit)
         quadrics[taken_w] += quadrics[taken_u]
         remap = np.arange(len(positions))
         remap[taken_u] = taken_w
@@ -67,7 +75,7 @@ def decimate(vertices: np.ndarray, triangles: np.ndarray, keep: float = 0.25,
 
 
 def _round(positions: np.ndarray, tri: np.ndarray, quadrics: np.ndarray, pinned: np.ndarray,
-           budget: int) -> tuple[np.ndarray, np.ndarray]:
+           budget: int, limit: float) -> tuple[np.ndarray, np.ndarray]:
     """The collapses (u, w) taken in one round: at most ``budget``, pairwise three edges apart."""
     n = len(positions)
     u, w, shared = _half_edges(tri, n)
@@ -78,7 +86,8 @@ def _round(positions: np.ndarray, tri: np.ndarray, quadrics: np.ndarray, pinned:
     if not len(u):
         return u, w
     cost = _cost(positions, quadrics, u, w)
-    cheap = cost <= np.median(cost)
+    area = np.trace(quadrics[u, :3, :3] + quadrics[w, :3, :3], axis1=1, axis2=2)
+    cheap = (cost <= np.median(cost)) & (cost <= limit ** 2 * area)
     u, w, cost = u[cheap], w[cheap], cost[cheap]
     order = np.lexsort((w, cost, u))
     u, w, cost = u[order], w[order], cost[order]

@@ -5,9 +5,10 @@ the lids and lips, with edges of 3-4 pixels at the live window's 640x480: on a s
 rasteriser they were a quarter of the frame's drawing (0.8 of 3.1 ms, with the tongue). A part
 whose mean edge, seen face-on at its distance, would be drawn shorter than ``FINE_EDGE_PX`` is drawn from a quarter of its triangles instead
 (``puppet.face.decimate``: the same vertices, so the runtime's motions and normals carry over,
-and colour borders such as the iris's kept). The skin, whose every vertex the DFFD moves, is
-always drawn whole. The choice follows the camera (its distance and field of view, the image
-height) and is made again only when the camera changes; a close-up draws every triangle.
+and colour borders such as the iris's kept). The skin, whose every vertex the DFFD moves, and
+what lies on it are always drawn whole (``WHOLE_PARTS``). The choice follows the camera (its
+distance and field of view, the image height) and is made again only when the camera changes;
+a close-up draws every triangle.
 
 Coarse levels are built on first use (0.3 s for the default face) and kept for the process,
 keyed by the part's geometry and colours.
@@ -29,8 +30,10 @@ COARSE_KEEP = 0.25
 FINE_EDGE_PX = 5.0
 """A part whose mean edge would be drawn shorter than this many pixels is drawn coarse."""
 
-WHOLE_PARTS = ("skin",)
-"""Parts always drawn with every triangle: the surface the DFFD bends."""
+WHOLE_PARTS = ("skin", "attached")
+"""Parts always drawn with every triangle: the surface the DFFD bends, and what lies on it and
+bends with it (lashes, tear lines: ``puppet.face.landmarks``'s ``attached``), a coarser copy of
+which would show the skin through it or sink into the eyeball."""
 
 _COARSE: dict[str, np.ndarray] = {}
 
