@@ -28,7 +28,9 @@ COARSE_KEEP = 0.25
 """The share of a part's triangles its coarse level keeps (its edges about twice as long)."""
 
 FINE_EDGE_PX = 5.0
-"""A part whose mean edge would be drawn shorter than this many pixels is drawn coarse."""
+"""A part whose mean edge, seen face-on at the part's distance, would be drawn shorter than this
+many pixels is drawn coarse (its coarse edges then about twice as long: still under the skin's
+8-10 pixels at the live window's 640x480)."""
 
 WHOLE_PARTS = ("skin", "attached")
 """Parts always drawn with every triangle: the surface the DFFD bends, and what lies on it and
