@@ -5,14 +5,21 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from puppet.view.partdetail import PartDetail
+from puppet.view.partdetail import FINE_EDGE_PX, PartDetail
 from puppet.view.renderer import Renderer
 from puppet.view.rendertake import aim_at_head
 
 OPEN_MOUTH = {"open_jaw": 1200, "stretch_l_cornerlip": 300, "stretch_r_cornerlip": 300,
               "lower_t_midlip": -300, "raise_b_midlip": -200}
 """A wide open mouth: the teeth, tongue and the inside of the lips in view."""
+
+
+@pytest.fixture(scope="module")
+def detail(face) -> PartDetail:
+    return PartDetail(face.vertices, face.triangles, face.parts, face.colors)
 
 
 @pytest.fixture(scope="module")
@@ -30,8 +37,7 @@ def _render(face, pose, size, view="front", detail=True, close_up=False) -> tupl
         return renderer.render(*pose), renderer.levels
 
 
-def test_the_inner_parts_are_set_apart_from_the_skin(face):
-    detail = PartDetail(face.vertices, face.triangles, face.parts, face.colors)
+def test_the_inner_parts_are_set_apart_from_the_skin(face, detail):
     assert set(detail.parts) == {"eye_l", "eye_r", "teeth_lower", "teeth_upper", "tongue"}
     skin = np.zeros(len(face.vertices), bool)
     skin[face.parts["skin"]] = True
@@ -91,3 +97,16 @@ def test_the_level_follows_the_camera(face, open_mouth, egl):
         assert np.array_equal(renderer.render(*open_mouth), far)
     whole, _ = _render(face, open_mouth, (640, 480), detail=False, close_up=True)
     assert np.abs(whole.astype(int) - near.astype(int)).max() <= 1
+
+
+@settings(max_examples=40, deadline=None)
+@given(distance=st.floats(1.0, 400.0), height=st.integers(60, 2160), fov=st.floats(10.0, 90.0))
+def test_a_part_is_coarse_exactly_when_its_edges_would_be_drawn_small(detail, distance, height, fov):
+    eye = np.array([0.0, 0.0, distance])
+    levels = detail.levels(eye, np.array([0.0, 0.0, 1.0]), fov, height)
+    focal = height / (2 * np.tan(np.radians(fov) / 2))
+    for name, part in detail.parts.items():
+        depth = distance - part.centre[2]
+        assert (levels[name] == "coarse") == (depth > 0 and part.edge * focal / depth < FINE_EDGE_PX)
+    farther = detail.levels(2 * eye, np.array([0.0, 0.0, 1.0]), fov, height)
+    assert all(farther[name] == "coarse" for name, level in levels.items() if level == "coarse")
