@@ -80,29 +80,42 @@ def _round(positions: np.ndarray, tri: np.ndarray, quadrics: np.ndarray, pinned:
     n = len(positions)
     u, w, shared = _half_edges(tri, n)
     adjacency = sp.csr_matrix((np.ones(len(u)), (u, w)), shape=(n, n))
+    u, w, cost = _candidates(positions, tri, quadrics, adjacency, u, w, shared, pinned, limit)
+    picked = _spread_out(adjacency, u, cost)
+    picked = picked[np.argsort(cost[picked], kind="stable")[:max(budget, 1)]]
+    return u[picked], w[picked]
+
+
+def _candidates(positions: np.ndarray, tri: np.ndarray, quadrics: np.ndarray, adjacency: sp.csr_matrix,
+                u: np.ndarray, w: np.ndarray, shared: np.ndarray, pinned: np.ndarray,
+                limit: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Of the half-edges (u, w), each ``u``'s cheapest allowed collapse (module docstring) among
+    the cheaper half, with its quadric error: sorted by ``u``, one row per ``u``."""
     allowed = ~pinned[u]
     allowed &= np.asarray(adjacency[u].multiply(adjacency[w]).sum(axis=1)).ravel() == shared
     u, w = u[allowed], w[allowed]
-    if not len(u):
-        return u, w
     cost = _cost(positions, quadrics, u, w)
+    if not len(cost):
+        return u, w, cost
     area = np.trace(quadrics[u, :3, :3] + quadrics[w, :3, :3], axis1=1, axis2=2)
     cheap = (cost <= np.median(cost)) & (cost <= limit ** 2 * area)
-    u, w, cost = u[cheap], w[cheap], cost[cheap]
-    order = np.lexsort((w, cost, u))
+    order = np.flatnonzero(cheap)[np.lexsort((w[cheap], cost[cheap], u[cheap]))]
     u, w, cost = u[order], w[order], cost[order]
-    place = np.arange(len(u)) - np.searchsorted(u, u)
-    best = place < CHOICES  # each u's cheapest few, checked for turned triangles
-    u, w, cost, place = u[best], w[best], cost[best], place[best]
-    keep = _keeps_surface(positions, tri, u, w, n)
+    best = np.arange(len(u)) - np.searchsorted(u, u) < CHOICES  # each u's cheapest few are checked
+    u, w, cost = u[best], w[best], cost[best]
+    keep = _keeps_surface(positions, tri, u, w, len(positions))
     u, w, cost = u[keep], w[keep], cost[keep]
-    if not len(u):
-        return u, w
-    first = np.flatnonzero(np.r_[True, u[1:] != u[:-1]])  # each u's cheapest collapse that folds nothing
+    first = np.flatnonzero(np.diff(u, prepend=-1))  # each u's cheapest that folds nothing
+    return u[first], w[first], cost[first]
+
+
+def _spread_out(adjacency: sp.csr_matrix, u: np.ndarray, cost: np.ndarray) -> np.ndarray:
+    """Rows of ``u`` (distinct vertices) to collapse together: each the cheapest within two edges
+    of its vertex among those not yet ruled out, ``PASSES`` times (Luby's algorithm)."""
     free = np.iinfo(np.int64).max
-    rank = np.full(n, free)
-    rank[u[first]] = np.argsort(np.argsort(cost[first], kind="stable"), kind="stable")
-    taken = np.zeros(n, dtype=bool)
+    rank = np.full(adjacency.shape[0], free)
+    rank[u] = np.argsort(np.argsort(cost, kind="stable"), kind="stable")
+    taken = np.zeros(adjacency.shape[0], dtype=bool)
     for _ in range(PASSES):
         near = _neighbour_min(adjacency, _neighbour_min(adjacency, rank))
         chosen = (rank == near) & (rank < free)
@@ -110,9 +123,7 @@ def _round(positions: np.ndarray, tri: np.ndarray, quadrics: np.ndarray, pinned:
             break
         taken |= chosen
         rank[_within_two(adjacency, chosen)] = free
-    picked = first[taken[u[first]]]
-    picked = picked[np.argsort(cost[picked], kind="stable")[:max(budget, 1)]]
-    return u[picked], w[picked]
+    return np.flatnonzero(taken[u])
 
 
 def _edge_keys(tri: np.ndarray, n: int) -> np.ndarray:

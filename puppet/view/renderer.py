@@ -618,8 +618,9 @@ class Renderer:
         are seen small (``PartDetail``) unless ``detail`` is False; ``options`` as for the
         constructor (size, ctx, samples...)."""
         parts = getattr(face, "parts", None)
-        levels = PartDetail(face.vertices, face.triangles, parts, face.colors) if detail and parts else None
-        return cls(face.triangles, len(face.vertices), face.colors, **texture_kwargs(face), detail=levels, **options)
+        part_detail = PartDetail(face.vertices, face.triangles, parts, face.colors) if detail and parts else None
+        return cls(face.triangles, len(face.vertices), face.colors, **texture_kwargs(face), detail=part_detail,
+                   **options)
 
     def _build(self, triangles: np.ndarray, colors: np.ndarray | None, materials: np.ndarray | None,
                samples: int, gpu_normals: bool | None) -> None:
