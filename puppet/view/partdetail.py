@@ -34,8 +34,8 @@ teeth (4.1), whose coarse edges are then 4.0 and 7.8 pixels, under the skin's 9.
 
 WHOLE_PARTS = ("skin", "attached")
 """Parts always drawn with every triangle: the surface the DFFD bends, and what lies on it and
-bends with it (lashes, tear lines: ``puppet.face.landmarks``'s ``attached``), a coarser copy of
-which would show the skin through it or sink into the eyeball."""
+bends with it (lashes, tear lines: ``puppet.face.landmarks``'s ``attached``; a coarser copy of
+the ICT head's put dark specks on its eyes)."""
 
 _COARSE: dict[str, np.ndarray] = {}
 
