@@ -47,8 +47,7 @@ class LidClosure:
 
     def __init__(self, runtime, controls: Controls, meet: float) -> None:
         self.meet = meet
-        self.sides = [side for side in (_ClosingShape.sampled(runtime, controls, meet, upper, LID_FAPS[upper][0],
-                                                              LID_FAPS[lower][0], lower)
+        self.sides = [side for side in (_ClosingShape.sampled(runtime, controls, meet, upper, lower)
                                         for upper, lower in LID_PAIRS) if side is not None]
 
     def add(self, values: np.ndarray, d: np.ndarray) -> None:
@@ -79,9 +78,11 @@ class _ClosingShape:
 
     @classmethod
     def sampled(cls, runtime, controls: Controls, meet: float, number: int,
-                upper_part: str, lower_part: str, lower_number: int) -> _ClosingShape | None:
-        """The shape of FAP ``number``'s lid, None where the rig has not both lids or no margin
-        points on them (a rig made elsewhere may carry none)."""
+                lower_number: int) -> _ClosingShape | None:
+        """The shape of upper lid FAP ``number``'s lid closing onto lower lid FAP
+        ``lower_number``'s, None where the rig has not both lids or no margin points on them (a rig
+        made elsewhere may carry none)."""
+        upper_part, lower_part = LID_FAPS[number][0], LID_FAPS[lower_number][0]
         if upper_part not in runtime.rig.rigid_parts or lower_part not in runtime.rig.rigid_parts:
             return None
         feature = set(runtime.face.feature_points)
