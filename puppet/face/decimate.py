@@ -54,9 +54,7 @@ def decimate(vertices: np.ndarray, triangles: np.ndarray, keep: float = 0.25,
     tri = local.reshape(-1, 3)
     start = len(tri)
     target = int(np.ceil(keep * start))
-    pinned = _pinned(tri, len(used))
-    if colors is not None:
-        pinned |= _colour_borders(tri, np.asarray(colors, dtype=np.float64)[used], color_tolerance)
+    pinned = _pinned(tri, None if colors is None else np.asarray(colors, dtype=np.float64)[used], color_tolerance)
     quadrics = _quadrics(positions, tri)
     edges = positions[tri[:, [1, 2, 0]]] - positions[tri]
     limit = MAX_ERROR * float(np.linalg.norm(edges, axis=2).mean())
@@ -140,21 +138,17 @@ def _half_edges(tri: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.nda
     return np.concatenate([low, high]), np.concatenate([high, low]), np.concatenate([count, count])
 
 
-def _pinned(tri: np.ndarray, n: int) -> np.ndarray:
-    """Vertices on an open border or a non-manifold edge (an edge not held by two triangles)."""
-    keys, count = np.unique(_edge_keys(tri, n), return_counts=True)
+def _pinned(tri: np.ndarray, colors: np.ndarray | None, tolerance: float) -> np.ndarray:
+    """Vertices never collapsed: on an open border or a non-manifold edge (an edge not held by two
+    triangles) and, given ``colors`` of the vertices, where a neighbour's colour differs by more
+    than ``tolerance`` in a channel (collapsing them would move where one colour meets another)."""
+    n = int(tri.max()) + 1
+    u, w, shared = _half_edges(tri, n)
     pinned = np.zeros(n, dtype=bool)
-    pinned[np.concatenate(np.divmod(keys[count != 2], n))] = True
+    pinned[u[shared != 2]] = True
+    if colors is not None:
+        pinned[u[np.abs(colors[u] - colors[w]).max(axis=1) > tolerance]] = True
     return pinned
-
-
-def _colour_borders(tri: np.ndarray, colors: np.ndarray, tolerance: float) -> np.ndarray:
-    """Vertices with a neighbour whose colour differs by more than ``tolerance`` in a channel:
-    collapsing them would move where one colour meets another."""
-    u, w, _ = _half_edges(tri, len(colors))
-    border = np.zeros(len(colors), dtype=bool)
-    border[u[np.abs(colors[u] - colors[w]).max(axis=1) > tolerance]] = True
-    return border
 
 
 def _keeps_surface(positions: np.ndarray, tri: np.ndarray, u: np.ndarray, w: np.ndarray, n: int) -> np.ndarray:

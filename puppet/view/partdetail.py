@@ -43,6 +43,7 @@ _COARSE: dict[str, np.ndarray] = {}
 @dataclass(frozen=True)
 class _Part:
     triangles: np.ndarray  # (F, 3) int32, every triangle of the part
+    used: np.ndarray  # the part's vertices (those its triangles use)
     positions: np.ndarray  # (N, 3) the whole mesh's rest positions
     colors: np.ndarray | None
     centre: np.ndarray
@@ -91,17 +92,16 @@ class PartDetail:
 def _part(positions: np.ndarray, triangles: np.ndarray, colors: np.ndarray | None) -> _Part:
     used = np.unique(triangles)
     edges = positions[triangles[:, [1, 2, 0]]] - positions[triangles]
-    return _Part(triangles, positions, None if colors is None else np.asarray(colors), positions[used].mean(axis=0),
-                 float(np.linalg.norm(edges, axis=2).mean()))
+    return _Part(triangles, used, positions, None if colors is None else np.asarray(colors),
+                 positions[used].mean(axis=0), float(np.linalg.norm(edges, axis=2).mean()))
 
 
 def _coarse(part: _Part) -> np.ndarray:
     """The part's coarse level, built once per process for the same geometry and colours."""
-    used = np.unique(part.triangles)
     digest = hashlib.sha256(np.ascontiguousarray(part.triangles, dtype="<i4").tobytes())
-    digest.update(np.ascontiguousarray(part.positions[used], dtype="<f8").tobytes())
+    digest.update(np.ascontiguousarray(part.positions[part.used], dtype="<f8").tobytes())
     if part.colors is not None:
-        digest.update(np.ascontiguousarray(part.colors[used], dtype="<f4").tobytes())
+        digest.update(np.ascontiguousarray(part.colors[part.used], dtype="<f4").tobytes())
     key = digest.hexdigest()
     if key not in _COARSE:
         _COARSE[key] = decimate(part.positions, part.triangles, COARSE_KEEP, colors=part.colors)
