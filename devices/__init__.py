@@ -28,7 +28,7 @@ import warnings
 from collections.abc import Mapping
 from types import ModuleType
 
-from devices.base import Counters, Device, DeviceError, DeviceLost, Found, Sample, State, Url
+from devices.base import Counters, Device, DeviceError, DeviceLost, Found, Sample, Sound, State, Url
 
 BACKENDS: dict[str, str] = {
     "serial": "devices.serial_port",
@@ -38,6 +38,8 @@ BACKENDS: dict[str, str] = {
     "osc": "devices.osc_device",
     "sim": "devices.sim_device",
     "replay": "devices.replay_device",
+    "audio": "devices.audio_device",
+    "wav": "devices.wav_device",
 }
 """URL scheme -> module of its built-in backend."""
 
@@ -114,5 +116,5 @@ def twin_schemes() -> list[str]:
     return sorted(out)
 
 
-__all__ = ["BACKENDS", "Counters", "Device", "DeviceError", "DeviceLost", "Found", "Sample", "State", "Url",
+__all__ = ["BACKENDS", "Counters", "Device", "DeviceError", "DeviceLost", "Found", "Sample", "Sound", "State", "Url",
            "backend", "backends", "device_class", "open_device", "open_twin", "twin_schemes"]

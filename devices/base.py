@@ -24,14 +24,32 @@ from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from urllib.parse import parse_qsl, urlsplit
 
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Sound:
+    """A block of sound a reading was made from: 16-bit mono PCM at ``rate`` Hz, its first sample
+    heard at ``start_ns`` (``time.monotonic_ns()``'s clock), and the state the device's analysis
+    was in before it (``devices.voice.Voice.state``). A take writes the blocks to its WAV, and the
+    first block's state to its metadata, so that the sound replays into the same readings."""
+
+    pcm: np.ndarray
+    rate: int
+    start_ns: int
+    state: Mapping | None = None
+
 
 @dataclass(frozen=True)
 class Sample:
-    """Raw channel values read from one device at one moment (``time.monotonic_ns()``)."""
+    """Raw channel values read from one device at one moment (``time.monotonic_ns()``); an audio
+    device's Samples also carry the ``sound`` they were analysed from (not compared, not logged:
+    the take keeps it as a WAV)."""
 
     t_ns: int
     device: str
     values: Mapping[str, float]
+    sound: Sound | None = field(default=None, compare=False, repr=False)
 
 
 class DeviceError(RuntimeError):
@@ -55,13 +73,16 @@ class State(enum.Enum):
 @dataclass
 class Counters:
     """What a device has seen: samples, dropped samples, bad frames (and bad checksums among
-    them), reconnections."""
+    them), reconnections; an audio device also its overruns (sound lost because it was not read
+    in time) and underruns (sound that came late)."""
 
     samples: int = 0
     dropped: int = 0
     bad_frames: int = 0
     bad_checksums: int = 0  # of the bad frames, those whose checksum failed (serial ascii lines)
     reconnects: int = 0
+    overruns: int = 0
+    underruns: int = 0
     last_error: str = ""
 
 

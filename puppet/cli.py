@@ -26,7 +26,7 @@ VIEWS = ("front", "three_quarter", "profile")
 so ``puppet devices`` starts in well under a second)."""
 ANTIALIAS_MODES = ("fxaa", "none")
 """``puppet render --antialias`` choices (``puppet.view.renderer.ANTIALIAS_MODES``)."""
-BENCH_SECTIONS = ("deform", "frames", "muscles", "inputs", "latency", "flood", "long_take")
+BENCH_SECTIONS = ("deform", "frames", "muscles", "inputs", "latency", "voice", "flood", "long_take")
 """``puppet bench --only`` choices (``puppet.bench.run.SECTIONS``; the bench is imported only when run)."""
 FACE_HELP = "a face folder (puppet rig ... -o FOLDER/, puppet face-from-photo) (default: the embedded face)"
 MAX_SIDE = 8192
@@ -98,7 +98,8 @@ def _demo(args: argparse.Namespace) -> int:
 
 
 def _render_arguments(render: argparse.ArgumentParser) -> None:
-    render.add_argument("take", nargs="+", help="the .fap file (or several, rendered in parallel)")
+    render.add_argument("take", nargs="+", help="the take folder or .fap file (or several, rendered in parallel); "
+                                                "a take's sound goes into the video")
     render.add_argument("-o", "--output", default=None,
                         help="the video to write (.mp4; default: take.mp4 in the take folder, or X.mp4 beside "
                              "X.fap), or for several takes a folder (DIR/): one TAKE.mp4 each")
@@ -159,6 +160,36 @@ def _import_arkit_arguments(arkit: argparse.ArgumentParser) -> None:
     arkit.add_argument("--fps", type=int, choices=(25, 30, 50, 60), default=30, help="take fps (default 30)")
     arkit.add_argument("--csv-fps", type=_seconds_or_rate("fps", 0.1, 1000), default=60.0,
                        help="the rate of the timecodes' frame field (default 60)")
+
+
+def _lipsync_arguments(lipsync: argparse.ArgumentParser) -> None:
+    lipsync.add_argument("sound", help="a recording of speech (any format libsndfile reads: WAV, FLAC, Ogg ...)")
+    lipsync.add_argument("-o", "--output", required=True, metavar="TAKE/",
+                         help="the take folder to write (new or empty): take.fap, take.wav, the log, take.json")
+    lipsync.add_argument("--mapping", default=None,
+                         help="what the voice drives: a mapping with an audio:// or wav:// device (default: voice)")
+    lipsync.add_argument("--over", default=None, metavar="TAKE",
+                         help="lay the mouth over this take, keeping the rest of it (a layered pass)")
+    lipsync.add_argument("--fps", type=int, choices=(25, 30, 50, 60), default=30, help="take fps (default 30)")
+    lipsync.add_argument("--live", action="store_true",
+                         help="analyse as a live microphone does (no look-ahead): the take a live pass would give")
+
+
+def _lipsync(args: argparse.Namespace) -> int:
+    """``puppet lipsync``: a speech recording into a take with its sound."""
+    import time
+
+    from puppet.io.takes import open_take
+    from puppet.live.lipsync import lipsync
+
+    start = time.perf_counter()
+    folder = lipsync(args.sound, args.output, mapping=args.mapping, over=args.over, fps=args.fps,
+                     lookahead=not args.live)
+    meta = open_take(folder).meta
+    seconds = meta["frames"] / meta["fps"]
+    print(f"{folder}: {meta['frames']} frames ({seconds:.1f} s) with its sound, in {time.perf_counter() - start:.1f} s; "
+          f"puppet render {folder} makes the video")
+    return 0
 
 
 def _live_arguments(live: argparse.ArgumentParser) -> None:
@@ -657,8 +688,11 @@ COMMANDS: dict[str, Command] = {
     "export": Command("export a take to glTF binary (.glb), animated by morph targets", _export_arguments, _export),
     "import-arkit": Command("import a Live Link Face / ARKit blendshape CSV as a take", _import_arkit_arguments,
                             _import_arkit),
+    "lipsync": Command("make a take from a recording of speech: the mouth follows the voice, the sound kept",
+                       _lipsync_arguments, _lipsync),
     "live": Command("run a mapping's devices onto the face in a window, live", _live_arguments, _live),
-    "devices": Command("list the controllers that are connected (serial, HID, MIDI, CAN)", _no_arguments, _devices),
+    "devices": Command("list the controllers that are connected (serial, HID, MIDI, CAN, sound inputs)",
+                       _no_arguments, _devices),
     "mappings": Command("list the shipped mappings, or write an editable copy of one", _mappings_arguments,
                         _mappings),
     "calibrate": Command("record rest and a sweep per channel; write them into the mapping", _calibrate_arguments,

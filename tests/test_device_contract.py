@@ -16,6 +16,7 @@ import uuid
 from collections.abc import Callable
 
 import mido
+import numpy as np
 import pytest
 from polling import wait_for
 from pythonosc.udp_client import SimpleUDPClient
@@ -28,7 +29,11 @@ from devices.midi_device import MessagePort, MidiDevice
 from devices.simulated_can import EXTRA_ID, JOYSTICK_SIGNALS, CanJoystick
 from devices.simulated_hid import FakeHidModule, gamepad, gamepad_report
 from devices.simulated_serial import PtyJoystick
+from devices.simulated_audio import FakeMicrophone, FakeSoundDevice
 from devices.twin import Twin
+from devices.audio_device import AudioDevice
+from devices.voice import CHANNELS, Voice
+from puppet.io.wavwriter import WavWriter
 
 
 class Harness:
@@ -40,6 +45,7 @@ class Harness:
     scheme: str
     readings: list[dict[str, float]] | None = None
     twin_url: str = ""
+    twin_wire: dict | None = None  # what a take keeps for the twin (a sound device: its recorded sound)
     unplug: Callable[[], None] | None = None
     replug: Callable[[], None] | None = None
 
@@ -194,8 +200,49 @@ class ReplayHarness(Harness):
         return {"ch0": 0.5}
 
 
+class SoundHarness(Harness):
+    """A recording a microphone hears: a vowel. Its twin plays a take's recorded sound back
+    through ``wav://``, so the readings it must carry are the analysis's of that sound."""
+
+    def __init__(self, tmp_path) -> None:
+        t = np.arange(48000) / 48000
+        self.sound = np.round(8000 * np.sin(2 * np.pi * 220 * t) * (1 + np.sin(2 * np.pi * 3 * t))).astype(np.int16)
+        self.path = tmp_path / "heard.wav"
+        with WavWriter(self.path, 48000) as writer:
+            writer.write(self.sound)
+        voice = Voice(48000)
+        self.readings = [voice(self.sound[k * 480:(k + 1) * 480]) for k in range(3)]
+        self.twin_wire = {"sound_file": str(self.path), "rate": 48000, "block": 480, "gate": -45.0}
+
+    def send(self) -> dict[str, float]:
+        return {name: None for name in CHANNELS}  # it hears by itself: any reading of the voice's channels
+
+
+class WavHarness(SoundHarness):
+    """A sound file: no plug to pull."""
+
+    scheme, twin_url = "wav", "wav://speech.wav"
+
+    def device(self) -> Device:
+        return open_device(f"wav://{self.path}?loop=1", "mic")
+
+
+class AudioHarness(SoundHarness):
+    """A microphone behind sounddevice's interface (``devices.simulated_audio``: these machines
+    have no sound card); its plug is the fake microphone's."""
+
+    scheme, twin_url = "audio", "audio://Headset"
+
+    def device(self) -> Device:
+        mic = FakeMicrophone("USB Headset Mic", self.sound)
+        self.unplug, self.replug = mic.unplug, mic.replug
+        return AudioDevice.from_url(Url.parse("audio://headset"), "mic", sd_module=FakeSoundDevice(mic))
+
+
 HARNESSES = {"serial": SerialHarness, "sim": SimHarness, "hid": HidHarness, "can": CanHarness,
-             "midi": MidiHarness, "osc": OscHarness, "replay": ReplayHarness}
+             "midi": MidiHarness, "osc": OscHarness, "replay": ReplayHarness, "wav": WavHarness,
+             "audio": AudioHarness}
+NEEDS_FOLDER = ("replay", "wav", "audio")
 
 
 def test_every_built_in_backend_is_in_the_contract():
@@ -204,7 +251,7 @@ def test_every_built_in_backend_is_in_the_contract():
 
 @pytest.fixture(params=sorted(HARNESSES))
 def harness(request, tmp_path):
-    made = HARNESSES[request.param](tmp_path) if request.param == "replay" else HARNESSES[request.param]()
+    made = HARNESSES[request.param](tmp_path) if request.param in NEEDS_FOLDER else HARNESSES[request.param]()
     yield made
     made.close()
 
@@ -224,7 +271,7 @@ def _reads(device: Device, harness: Harness, timeout: float = 3.0) -> bool:
     itself, any reading of its channels)."""
     deadline, got = time.monotonic() + timeout, {}
     while time.monotonic() < deadline:
-        expected = harness.send() or {"ch0": None, "ch1": None}
+        expected = harness.send() or {"ch0": None, "ch1": None}  # a device that sends by itself
         for sample in device.samples(timeout=0.2):
             got.update(sample.values)
             if all(name in got and value in (None, got[name]) for name, value in expected.items()):
@@ -274,7 +321,7 @@ def test_a_reading_goes_round_its_twin_bit_for_bit(harness):
         with pytest.raises(DeviceError, match="cannot be replayed through a device"):
             open_twin(harness.twin_url, "box")
         return
-    with open_twin(harness.twin_url, "box") as twin:
+    with open_twin(harness.twin_url, "box", harness.twin_wire) as twin:
         for reading in harness.readings:
             got = twin.exchange(reading).values
             assert [repr(got[k]) for k in sorted(reading)] == [repr(reading[k]) for k in sorted(reading)]

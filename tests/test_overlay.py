@@ -188,3 +188,35 @@ def test_the_window_does_not_calibrate_a_shipped_mapping_or_while_recording(tmp_
     finally:
         live.close()
         session.close()
+
+
+def test_an_audio_input_shows_its_level_against_its_gate_and_its_xruns(tmp_path, headless_window):
+    """A microphone (here a wav:// file at real-time pace) gets a level meter in the cockpit, green
+    above its gate; its overruns and underruns are counted beside it."""
+    import subprocess
+
+    wav = tmp_path / "ah.wav"
+    subprocess.run([sys.executable, "-c", "import numpy as np, sys; from puppet.io.wavwriter import WavWriter; "
+                    "t = np.arange(96000) / 48000; w = WavWriter(sys.argv[1], 48000); "
+                    "w.write((8000 * np.sin(2 * np.pi * 220 * t)).astype(np.int16)); w.close()", str(wav)],
+                   check=True, cwd=Path(__file__).resolve().parents[1])
+    window = headless_window(SIZE)
+    session = open_session(shipped_mappings()["arduino_sliders_voice"],
+                           devices={**SIM_BOX, "mic": f"wav://{wav}?loop=1"}, record_root=tmp_path)
+    live = LiveView(session, window)
+    try:
+        _steps(live, 30)
+        [mic] = [line for line in device_lines(session.states, session.devices) if line.name == "mic"]
+        assert mic.state == "open" and mic.level_db > mic.gate_db and 0.5 < mic.meter < 1.0
+        assert (mic.overruns, mic.underruns) == (session.devices["mic"].counters.overruns,
+                                                 session.devices["mic"].counters.underruns)
+        pixels = _pixels(window)
+        Image.fromarray(pixels).save(tmp_path / "cockpit.png")
+        panel = pixels[8:300, 8:330].reshape(-1, 3).astype(int)
+        bar = np.all(np.abs(panel - (76, 217, 89)) < 12, axis=1)  # the meter's green, not the text's
+        assert bar.sum() > 300
+    finally:
+        live.close()
+        session.close()
+    box = device_lines(session.states, session.devices)[0]
+    assert box.level_db is None  # a slider box has no meter

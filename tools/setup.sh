@@ -23,6 +23,18 @@ if need_egl; then
   fi
 fi
 
+# Sound: PortAudio for microphones (audio://) and play-out (sounddevice loads it at run time), and
+# espeak-ng, whose speech with known phonemes the voice tests listen to.
+if ! { ldconfig -p | grep -q 'libportaudio.so.2' && command -v espeak-ng >/dev/null; }; then
+  if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
+    echo "setup: installing PortAudio and espeak-ng (libportaudio2 espeak-ng) for the microphone and its tests"
+    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libportaudio2 espeak-ng >/dev/null
+  else
+    echo "setup: PortAudio or espeak-ng is missing; install them (Debian/Ubuntu: sudo apt-get install libportaudio2 espeak-ng)" >&2
+    exit 1
+  fi
+fi
+
 # Xvfb lets the tests open the real live window (and take its screenshot) with no screen.
 if ! command -v xvfb-run >/dev/null && [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
   echo "setup: installing Xvfb (xvfb xauth) so the live window can be tested without a screen"

@@ -54,8 +54,9 @@ def rss_mb() -> float:
         return int(statm.read().split()[1]) * PAGE / 2**20
 
 
-def _session(runtime: Runtime, url: str, root: str) -> LiveSession:
-    session = LiveSession(MAPPING, face=runtime, devices={"box": open_device(url, "box")}, record_root=root)
+def _session(runtime: Runtime, url: str, root: str, extra: dict[str, str] | None = None) -> LiveSession:
+    devices = {"box": open_device(url, "box"), **{name: open_device(u, name) for name, u in (extra or {}).items()}}
+    session = LiveSession(MAPPING, face=runtime, devices=devices, record_root=root)
     deadline = time.monotonic() + 5
     while not (session.frame().states["box"] is State.OPEN and session.samples_fed):
         if time.monotonic() > deadline:
@@ -65,7 +66,7 @@ def _session(runtime: Runtime, url: str, root: str) -> LiveSession:
     return session
 
 
-def _renderer(runtime: Runtime, size: tuple[int, int]) -> Renderer:
+def live_renderer(runtime: Runtime, size: tuple[int, int]) -> Renderer:
     """An offscreen renderer with the live window's settings (``render.choose_antialias``'s
     default for this GL, as ``puppet live`` uses), so the latency measured is what it draws."""
     from puppet.view.rendertake import aim_at_head
@@ -83,10 +84,12 @@ def latency(runtime: Runtime, seconds: float = BOX_CYCLE_S, size: tuple[int, int
 
 
 @contextlib.contextmanager
-def live_box(runtime: Runtime, size: tuple[int, int]) -> Iterator[tuple[LiveSession, Renderer]]:
+def live_box(runtime: Runtime, size: tuple[int, int],
+             extra: dict[str, str] | None = None) -> Iterator[tuple[LiveSession, Renderer]]:
     """(session, renderer): the slider box sending ascii lines at 200 readings/s from a process
-    of its own, a live session reading it once it sends, and an offscreen renderer of ``size``
-    with the live window's settings; all closed on leaving."""
+    of its own, a live session reading it once it sends (and the ``extra`` devices, name: URL,
+    read beside it), and an offscreen renderer of ``size`` with the live window's settings; all
+    closed on leaving."""
     spawn = multiprocessing.get_context("spawn")  # a clean process: no GL or threads of ours forked
     with tempfile.TemporaryDirectory() as root:
         link, stop = os.path.join(root, "box"), spawn.Event()
@@ -94,8 +97,8 @@ def live_box(runtime: Runtime, size: tuple[int, int]) -> Iterator[tuple[LiveSess
         box.start()
         try:
             _wait_for(link, box)
-            session = _session(runtime, f"serial://{link}?protocol=ascii", root)
-            renderer = _renderer(runtime, size)
+            session = _session(runtime, f"serial://{link}?protocol=ascii", root, extra)
+            renderer = live_renderer(runtime, size)
             try:
                 yield session, renderer
             finally:
@@ -146,7 +149,7 @@ def _loop(session: LiveSession, renderer: Renderer, seconds: float) -> dict:
 def flood(runtime: Runtime, seconds: float = 60.0, rate: float = 10_000.0,
           size: tuple[int, int] = (320, 240)) -> dict:
     """The live loop, recording, under ``rate`` readings a second (see the module docstring)."""
-    renderer = _renderer(runtime, size)
+    renderer = live_renderer(runtime, size)
     try:
         with tempfile.TemporaryDirectory() as root:
             calm = _session(runtime, "sim://joystick?protocol=cobs&rate=200&channels=6", root)

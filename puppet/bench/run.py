@@ -15,9 +15,10 @@ from collections.abc import Callable
 from puppet.bench import pipeline
 from puppet.bench.deform import bench_face, bench_faces, bench_frame_split, bench_muscles
 from puppet.bench.inputs import bench_inputs
+from puppet.bench.voice import voice
 from puppet.runtime.runtime import MUSCLE_MODES, Runtime
 
-SECTIONS = ("deform", "frames", "muscles", "inputs", "latency", "flood", "long_take")
+SECTIONS = ("deform", "frames", "muscles", "inputs", "latency", "voice", "flood", "long_take")
 """What ``puppet bench --only`` can pick, in the order they run and print."""
 
 
@@ -77,6 +78,7 @@ def _live_sections(runtime: Callable[[], Runtime], flood_seconds: float, take_se
                    latency_seconds: float) -> dict[str, tuple[str, Callable[[], dict]]]:
     """The live pipeline on the default face: latency, a flood of input, a long take."""
     return {"latency": ("sim slider box -> drawn frame", lambda: pipeline.latency(runtime(), latency_seconds)),
+            "voice": ("wav:// bursts -> drawn frame", lambda: voice(runtime())),
             "flood": (f"{flood_seconds:g} s of 10,000 readings/s", lambda: pipeline.flood(runtime(), flood_seconds)),
             "long_take": (f"a {take_seconds:g} s take", lambda: pipeline.long_take(take_seconds))}
 
@@ -115,6 +117,14 @@ def _print_live(report: dict) -> None:
               f"({lat['samples']} samples; {lat['samples_before']} queued before the loop, not timed; "
               f"drawn by {lat['gl_renderer']}{_cores(lat['rasteriser_cores'])}, "
               f"normals on the {'GPU, in the draw' if lat['normals'] == 'draw' else 'CPU'})")
+    if "voice" in report:
+        sync = report["voice"]
+        lag = sync["sound_to_drawn_ms"]
+        print(f"voice (wav:// at real-time pace -> voice.yaml -> default face, drawn and read back 640x480): a sound's "
+              f"onset to the first frame showing it {lag['median']:.1f} ms median / {lag['p99']:.1f} p99 over "
+              f"{lag['bursts']} bursts; analysis {sync['analysis_ms_per_block']:.3f} ms CPU per 10 ms block; the "
+              f"slider box's loop {sync['fps_without_mic']:.0f} fps without a microphone, {sync['fps_with_mic']:.0f} "
+              f"with one (ratio {sync['fps_ratio']:.2f})")
     if "flood" in report:
         flood = report["flood"]
         print(f"flood {flood['rate']:,.0f} readings/s for {flood['seconds']:g} s, recording: {flood['fps']:.1f} fps "

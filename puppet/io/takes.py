@@ -7,6 +7,11 @@ succeeds twice, so two recorders can never write into one take) with
   ``FapWriter``: flushed every frame, its header count exact after every frame;
 * ``samples.jsonl``: every raw Sample as it arrived (``puppet.io.samplelog``), flushed per sample,
   so the take can be re-mapped later;
+* ``take.wav`` (and ``take.NAME.wav`` for a second audio device NAME): the sound each audio
+  device heard while recording, block by block (``puppet.io.wavwriter``: readable up to the last
+  block after a kill); ``take.json``'s ``sound`` says, per device, its file, rate, where its first
+  frame falls on the Samples' clock (``first_ns``, against ``t0_ns``: frame 0 of the .fap) and the
+  analysis's state before it (so the sound replays through ``wav://`` into the same readings);
 * ``take.json``: the metadata -- name, fps, start time (UTC, ISO 8601), the mapping's path and
   text, the devices' URLs, what the session adds to replay the take exactly (``t0_ns``: the
   clock of frame 0, ``mapping_state``: the mapping's state then, ``hold_ns``, ``wire``: each
@@ -38,12 +43,15 @@ import numpy as np
 
 from devices.base import Sample
 from devices.samplelines import read_samples
+from devices.voice import json_state
 from puppet.errors import PuppetError
 from puppet.io.fapfile import FapStream, FapWriter, read_fap
 from puppet.io.samplelog import LogEvent, SampleLogWriter, read_take_log
+from puppet.io.wavwriter import WavWriter
 
 FPS_CHOICES = (25, 30, 50, 60)
-FAP_NAME, LOG_NAME, META_NAME = "take.fap", "samples.jsonl", "take.json"
+FAP_NAME, LOG_NAME, META_NAME, SOUND_NAME = "take.fap", "samples.jsonl", "take.json", "take.wav"
+SOUND_FILE = re.compile(r"take(\.[A-Za-z_][A-Za-z0-9_-]*)?\.wav")
 MAX_META_BYTES = 64 << 20
 
 
@@ -74,15 +82,26 @@ def next_take_folder(root: str | os.PathLike, name: str) -> Path:
             number += 1
 
 
+def exact_take_folder(folder: Path) -> Path:
+    """``folder`` made for a take (an empty one taken as it is); a TakeError if it holds anything."""
+    if folder.is_dir() and any(folder.iterdir()):
+        raise TakeError(f"{folder}: the folder holds files already; give a new or empty folder for the take")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise TakeError(f"{folder}: cannot make a take folder there: {exc.strerror or exc}") from None
+    return folder
+
+
 class TakeRecorder:
     """Records one take: raw Samples as they come, Pose frames at the take's fps."""
 
     def __init__(self, root: str | os.PathLike, name: str, fps: int = 25, *,
                  mapping_path: str | os.PathLike | None = None, devices: Mapping[str, str] | None = None,
-                 extra: Mapping[str, object] | None = None) -> None:
+                 extra: Mapping[str, object] | None = None, exact: bool = False) -> None:
         if fps not in FPS_CHOICES:
             raise TakeError(f"take fps {fps}: choose one of {FPS_CHOICES}")
-        self.folder = next_take_folder(root, name)
+        self.folder = exact_take_folder(Path(root) / name) if exact else next_take_folder(root, name)
         self.fps = fps
         self.meta = {
             "name": name, "fps": fps, "started": _dt.datetime.now(_dt.timezone.utc).isoformat(),
@@ -93,15 +112,32 @@ class TakeRecorder:
         }
         try:
             self._write_meta()
-            self._fap = FapWriter(self.folder / FAP_NAME, fps, f"{name}_{self.folder.name[-3:]}")
+            self._fap = FapWriter(self.folder / FAP_NAME, fps, self.folder.name)
             self._log = SampleLogWriter(self.folder / LOG_NAME)
         except OSError as exc:
             raise TakeError(f"{self.folder}: cannot start the take: {exc.strerror or exc}") from exc
         self.frames = 0
+        self._sounds: dict[str, WavWriter] = {}
 
     def sample(self, sample: Sample) -> None:
-        """Log one raw Sample (call for every Sample, in arrival order)."""
+        """Log one raw Sample (call for every Sample, in arrival order), and its sound."""
         self._log.write(sample)
+        if sample.sound is not None:
+            self._sound(sample)
+
+    def _sound(self, sample: Sample) -> None:
+        """Append a Sample's sound to its device's WAV (the first block opens it, and the
+        metadata says where it falls and what the analysis's state was)."""
+        writer = self._sounds.get(sample.device)
+        if writer is None:
+            sound = sample.sound
+            name = SOUND_NAME if not self._sounds else f"take.{sample.device}.wav"
+            state = None if sound.state is None else json_state(sound.state)
+            self.meta.setdefault("sound", {})[sample.device] = {
+                "file": name, "rate": sound.rate, "first_ns": sound.start_ns, "frames": 0, "state": state}
+            writer = self._sounds[sample.device] = WavWriter(self.folder / name, sound.rate)
+            self._write_meta()
+        writer.write(sample.sound.pcm)
 
     def event(self, event: LogEvent) -> None:
         """Log one event (hold, resume, reset, frame) in its place among the Samples."""
@@ -116,6 +152,7 @@ class TakeRecorder:
         """Finish the take (final counts in its metadata, marked complete); returns its folder."""
         self._fap.close()
         self._log.close()
+        self._close_sounds()
         self.meta.update(frames=self.frames, samples=self._log.count, complete=True)
         self._write_meta()
         return self.folder
@@ -129,12 +166,21 @@ class TakeRecorder:
                 part.close()
             except OSError:
                 pass
+        try:
+            self._close_sounds()
+        except OSError:
+            pass
         self.meta.update(frames=self.frames, samples=self._log.count, complete=False, error=reason)
         try:
             self._write_meta()
         except OSError:
             pass  # take.json still says "complete": false from the start
         return self.folder
+
+    def _close_sounds(self) -> None:
+        for device, writer in self._sounds.items():
+            writer.close()
+            self.meta["sound"][device]["frames"] = writer.frames
 
     def __enter__(self) -> TakeRecorder:
         return self
@@ -158,6 +204,18 @@ def write_pose(writer: FapWriter, fap: np.ndarray, viseme: tuple | None = None,
                        expression=None if expression is None else (*expression[:4], 0, 0))
 
 
+@dataclass(frozen=True)
+class TakeSound:
+    """One audio device's sound in a take: its WAV, rate, the clock time of its first frame, and
+    the analysis's state before it."""
+
+    device: str
+    path: Path
+    rate: int
+    first_ns: int
+    state: dict | None = None
+
+
 @dataclass
 class Take:
     """A recorded take, read back."""
@@ -175,6 +233,12 @@ class Take:
 
     def stream(self) -> FapStream:
         return read_fap(self.present(FAP_NAME))
+
+    def sounds(self) -> list[TakeSound]:
+        """The sound each audio device recorded, as the metadata describes it (the files are
+        read on demand; one may be missing or damaged)."""
+        return [TakeSound(device, self.folder / info["file"], info["rate"], info["first_ns"], info.get("state"))
+                for device, info in (self.meta.get("sound") or {}).items()]
 
     def samples(self) -> Iterator[Sample]:
         return self._log(read_samples)
@@ -230,6 +294,14 @@ def _layer(value: object) -> bool:
 
 
 _COUNT = _optional(lambda v: _of(int)(v) and v >= 0)
+
+
+def _sound(value: object) -> bool:
+    return (isinstance(value, dict) and _of(str)(value.get("file")) and bool(SOUND_FILE.fullmatch(value["file"]))
+            and _of(int)(value.get("rate")) and 1000 <= value["rate"] <= 384000 and _of(int)(value.get("first_ns"))
+            and _COUNT(value.get("frames")) and _optional(lambda v: isinstance(v, dict))(value.get("state")))
+
+
 META_TYPES: dict[str, tuple[Callable[[object], bool], str]] = {
     "name": (_of(str), "a string"),
     "fps": (lambda v: _of(int)(v) and v in FPS_CHOICES, f"one of {FPS_CHOICES}"),
@@ -243,6 +315,8 @@ META_TYPES: dict[str, tuple[Callable[[object], bool], str]] = {
     "mapping_state": (_optional(_state), 'a mapping state {"seq": int, "channels": {...}} or null'),
     "layer": (_optional(_layer), 'a layer {"over": path, "slots": [0-67 ...], "viseme": bool, '
               '"expression": bool} or null'),
+    "sound": (_optional(_dict_of(_sound)), 'an object of device names to {"file": "take.wav", "rate": Hz, '
+              '"first_ns": int, "frames": count, "state": {...}} or null'),
     "frames": (_COUNT, "a count (integer >= 0) or null"),
     "samples": (_COUNT, "a count (integer >= 0) or null"),
     "complete": (_of(bool), "true or false"),

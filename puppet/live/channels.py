@@ -448,6 +448,11 @@ class Mapping:
         return [ChannelState(c.name, c.raw, c.value, tuple(c.targets), None if c.raw is None else (c.raw - c.low) * c.k)
                 for c in self._channels.values()]
 
+    @property
+    def channel_names(self) -> tuple[str, ...]:
+        """Every channel the mapping shapes (``device.channel``), in the file's order."""
+        return tuple(self._channels)
+
     def drives(self, channel: str) -> tuple[set[int], set[str]]:
         """What a channel (``device.channel``) moves: its FAP slots (0-based) and the high-level
         kinds (``viseme``, ``expression``, ``muscle``) among its targets."""

@@ -12,7 +12,8 @@ of, so a take can always be re-mapped or re-rendered.
   the same performance into other FAPs.
 * ``through_devices=True`` sends every logged reading through its device's wire -- serial
   lines or frames on a pseudo-terminal, HID reports from the fake HID source, CAN frames on a
-  virtual bus, MIDI messages, OSC datagrams (``devices.twin``) -- where the real adapter reads
+  virtual bus, MIDI messages, OSC datagrams, the take's recorded sound through ``wav://``
+  (``devices.twin``) -- where the real adapter reads
   it back; the values it decodes are fed with the logged timestamp (a deterministic clock: the
   adapter's own stamp says when the bytes came back, not when the performer moved). A wire that
   does not carry a value exactly stops the replay with the device, channel and both values.
@@ -159,6 +160,7 @@ def _through_devices(entries: Iterator[Sample | LogEvent], take: Take,
     from devices import open_twin
 
     urls, wire = take.meta.get("devices") or {}, take.meta.get("wire") or {}
+    sounds = {sound.device: {"sound_file": str(sound.path), "sound_state": sound.state} for sound in take.sounds()}
     twins = {}
     for entry in entries:
         if isinstance(entry, Sample):
@@ -167,7 +169,8 @@ def _through_devices(entries: Iterator[Sample | LogEvent], take: Take,
                 if entry.device not in urls:
                     raise TakeError(f"{take.folder}: the log has samples of device {entry.device!r}, "
                                     "which the take's metadata does not list")
-                twin = twins[entry.device] = open_twin(urls[entry.device], entry.device, wire.get(entry.device))
+                info = {**(wire.get(entry.device) or {}), **sounds.get(entry.device, {})}
+                twin = twins[entry.device] = open_twin(urls[entry.device], entry.device, info)
                 stack.callback(twin.close)
             entry = Sample(entry.t_ns, entry.device, twin.exchange(entry.values).values)
         yield entry

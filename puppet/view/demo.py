@@ -1,18 +1,24 @@
-"""The main job on the embedded default face: replay the shipped demo take to a video.
+"""The main job on the embedded default face: replay the shipped demo take to a video, with its voice.
 
 ``demo_take.fap`` (made by ``tools/make_demo_take.py``) says a short sentence in visemes with a
-growing smile, blinks, glances and head motion. The demo renders it to MP4 and also writes a
-still of the frame with the mouth open widest beside the neutral face, for a quick look without
-a player.
+growing smile, blinks, glances and head motion; ``demo_speech.wav`` (``tools/make_demo_speech.py``)
+is that sentence spoken. The demo lays the mouth the voice makes over the take, as ``puppet
+lipsync --over`` does (the take folder ``demo_take/`` beside the video), renders it to MP4 with
+the sound, and also writes a still of the frame with the mouth open widest beside the neutral
+face, for a quick look without a player.
 """
 
 from __future__ import annotations
 
 import importlib.resources
+import shutil
 from pathlib import Path
 
 import numpy as np
 
+from puppet.io.soundtrack import soundtrack
+from puppet.live.lipsync import lipsync
+from puppet.view.muxsound import mux_sound
 from puppet.view.renderer import Renderer, save_png, write_video
 from puppet.view.rendertake import FapPlayback, aim_at_head
 
@@ -22,19 +28,32 @@ def demo_take() -> Path:
     return Path(str(importlib.resources.files("puppet").joinpath("data", "demo_take.fap")))
 
 
+def demo_speech() -> Path:
+    """Path of the demo's spoken sentence shipped in the package."""
+    return Path(str(importlib.resources.files("puppet").joinpath("data", "demo_speech.wav")))
+
+
 def run_demo(out: Path, size: tuple[int, int] = (640, 480), view: str = "three_quarter") -> list[Path]:
-    """Render the demo take to ``out/demo_take.mp4`` and ``out/demo_still.png``; return the paths."""
+    """Render the demo take with its voice to ``out/demo_take.mp4`` (the take in ``out/demo_take/``)
+    and ``out/demo_still.png``; return the paths."""
     out.mkdir(parents=True, exist_ok=True)
-    playback = FapPlayback(demo_take())
+    take = out / "demo_take"
+    if take.exists():
+        shutil.rmtree(take)
+    header = FapPlayback(demo_take()).header
+    lipsync(demo_speech(), take, over=demo_take(), fps=round(header.fps))
+    playback = FapPlayback(take)
     face = playback.face
     neutral = face.vertices
+    video, silent = out / "demo_take.mp4", out / ".demo_take.silent.mp4"
     with Renderer.for_face(face, width=size[0], height=size[1]) as renderer:
         aim_at_head(renderer, face, view)
         still = _Still(face.feature_vertices["2.2"], face.feature_vertices["2.3"])
         frames = (still.keep(renderer.render(v, n), v) for v, n in playback)
-        video = out / "demo_take.mp4"
-        write_video(frames, video, playback.fps)
+        count = write_video(frames, silent, playback.fps)
         rest = renderer.render(neutral.astype(np.float32))
+    mux_sound(silent, soundtrack(take), count, playback.fps, video)
+    silent.unlink()
     picture = out / "demo_still.png"
     save_png(np.hstack([rest, still.image]), picture)
     return [video, picture]

@@ -6,7 +6,8 @@ is rendered into the window's framebuffer:
 * **fps and input-to-photon latency**: the numbers and a rolling graph of the last ``HISTORY``
   frames each;
 * **devices**: each one's state, and while it is LOST the reason its adapter gave (port missing,
-  permission denied, unplugged);
+  permission denied, unplugged); an audio input also gets a level meter (dBFS, the noise gate's
+  threshold marked by the bar's colour) and its overrun and underrun counts;
 * **REC**: the take's name and how long it has been recording;
 * a **notice** line: the steps of a calibration run from the window (K), then its result;
 * **channel monitor** (M): per channel a bar of its raw value within its calibrated range and one
@@ -43,6 +44,15 @@ class DeviceLine:
     name: str
     state: str
     reason: str = ""
+    level_db: float | None = None   # an audio input's newest level (None: not an audio input)
+    gate_db: float | None = None
+    overruns: int = 0
+    underruns: int = 0
+
+    @property
+    def meter(self) -> float:
+        """The level as a bar's fill: -60 dBFS empty, 0 dBFS full."""
+        return 0.0 if self.level_db is None else min(1.0, max(0.0, (self.level_db + 60.0) / 60.0))
 
 
 class Cockpit:
@@ -119,6 +129,8 @@ class Cockpit:
             if device.reason:
                 imgui.same_line()
                 imgui.text_wrapped(device.reason)
+            if device.level_db is not None:
+                self._meter(device)
         if recording is not None:
             name, seconds = recording
             imgui.text_colored((1.0, 0.2, 0.2, 1.0), f"REC {name}  {int(seconds) // 60}:{seconds % 60:04.1f}")
@@ -130,6 +142,18 @@ class Cockpit:
                 imgui.same_line(150)
             imgui.text_disabled(f"{key:>5} {what}")
         imgui.end()
+
+    def _meter(self, device: DeviceLine) -> None:
+        """An audio input's level bar (green above its gate, grey below) and its xruns."""
+        imgui = self.imgui
+        above = device.gate_db is not None and device.level_db > device.gate_db
+        colour = (0.3, 0.85, 0.35, 1.0) if above else (0.5, 0.5, 0.5, 1.0)
+        imgui.push_style_color(imgui.Col_.plot_histogram, colour)
+        imgui.progress_bar(device.meter, (160, 0), f"{device.level_db:.0f} dBFS")
+        imgui.pop_style_color()
+        if device.overruns or device.underruns:
+            imgui.same_line()
+            imgui.text_colored((1.0, 0.85, 0.3, 1.0), f"over {device.overruns} under {device.underruns}")
 
     def _monitor(self, channels: list[Any]) -> None:
         imgui = self.imgui
@@ -154,11 +178,17 @@ class Cockpit:
 
 
 def device_lines(states: Mapping[str, Any], devices: Mapping[str, Any]) -> list[DeviceLine]:
-    """Each device's state (``LiveFrame.states``) and, when it is not open, the reason its adapter gave."""
+    """Each device's state (``LiveFrame.states``) and, when it is not open, the reason its adapter
+    gave; an audio input's level, gate and xruns."""
     lines = []
     for name, state in states.items():
         text = getattr(state, "value", str(state)).lower()
-        counters = getattr(devices.get(name), "counters", None)
+        device = devices.get(name)
+        counters = getattr(device, "counters", None)
         reason = counters.last_error if counters is not None and text != "open" else ""
-        lines.append(DeviceLine(name, text, reason))
+        line = DeviceLine(name, text, reason)
+        if hasattr(device, "level_db"):
+            line.level_db, line.gate_db = device.level_db, device.gate
+            line.overruns, line.underruns = counters.overruns, counters.underruns
+        lines.append(line)
     return lines

@@ -9,6 +9,7 @@ and normals to whatever draws them.
 from __future__ import annotations
 
 import os
+import warnings
 from collections.abc import Iterator
 
 import numpy as np
@@ -19,8 +20,10 @@ from puppet.fap.held import held_low_level
 from puppet.fap.pose import Pose
 from puppet.io.fapfile import iter_fap
 from puppet.io.outputs import writable
+from puppet.io.soundtrack import soundtrack
 from puppet.io.takes import TakeError, take_fap
 from puppet.runtime.runtime import Runtime
+from puppet.view.muxsound import mux_sound
 from puppet.view.renderer import VIEW_DIRECTIONS, Renderer, write_video
 
 VIEWS = tuple(VIEW_DIRECTIONS)
@@ -55,6 +58,8 @@ def render_take(path: str | os.PathLike, out: str | os.PathLike, *, face: Face |
     """Render a .fap take to an MP4 at the take's fps (or ``fps``); return the frame count.
     ``runtime`` (of ``face``) saves building one when many takes are rendered in turn;
     ``antialias`` None draws as the live window does on this GL (``renderer.choose_antialias``).
+    A take folder with sound gets it as the video's AAC track, its first sample on frame 0
+    (``puppet.io.soundtrack``; a damaged WAV renders silent, with a warning naming it).
 
     The video is written beside ``out`` and renamed into place only when every frame has been
     rendered, so a bad take never leaves a broken video behind. The take, its folder and ``out``
@@ -62,18 +67,27 @@ def render_take(path: str | os.PathLike, out: str | os.PathLike, *, face: Face |
     """
     out = writable(out, "video")
     playback = FapPlayback(path, face, runtime)
+    sound = soundtrack(path)
     partial = out.with_name(f".{out.stem}.partial{out.suffix}")
+    silent = out.with_name(f".{out.stem}.silent{out.suffix}")
     try:
         with Renderer.for_face(playback.face, width=size[0], height=size[1], antialias=antialias) as renderer:
             aim_at_head(renderer, playback.face, view)
             playback.normals = not renderer.gpu_normals
             total = playback.header.declared_frames
             frames = _progress((renderer.render(v, n) for v, n in playback), total, progress)
-            count = write_video(_not_empty(frames, path), partial, playback.fps if fps is None else fps)
+            rate = playback.fps if fps is None else fps
+            count = write_video(_not_empty(frames, path), silent if sound else partial, rate)
+        if sound:
+            if rate != playback.fps:
+                warnings.warn(f"{path}: drawn at {rate:g} frames/s, not the take's {playback.fps:g}: its sound "
+                              "keeps its own pace and drifts from the face", stacklevel=2)
+            mux_sound(silent, sound, count, rate, partial)
         partial.replace(out)
         return count
     finally:
         partial.unlink(missing_ok=True)
+        silent.unlink(missing_ok=True)
 
 
 def _not_empty(frames: Iterator[np.ndarray], path: str | os.PathLike) -> Iterator[np.ndarray]:

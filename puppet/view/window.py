@@ -54,9 +54,11 @@ from puppet.fap.held import held_low_level
 from puppet.fap.pose import Pose
 from puppet.fap.table import N_FAPS
 from puppet.io.fapfile import FapError, FapReader, FapWarning, iter_fap
+from puppet.io.soundtrack import soundtrack
 from puppet.runtime.runtime import Runtime
 from puppet.view.renderer import Renderer, software_rasteriser
 from puppet.view.rendertake import VIEWS, FapPlayback, aim_at_head
+from puppet.view.soundout import ClockedSound
 
 BACKENDS = ("pyglet", "glfw")
 """moderngl-window backends tried in order (glfw only where its package is installed)."""
@@ -120,6 +122,16 @@ class PlayClock:
         if self._paused:
             return self._origin
         return self._origin + (now - self._anchor) * self.fps
+
+    def seconds(self, now: float) -> float | None:
+        """Where playback is in the take at ``now``, in seconds (wrapped when looping); None
+        while it stands still (paused, or held on the last frame): what its sound follows."""
+        if self._paused or self.at_end(now):
+            return None
+        position, n = self.position(now), self._n_frames
+        if self.loop and n is not None:
+            position %= n
+        return position / self.fps
 
     def frame(self, now: float) -> int:
         """The frame to show at ``now``: wrapped when looping, held on the last one otherwise."""
@@ -397,20 +409,30 @@ class Player:
 
     def run(self) -> None:
         window = self.window
+        sound = self._sound()
         try:
             if min(window.buffer_size) > 0:
                 self._make_renderer(tuple(window.buffer_size))
             self.clock.seek(time.perf_counter(), 0)
+            if sound is not None and not sound.start(lambda line: print(f"puppet play: {line}", file=sys.stderr)):
+                sound = None
             while not (self._quit or window.is_closing):
                 self._update()
                 self._idle()
         finally:
+            if sound is not None:
+                sound.close()
             if self.renderer is not None:
                 self.renderer.release()
                 self.renderer = None
             self.table.close()
             window.close()
             window.destroy()
+
+    def _sound(self) -> ClockedSound | None:
+        """The take's sound, following this player's clock (None for a take without sound)."""
+        track = soundtrack(self.playback.path)
+        return None if track is None else ClockedSound(track, self.clock.seconds)
 
     def _update(self) -> None:
         """Draw the frame due now if anything changed; handle the window's events."""

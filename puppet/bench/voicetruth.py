@@ -1,0 +1,119 @@
+"""How well the mouth follows real speakers: the rig's lip gap, driven by sound alone, against
+the lip opening measured on video of the person who spoke.
+
+A clip is ``NAME.wav`` (the speaker's sound) beside ``NAME_lips.csv`` (per video frame: ``t_s``,
+the inner-lip ``opening`` and the ``face_width`` in pixels, and ``found``, MediaPipe's face mesh
+measured them). For each clip the sound is made into a take twice, with the offline analysis
+(look-ahead, ``puppet lipsync``) and with the live one (what a microphone gives), and the default
+face's inner-lip gap (feature points 2.2 to 2.3) is measured in every frame. The baseline is
+"mouth open = loud": the sound's RMS envelope over a centred 20 ms window. Each is correlated with
+the measured opening (Pearson) at every lag up to ``MAX_LAG_S``; a positive lag is the rig's mouth
+moving after the speaker's. ``measure(folder)`` gives per clip and pooled (Fisher z mean)
+figures; ``tools/voice_truth.py`` prints them.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from devices.soundread import read_sound
+from puppet.face.load import load_face
+from puppet.fap.held import held_low_level
+from puppet.fap.pose import Pose
+from puppet.io.fapfile import iter_fap
+from puppet.live.lipsync import lipsync
+from puppet.runtime.runtime import Runtime
+
+MAX_LAG_S = 0.2
+LAG_STEP_S = 0.01
+ENVELOPE_S = 0.02
+
+
+def clips(folder: str | Path) -> list[Path]:
+    """The clips (their .wav) in ``folder`` that have a ``_lips.csv`` beside them."""
+    return sorted(p for p in Path(folder).glob("*.wav") if p.with_name(f"{p.stem}_lips.csv").is_file())
+
+
+def read_lips(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """The frames' times and the lip opening in face widths, where a face was found."""
+    times, opening = [], []
+    with open(path, newline="", encoding="utf-8") as file:
+        for row in csv.DictReader(file):
+            if row.get("found", "1") == "1" and float(row["face_width"]) > 0:
+                times.append(float(row["t_s"]))
+                opening.append(float(row["opening"]) / float(row["face_width"]))
+    return np.array(times), np.array(opening)
+
+
+def lip_gap(take: Path, runtime: Runtime) -> tuple[np.ndarray, np.ndarray]:
+    """Each frame's time and the face's inner-lip gap (2.2 to 2.3) in a take."""
+    face = runtime.face
+    top, bottom = face.feature_vertices["2.2"], face.feature_vertices["2.3"]
+    gaps = []
+    with iter_fap(take / "take.fap") as reader:
+        fps = reader.header.fps
+        for values in held_low_level(reader):
+            v = runtime.deform_pose(Pose(values), normals=False)[0]
+            gaps.append(float(np.linalg.norm(v[top] - v[bottom])))
+    return np.arange(len(gaps)) / fps, np.array(gaps)
+
+
+def loudness(wav: Path) -> tuple[np.ndarray, np.ndarray]:
+    """The sound's RMS envelope every 10 ms (a centred ``ENVELOPE_S`` window)."""
+    pcm, rate = read_sound(wav)
+    x = pcm.astype(np.float64) / 32768.0
+    half = int(ENVELOPE_S * rate / 2)
+    hop = rate // 100
+    centres = np.arange(0, len(x), hop)
+    cumulative = np.concatenate([[0.0], np.cumsum(x * x)])
+    low, high = np.clip(centres - half, 0, len(x)), np.clip(centres + half, 0, len(x))
+    rms = np.sqrt((cumulative[high] - cumulative[low]) / np.maximum(high - low, 1))
+    return centres / rate, rms
+
+
+def correlate(truth_t: np.ndarray, truth: np.ndarray, t: np.ndarray, signal: np.ndarray) -> dict:
+    """Pearson r of ``signal`` (at times ``t``) against ``truth`` at every lag; the best and lag 0."""
+    lags = np.arange(-MAX_LAG_S, MAX_LAG_S + 1e-9, LAG_STEP_S)
+    rs = []
+    for lag in lags:
+        predicted = np.interp(truth_t + lag, t, signal)
+        rs.append(float(np.corrcoef(predicted, truth)[0, 1]) if np.std(predicted) > 0 else 0.0)
+    best = int(np.argmax(rs))
+    return {"r": rs[best], "lag_ms": round(float(lags[best]) * 1000), "r_at_0": rs[len(lags) // 2]}
+
+
+def measure_clip(wav: Path, runtime: Runtime, work: Path) -> dict:
+    """The offline, live and loudness figures of one clip."""
+    truth_t, truth = read_lips(wav.with_name(f"{wav.stem}_lips.csv"))
+    out = {"seconds": round(float(truth_t[-1]), 2), "frames": len(truth)}
+    for name, lookahead in (("offline", True), ("live", False)):
+        take = lipsync(wav, work / f"{wav.stem}_{name}", lookahead=lookahead)
+        out[name] = correlate(truth_t, truth, *lip_gap(take, runtime))
+    out["loudness"] = correlate(truth_t, truth, *loudness(wav))
+    return out
+
+
+def measure(folder: str | Path) -> dict:
+    """Every clip's figures, and each method's pooled r (Fisher z mean) and median lag."""
+    runtime = Runtime(load_face())
+    found = clips(folder)
+    with tempfile.TemporaryDirectory(prefix="facepuppet-voice-") as work:
+        per_clip = {wav.stem: measure_clip(wav, runtime, Path(work)) for wav in found}
+    pooled = {}
+    for method in ("offline", "live", "loudness"):
+        rs = [clip[method]["r"] for clip in per_clip.values()]
+        r0 = [clip[method]["r_at_0"] for clip in per_clip.values()]
+        pooled[method] = {"r": _fisher_mean(rs), "r_at_0": _fisher_mean(r0),
+                          "lag_ms": float(np.median([clip[method]["lag_ms"] for clip in per_clip.values()]))}
+    return {"clips": per_clip, "pooled": pooled}
+
+
+def _fisher_mean(rs: list[float]) -> float:
+    if not rs:
+        return math.nan
+    return float(np.tanh(np.mean(np.arctanh(np.clip(rs, -0.999, 0.999)))))
