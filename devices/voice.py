@@ -48,6 +48,8 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from devices.voicescript import scripted
+
 CHANNELS = ("db", "gate", "level", "voiced", "pitch", "open", "wide", "round", "closed",
             "aa", "e", "i", "o", "u", "ss", "ff")
 VOWELS = {"aa": (0.85, 0.35), "e": (0.45, 0.75), "i": (0.10, 0.95), "o": (0.50, 0.10), "u": (0.10, 0.05)}
@@ -215,20 +217,26 @@ LOOKAHEAD_S = 0.06    # how far ahead of its sound ``offline`` moves the lips
 OFFLINE_SMOOTH_S = 0.03
 
 
-def offline(blocks: list[np.ndarray], rate: int, gate_db: float = GATE_DB) -> list[dict[str, float]]:
+def offline(blocks: list[np.ndarray], rate: int, gate_db: float = GATE_DB,
+            script: list[list[str]] | None = None) -> list[dict[str, float]]:
     """Readings for a whole recording, one per block, with look-ahead: each channel as ``Voice``
-    gives it, then smoothed forwards and backwards (no lag) and, for the lips, led by
+    gives it (or, given the ``script``'s words as mouth shapes, as ``devices.voicescript`` aligns
+    them), then smoothed forwards and backwards (no lag) and, for the lips, led by
     ``LOOKAHEAD_S`` (lips close before a p and open before a vowel is heard)."""
     voice = Voice(rate, gate_db)
     rows = [voice(block) for block in blocks]
     if not rows:
         return []
+    if script is not None:
+        rows = scripted(rows, script)
     dt = len(blocks[0]) / rate
     lead = round(LOOKAHEAD_S / dt)
     table = {name: np.array([row[name] for row in rows]) for name in CHANNELS}
-    table["closed"] = _closures(table["level"], dt)
+    if script is None:
+        table["closed"] = _closures(table["level"], dt)
     for name in SMOOTHED:
-        values = _zero_phase(table[name], dt)
+        crisp = script is not None and name == "closed"  # an aligned closure: the lips meet, then part
+        values = table[name] if crisp else _zero_phase(table[name], dt)
         table[name] = np.concatenate([values[lead:], np.full(min(lead, len(values)), values[-1])])
     return [{name: float(table[name][k]) for name in CHANNELS} for k in range(len(rows))]
 

@@ -6,7 +6,9 @@ libsndfile reads (WAV, FLAC, Ogg, AIFF ...; ``devices.soundread``), mixed to mon
 ``start + (k + 1) * block / speed`` (``speed=0``: as fast as the reader takes them). A reader
 that falls more than a block behind catches up (each late block counts as an underrun). At the
 end it stops, or starts over with ``loop=1``. ``mode=offline`` gives each block the readings of
-``devices.voice.offline`` (look-ahead over the whole file) instead of the causal ones.
+``devices.voice.offline`` (look-ahead over the whole file) instead of the causal ones; with
+``script=the words`` (and ``language``, espeak-ng's, default en-us) they follow the script's
+phones aligned to the sound (``devices.voicescript``).
 
 A file that is missing or unreadable makes the device LOST with the reason (the face holds), and
 it is tried again with backoff, as an unplugged controller is.
@@ -31,6 +33,7 @@ from devices.sound_device import SOUND_OPTIONS, SoundDevice, sound_options
 from devices.soundread import read_sound
 from devices.twin import Twin
 from devices.voice import offline
+from devices.voicescript import script_phones
 
 MODES = ("live", "offline")
 
@@ -38,14 +41,18 @@ MODES = ("live", "offline")
 class WavDevice(SoundDevice):
     """A sound file played back as a sound input (see the module docstring)."""
 
-    OPTIONS = SOUND_OPTIONS | {"speed", "loop", "mode"}
+    OPTIONS = SOUND_OPTIONS | {"speed", "loop", "mode", "script", "language"}
 
     def __init__(self, name: str, path: str | Path, *, speed: float = 1.0, loop: bool = False,
-                 mode: str = "live", stepped: bool = False, **options) -> None:
+                 mode: str = "live", stepped: bool = False, script: str | None = None,
+                 language: str = "en-us", **options) -> None:
         super().__init__(name, **options)
         if speed < 0 or mode not in MODES:
             raise DeviceError(f"wav://{path}: expected speed >= 0 and mode in {MODES}, got {speed:g} and {mode!r}")
+        if script is not None and mode != "offline":
+            raise DeviceError(f"wav://{path}: a script is aligned with look-ahead: give mode=offline with it")
         self.path, self.speed, self.loop, self.mode = Path(path), speed, loop, mode
+        self.script, self.language = script, language
         self.finished = False
         self.block_index = 0          # the next block to hand over
         self._pcm: np.ndarray | None = None
@@ -65,8 +72,8 @@ class WavDevice(SoundDevice):
             raise DeviceError(f"wav://{url.target}: loop={options['loop']!r}: expected 0 or 1")
         if not url.target:
             raise DeviceError("wav:// needs a file: wav://speech.wav or wav:///absolute/path.wav")
-        return cls(name, url.target, speed=speed, loop=options.get("loop") == "1",
-                   mode=options.get("mode", "live"), **sound_options(url))
+        return cls(name, url.target, speed=speed, loop=options.get("loop") == "1", mode=options.get("mode", "live"),
+                   script=options.get("script"), language=options.get("language", "en-us"), **sound_options(url))
 
     @property
     def blocks(self) -> int:
@@ -81,7 +88,8 @@ class WavDevice(SoundDevice):
         whole = -(-len(pcm) // self.block) * self.block
         self._pcm = np.concatenate([pcm, np.zeros(whole - len(pcm), np.int16)])
         if self.mode == "offline":
-            self._offline = offline(self._split(), self.rate, self.gate)
+            words = None if self.script is None else script_phones(self.script, self.language)
+            self._offline = offline(self._split(), self.rate, self.gate, words)
 
     def _split(self) -> list[np.ndarray]:
         return [self._pcm[k * self.block:(k + 1) * self.block] for k in range(self.blocks)]
@@ -172,7 +180,9 @@ class SoundTwin(Twin):
         start = int(state.get("offline_block", 0))
         if mode == "offline" and start > 0:
             source = parsed.target   # the look-ahead needs the file from its start
-        device = WavDevice(name, source, speed=0, mode=mode, stepped=True, **options)
+        script = parsed.options.get("script") if mode == "offline" else None
+        device = WavDevice(name, source, speed=0, mode=mode, stepped=True, script=script,
+                           language=parsed.options.get("language", "en-us"), **options)
         try:
             device.load()
             device.block_index = start if source == parsed.target else 0

@@ -173,6 +173,10 @@ def _lipsync_arguments(lipsync: argparse.ArgumentParser) -> None:
     lipsync.add_argument("--fps", type=int, choices=(25, 30, 50, 60), default=30, help="take fps (default 30)")
     lipsync.add_argument("--live", action="store_true",
                          help="analyse as a live microphone does (no look-ahead): the take a live pass would give")
+    lipsync.add_argument("--script", default=None, metavar="WORDS",
+                         help="the words said: aligned to the sound, they shape the mouth phone by phone (espeak-ng)")
+    lipsync.add_argument("--language", default="en-us",
+                         help="the script's language, as espeak-ng names it (default en-us; espeak-ng --voices)")
 
 
 def _lipsync(args: argparse.Namespace) -> int:
@@ -184,7 +188,7 @@ def _lipsync(args: argparse.Namespace) -> int:
 
     start = time.perf_counter()
     folder = lipsync(args.sound, args.output, mapping=args.mapping, over=args.over, fps=args.fps,
-                     lookahead=not args.live)
+                     lookahead=not args.live, script=args.script, language=args.language)
     meta = open_take(folder).meta
     seconds = meta["frames"] / meta["fps"]
     print(f"{folder}: {meta['frames']} frames ({seconds:.1f} s) with its sound, in {time.perf_counter() - start:.1f} s; "

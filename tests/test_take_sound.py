@@ -5,6 +5,7 @@ in step (or silent, saying why), and made offline from a recording by ``puppet l
 from __future__ import annotations
 
 import json
+import shutil
 import signal
 import subprocess
 import sys
@@ -13,6 +14,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pytest
 import soundfile
 from test_voice import RATE, vowel, write_wav
 
@@ -251,3 +253,21 @@ def test_a_slider_box_and_a_microphone_record_a_take_that_renders_with_the_voice
     assert main(["render", str(folder), "--size", "160x120"]) == 0
     pcm, _ = _decoded(folder / "take.mp4")
     assert np.abs(pcm).max() > 5000
+
+
+@pytest.mark.skipif(shutil.which("espeak-ng") is None, reason="espeak-ng is not installed (tools/setup.sh installs it)")
+def test_lipsync_with_a_script_presses_the_lips_on_each_closure_and_replays_exactly(tmp_path):
+    wav = tmp_path / "mama.wav"
+    subprocess.run(["espeak-ng", "-v", "en-us", "-w", str(wav), "mama papa bobo"], check=True)
+    folder = tmp_path / "scripted"
+    assert main(["lipsync", str(wav), "-o", str(folder), "--script", "mama papa bobo"]) == 0
+    take = open_take(folder)
+    assert "script=mama+papa+bobo" in take.meta["devices"]["mic"]
+    viseme = read_fap(folder / "take.fap").viseme[:, 0]  # FAP 1's select: the strongest viseme
+    assert _runs(viseme == 1) >= 5             # p b m, pressed (30 frames/s may merge two)
+    assert retake(take, tmp_path / "replay.fap", through_devices=True).identical
+    assert main(["lipsync", str(wav), "-o", str(tmp_path / "x"), "--script", "hi", "--live"]) == 2
+
+
+def _runs(flags: np.ndarray) -> int:
+    return int(np.sum(np.diff(np.concatenate([[0], flags.astype(int)])) == 1))

@@ -246,3 +246,44 @@ def test_garbage_in_a_sound_file_is_read_or_refused_with_a_sound_file_error(tmp_
         assert str(path) in str(error) and "\n" not in str(error)
     else:
         assert pcm.dtype == np.int16 and rate == RATE and len(pcm) > 0
+
+
+def _episodes(flags: np.ndarray) -> int:
+    """How many runs of True a sequence holds."""
+    return int(np.sum(np.diff(np.concatenate([[0], flags.astype(int)])) == 1))
+
+
+@pytest.mark.skipif(shutil.which("espeak-ng") is None, reason="espeak-ng is not installed (tools/setup.sh installs it)")
+def test_a_script_puts_each_closure_and_vowel_where_the_voice_says_it(tmp_path):
+    """"mama papa bobo" has six lip closures: the sound alone hears an m as a hum, so its
+    closures blur; aligned to its script, each one is there, in order, with the right vowel
+    between them, and nothing is pressed before the speech starts."""
+    from devices.voice import offline
+    from devices.voicescript import script_phones
+
+    path = tmp_path / "mama.wav"
+    subprocess.run(["espeak-ng", "-v", "en-us", "-w", str(path), "mama papa bobo"], check=True)
+    pcm, _ = read_sound(path, RATE)
+    blocks = [pcm[k:k + BLOCK] for k in range(0, len(pcm) - BLOCK + 1, BLOCK)]
+    words = script_phones("mama papa bobo")
+    assert words == [["closed", "aa", "closed", "aa"], ["closed", "aa", "closed", "e"],
+                     ["closed", "o", "closed", "o"]]
+    rows = offline(blocks, RATE, script=words)
+    closed = np.array([r["closed"] for r in rows]) > 0.5
+    assert _episodes(closed) == 6
+    first = int(np.argmax(closed))
+    assert all(r["closed"] < 0.05 for r in rows[:max(0, first - 10)])
+    vowel_order = [max(("aa", "e", "o"), key=lambda v: r[v]) for r in rows if r["level"] > 0.3 and r["closed"] < 0.2]
+    assert vowel_order.index("o") > vowel_order.index("aa")          # bobo after mama and papa
+    assert sum(v == "o" for v in vowel_order[-10:]) >= 5
+    unaided = np.array([r["closed"] for r in offline(blocks, RATE)]) > 0.5
+    assert _episodes(unaided) < 6
+
+
+def test_a_script_needs_the_offline_analysis_and_espeak_reads_it(tmp_path):
+    with pytest.raises(DeviceError, match="mode=offline"):
+        open_device("wav://x.wav?script=hello", "mic")
+    from devices.voicescript import shape_of
+
+    assert [shape_of(p) for p in ("p", "'A:", "i:", "'oU", "u:", "s", "v", "t", "w")] == [
+        "closed", "aa", "i", "o", "u", "ss", "ff", "other", "u"]

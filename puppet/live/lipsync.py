@@ -8,6 +8,10 @@ log and ``take.json``, on a clock that starts at 0 with the sound. So the take r
 with its sound, replays through its device (``puppet replay --through-devices``) into the same
 frames, and exports like any other. The mapping's other devices stay at rest.
 
+``script`` gives the words said: espeak-ng reads them into phones, which are aligned to the
+sound (``devices.voicescript``), so the mouth makes each phone's shape (an m's pressed lips, an
+oo's pucker) when the voice says it.
+
 ``over=TAKE`` lays the mouth over an earlier take, as a layered pass does (``takeclock.Layer``):
 the mouth's FAPs (jaw, lips, tongue, cheeks' puff) and the viseme come from the voice, the rest
 of each frame from that take, which plays on to its own end if it is the longer.
@@ -35,12 +39,18 @@ MOUTH_GROUPS = (2, 6, 8)
 
 
 def lipsync(sound: str | os.PathLike, folder: str | os.PathLike, *, mapping: str | os.PathLike | None = None,
-            over: str | os.PathLike | None = None, fps: int = 30, lookahead: bool = True) -> Path:
+            over: str | os.PathLike | None = None, fps: int = 30, lookahead: bool = True,
+            script: str | None = None, language: str = "en-us") -> Path:
     """Record the take of ``sound`` into ``folder`` (new or empty); returns the folder. Without
-    ``lookahead`` the analysis is the live one: the take a microphone would have given."""
+    ``lookahead`` the analysis is the live one: the take a microphone would have given. A
+    ``script`` (the words said, in espeak-ng's ``language``) is aligned to the sound and shapes
+    the mouth phone by phone."""
+    if script is not None and not lookahead:
+        raise TakeError("a script is aligned with look-ahead: it cannot be used with the live analysis")
     mapping_file = Path(mapping) if mapping is not None else mapping_path("voice")
     mapper = load_mapping(mapping_file)
-    name, url = _voice_device(mapper, mapping_file, Path(sound), "offline" if lookahead else "live")
+    words = {} if script is None else {"script": script, "language": language}
+    name, url = _voice_device(mapper, mapping_file, Path(sound), "offline" if lookahead else "live", words)
     device = WavDevice.from_url(Url.parse(url), name)
     device.load()
     layer = None if over is None else _mouth_layer(take_fap(over), mapper, name)
@@ -65,7 +75,7 @@ def lipsync(sound: str | os.PathLike, folder: str | os.PathLike, *, mapping: str
     return recorder.close()
 
 
-def _voice_device(mapper, mapping_file: Path, sound: Path, mode: str) -> tuple[str, str]:
+def _voice_device(mapper, mapping_file: Path, sound: Path, mode: str, words: dict) -> tuple[str, str]:
     """The mapping's sound device (its name) and the ``wav://`` URL that plays ``sound`` in
     ``mode`` with the device's rate, block and gate."""
     for name, url in mapper.devices.items():
@@ -73,7 +83,7 @@ def _voice_device(mapper, mapping_file: Path, sound: Path, mode: str) -> tuple[s
         if parsed.scheme in ("audio", "wav"):
             options = sound_options(parsed)
             query = urlencode({"rate": options["rate"], "block": options["block"], "gate": options["gate"],
-                               "speed": 0, "mode": mode})
+                               "speed": 0, "mode": mode, **words})
             return name, f"wav://{quote(str(sound.resolve()))}?{query}"
     raise TakeError(f"{mapping_file}: no audio:// or wav:// device, so nothing in it follows a voice "
                     "(the shipped voice.yaml has one)")
