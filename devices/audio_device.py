@@ -123,10 +123,10 @@ class AudioDevice(SoundDevice):
                 pass
 
 
-def discover() -> list[Found]:
+def discover(sd_module=None) -> list[Found]:
     """The sound inputs PortAudio has, as ``audio://NAME`` URLs."""
     try:
-        sd = _sounddevice()
+        sd = sd_module or _sounddevice()
     except OSError as exc:
         raise DeviceError(str(exc)) from None
     found = []

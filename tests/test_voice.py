@@ -287,3 +287,19 @@ def test_a_script_needs_the_offline_analysis_and_espeak_reads_it(tmp_path):
 
     assert [shape_of(p) for p in ("p", "'A:", "i:", "'oU", "u:", "s", "v", "t", "w")] == [
         "closed", "aa", "i", "o", "u", "ss", "ff", "other", "u"]
+
+
+def test_puppet_devices_lists_each_sound_input_as_a_url_that_opens_it():
+    from devices.audio_device import AudioDevice
+    from devices.base import Url
+    from devices.simulated_audio import FakeMicrophone, FakeSoundDevice
+
+    module = FakeSoundDevice(FakeMicrophone("USB Headset Mic: Audio (hw:2,0)", np.zeros(4800, np.int16)))
+    [found] = discover(module)
+    assert found.url == "audio://USB%20Headset%20Mic%3A%20Audio%20%28hw%3A2%2C0%29"
+    assert "input 0" in found.description and "48000 Hz" in found.description
+    device = AudioDevice.from_url(Url.parse(found.url), "mic", sd_module=module).start()
+    try:
+        assert device.wait_state(State.OPEN, 3) and next(device.samples(timeout=2)).sound.rate == RATE
+    finally:
+        device.close()

@@ -1,4 +1,4 @@
-"""Write puppet/data/demo_speech.wav: the demo take's sentence spoken, for ``puppet demo``.
+"""Write puppet/data/demo_speech.wav (see DEMO_SPEECH.md there): the demo take's sentence, spoken.
 
 espeak-ng (apt) says "Hello! Nice to meet you." in US English; the speech is put 0.4 s into the
 file, where the shipped demo take (tools/make_demo_take.py) starts to speak, and saved as 16-bit
