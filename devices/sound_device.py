@@ -32,7 +32,8 @@ def sound_options(url: Url) -> dict:
     try:
         rate = int(options.get("rate", RATE))
     except ValueError:
-        raise DeviceError(f"{url.scheme}://{url.target}: rate={options['rate']!r}: expected a whole number of Hz") from None
+        raise DeviceError(f"{url.scheme}://{url.target}: rate={options['rate']!r}: expected a whole number "
+                          "of Hz") from None
     if not 8000 <= rate <= 192000:
         raise DeviceError(f"{url.scheme}://{url.target}: rate={rate}: expected 8000 to 192000 Hz")
     block = _block_frames(options.get("block", "10ms"), rate, url)

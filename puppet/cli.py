@@ -191,8 +191,8 @@ def _lipsync(args: argparse.Namespace) -> int:
                      lookahead=not args.live, script=args.script, language=args.language)
     meta = open_take(folder).meta
     seconds = meta["frames"] / meta["fps"]
-    print(f"{folder}: {meta['frames']} frames ({seconds:.1f} s) with its sound, in {time.perf_counter() - start:.1f} s; "
-          f"puppet render {folder} makes the video")
+    print(f"{folder}: {meta['frames']} frames ({seconds:.1f} s) with its sound, in "
+          f"{time.perf_counter() - start:.1f} s; puppet render {folder} makes the video")
     return 0
 
 

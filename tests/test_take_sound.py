@@ -44,7 +44,8 @@ def speech(tmp_path: Path, seconds: float = 1.6) -> Path:
     parts = [np.zeros(int(0.2 * RATE)), vowel(750, 1200), np.zeros(int(0.06 * RATE)), vowel(280, 2350),
              np.zeros(int(0.3 * RATE)), vowel(300, 750)]
     sound = np.concatenate(parts)
-    return write_wav(tmp_path / "speech.wav", np.concatenate([sound, np.zeros(max(0, int(seconds * RATE) - len(sound)))]))
+    rest = np.zeros(max(0, int(seconds * RATE) - len(sound)))
+    return write_wav(tmp_path / "speech.wav", np.concatenate([sound, rest]))
 
 
 def record(tmp_path: Path, wav: Path, *, wait_s: float = 0.3) -> tuple[Path, WavDevice]:
