@@ -13,7 +13,11 @@ import numpy as np
 import pytest
 from test_voice import RATE, vowel, write_wav
 
-from puppet.bench.voicetruth import clips, measure
+from puppet.bench.voicetruth import clip_from_video, clips, measure, read_lips
+from puppet.cli import main
+from puppet.live.lipsync import lipsync
+from puppet.photo.detect import photo_python
+from puppet.view.demo import demo_speech
 
 VOICE_DATA = os.environ.get("FACEPUPPET_VOICE_DATA")
 
@@ -60,3 +64,18 @@ def test_against_real_speakers_the_mouth_follows_better_than_loudness():
     assert pooled["live"]["r"] > pooled["loudness"]["r"] + 0.05
     better = [clip["offline"]["r"] > clip["loudness"]["r"] for clip in result["clips"].values()]
     assert sum(better) >= 0.8 * len(better)
+
+
+@pytest.mark.skipif(photo_python() is None, reason="no photo environment (.venv-photo: tools/setup.sh makes it)")
+def test_the_measure_sees_a_rendered_take_say_what_its_sound_says_in_sync(tmp_path, egl):
+    """The whole chain, closed on itself: a take made from speech, rendered with its sound, then
+    measured as a real speaker's video is (MediaPipe on every frame, the frames' times on the
+    sound's clock) follows its own sound with no lag: the render keeps sound and picture in
+    step, and the measure reads them as they are."""
+    take = lipsync(demo_speech(), tmp_path / "take", fps=25)
+    assert main(["render", str(take), "-o", str(tmp_path / "said.mp4"), "--size", "320x240"]) == 0
+    clip_from_video(tmp_path / "said.mp4", tmp_path / "clips")
+    truth_t, truth = read_lips(tmp_path / "clips" / "said_lips.csv")
+    assert len(truth) >= 60                                      # a face in (nearly) every frame
+    result = measure(tmp_path / "clips")["pooled"]
+    assert result["offline"]["r"] > 0.8 and abs(result["offline"]["lag_ms"]) <= 20

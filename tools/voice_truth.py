@@ -4,9 +4,10 @@ loudness baseline, measured in one run (``puppet.bench.voicetruth``).
     python tools/voice_truth.py DATA_FOLDER [--json]
 
 DATA_FOLDER holds clips as ``NAME.wav`` and ``NAME_lips.csv`` (per video frame: ``t_s``, the
-inner-lip ``opening`` and ``face_width`` in pixels and ``found``, measured on the speaker's video
-with MediaPipe's face mesh). No such clips ship with the project: real recordings carry their
-own licences, so they are kept outside it (the guide's "The voice" page says which were used).
+inner-lip ``opening`` and ``face_width`` in pixels and ``found``), as ``tools/voice_lips.py``
+makes them from videos of people speaking. No such clips ship with the project: real recordings
+carry their own licences, so they are kept outside it (the guide's "The voice" page says which
+were used).
 """
 
 from __future__ import annotations

@@ -9,13 +9,19 @@ face's inner-lip gap (feature points 2.2 to 2.3) is measured in every frame. The
 "mouth open = loud": the sound's RMS envelope over a centred 20 ms window. Each is correlated with
 the measured opening (Pearson) at every lag up to ``MAX_LAG_S``; a positive lag is the rig's mouth
 moving after the speaker's. ``measure(folder)`` gives per clip and pooled (Fisher z mean)
-figures; ``tools/voice_truth.py`` prints them.
+figures; ``tools/voice_truth.py`` prints them. ``clip_from_video`` makes a clip from a video
+with sound (``tools/voice_lips.py``): its sound track, and the lips measured in every frame by
+MediaPipe in the photo environment (``puppet/photo/mediapipe_lips.py``), each frame's time
+taken on the sound's clock.
 """
 
 from __future__ import annotations
 
 import csv
+import json
 import math
+import re
+import subprocess
 import tempfile
 from pathlib import Path
 
@@ -27,6 +33,7 @@ from puppet.fap.held import held_low_level
 from puppet.fap.pose import Pose
 from puppet.io.fapfile import iter_fap
 from puppet.live.lipsync import lipsync
+from puppet.photo.detect import DetectionError, photo_python
 from puppet.runtime.runtime import Runtime
 
 MAX_LAG_S = 0.2
@@ -111,6 +118,58 @@ def measure(folder: str | Path) -> dict:
         pooled[method] = {"r": _fisher_mean(rs), "r_at_0": _fisher_mean(r0),
                           "lag_ms": float(np.median([clip[method]["lag_ms"] for clip in per_clip.values()]))}
     return {"clips": per_clip, "pooled": pooled}
+
+
+LIPS = Path(__file__).resolve().parents[1] / "photo" / "mediapipe_lips.py"
+SHOWN_AT = re.compile(r"\bn:\s*\d+\s+pts:\s*-?\d+\s+pts_time:\s*(-?[\d.eE+-]+)")
+
+
+def clip_from_video(video: str | Path, folder: str | Path, name: str | None = None) -> Path:
+    """Write ``NAME.wav`` (the video's sound, mono 48 kHz) and ``NAME_lips.csv`` (the lips in each
+    frame, at its time on the sound's clock) into ``folder``; returns the .wav."""
+    import imageio_ffmpeg
+
+    ffmpeg, video, folder = imageio_ffmpeg.get_ffmpeg_exe(), Path(video), Path(folder)
+    python = photo_python()
+    if python is None:
+        raise DetectionError("measuring lips needs the photo environment (.venv-photo: tools/setup.sh makes it)")
+    name = name or video.stem
+    folder.mkdir(parents=True, exist_ok=True)
+    wav = folder / f"{name}.wav"
+    subprocess.run([ffmpeg, "-v", "error", "-y", "-i", str(video), "-map", "0:a:0", "-ac", "1", "-ar", "48000",
+                    "-c:a", "pcm_s16le", str(wav)], check=True)
+    width, height = _size(ffmpeg, video)
+    start = _shown_at(ffmpeg, video, "a")[0]
+    times = [t - start for t in _shown_at(ffmpeg, video, "v")]
+    decode = subprocess.Popen([ffmpeg, "-v", "error", "-i", str(video), "-map", "0:v:0", "-fps_mode", "passthrough",
+                               "-f", "rawvideo", "-pix_fmt", "rgb24", "pipe:1"], stdout=subprocess.PIPE)
+    measured = subprocess.run([str(python), str(LIPS), str(width), str(height)], stdin=decode.stdout,
+                              capture_output=True, text=True, check=True)
+    decode.wait()
+    with open(folder / f"{name}_lips.csv", "w", newline="", encoding="utf-8") as file:
+        writer = csv.writer(file)
+        writer.writerow(["frame", "t_s", "opening", "mouth_width", "face_width", "found"])
+        for k, (t, line) in enumerate(zip(times, measured.stdout.splitlines())):
+            row = json.loads(line)
+            sizes = [round(row[key], 3) for key in ("opening", "mouth_width", "face_width")] if row["found"] else [""] * 3
+            writer.writerow([k, round(t, 6), *sizes, int(row["found"])])
+    return wav
+
+
+def _size(ffmpeg: str, video: Path) -> tuple[int, int]:
+    banner = subprocess.run([ffmpeg, "-hide_banner", "-i", str(video)], capture_output=True, text=True).stderr
+    found = re.search(r"Video:.*?, (\d{2,5})x(\d{2,5})", banner)
+    if found is None:
+        raise ValueError(f"{video}: no video stream")
+    return int(found.group(1)), int(found.group(2))
+
+
+def _shown_at(ffmpeg: str, video: Path, stream: str) -> list[float]:
+    """The presentation times (s) of a stream's frames, on the file's own clock."""
+    show = ["-vf", "showinfo", "-fps_mode", "passthrough"] if stream == "v" else ["-af", "ashowinfo"]
+    banner = subprocess.run([ffmpeg, "-hide_banner", "-nostats", "-copyts", "-i", str(video), "-map", f"0:{stream}:0",
+                             *show, "-f", "null", "-"], capture_output=True, text=True).stderr
+    return [float(t) for t in SHOWN_AT.findall(banner)]
 
 
 def _fisher_mean(rs: list[float]) -> float:
