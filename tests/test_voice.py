@@ -166,15 +166,21 @@ def test_options_are_checked_where_the_url_is_given(tmp_path):
 
 
 def test_a_missing_microphone_is_lost_with_the_reason_and_listing_inputs_works():
-    device = open_device("audio://", "mic").start()
+    """Through the real PortAudio: an input no machine has is LOST with the reason; and a machine
+    with no input at all (sounddevice's interface, no microphone plugged) says so."""
+    from devices.audio_device import AudioDevice
+    from devices.base import Url
+    from devices.simulated_audio import FakeSoundDevice
+
+    named = open_device("audio://NoSuchMicrophone%20XYZ", "mic").start()
+    bare = AudioDevice.from_url(Url.parse("audio://"), "mic2", sd_module=FakeSoundDevice()).start()
     try:
-        assert device.wait_state(State.LOST, 5)
-        assert device.counters.last_error  # the reason, as the cockpit shows it
-        named = open_device("audio://NoSuchMicrophone", "mic2").start()
-        assert named.wait_state(State.LOST, 5) and "NoSuchMicrophone" in named.counters.last_error
-        named.close()
+        assert named.wait_state(State.LOST, 5) and "NoSuchMicrophone XYZ" in named.counters.last_error
+        assert bare.wait_state(State.LOST, 5)
+        assert bare.counters.last_error == "not plugged in: no sound input on this machine (no default input device)"
     finally:
-        device.close()
+        named.close()
+        bare.close()
     assert all(found.url.startswith("audio://") for found in discover())
 
 
