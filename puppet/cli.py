@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import re
 import sys
 import warnings
 from collections.abc import Callable
@@ -319,12 +320,22 @@ def _mappings(args: argparse.Namespace) -> int:
     if args.copy:
         print(copy_mapping(args.copy, args.output))
         return 0
-    for name, path in shipped_mappings().items():
-        first = next((line.lstrip("# ").strip() for line in path.read_text(encoding="utf-8").splitlines()
-                      if line.lstrip("# ").strip() and "$schema" not in line and "Written by" not in line), "")
-        print(f"{name:16} {first[:90]}")
+    shipped = shipped_mappings()
+    width = max(map(len, shipped))
+    for name, path in shipped.items():
+        print(f"{name:{width}}  {_summary(path.read_text(encoding='utf-8'))}")
     print(f"({mappings_folder()}; use a name with --mapping, or --copy NAME to edit one)")
     return 0
+
+
+def _summary(text: str, most: int = 90) -> str:
+    """A mapping's ``description:`` line (else its first comment), cut at a word within ``most``."""
+    found = re.search(r"^description:[ \t]*(.+)$", text, re.M)
+    line = found.group(1).strip().strip("'\"") if found else next(
+        (line.lstrip("# ").strip() for line in text.splitlines() if line.lstrip("# ").strip() and "$schema" not in line), "")
+    if len(line) <= most:
+        return line
+    return line[:most - 3].rsplit(" ", 1)[0].rstrip(",;:") + "..."
 
 
 def _sections(text: str) -> tuple[str, ...]:
@@ -488,7 +499,8 @@ def _export(args: argparse.Namespace) -> int:
 
     info = export_glb(args.take, args.output, mode=args.mode, max_frames=args.max_frames, face=_face(args.face))
     print(f"{args.output}: {info['frames']} frames, {info['targets']} morph targets, "
-          f"largest vertex error {info['max_error']:.2g}, {info['bytes']:,} bytes")
+          f"largest vertex error {info['max_error']:.2g} mesh units ({100 * info['max_error'] / info['extent']:.2g}% "
+          f"of the face's {info['extent']:.3g}-unit size), {info['bytes']:,} bytes")
     return 0
 
 

@@ -223,3 +223,15 @@ def test_the_cansend_lines_move_what_the_can_page_says():
     assert len(readings) == len(frames)
     for (name, value), reading in zip(frames.values(), readings):
         assert reading[name] == pytest.approx(value)
+
+
+def test_every_python_name_the_schema_cites_exists():
+    """The mapping reference (made from mappings/schema.json) names Python objects, e.g. where the
+    muscle names live; each must import."""
+    import importlib
+
+    text = (ROOT / "mappings" / "schema.json").read_text("utf-8")
+    cited = set(re.findall(r"\b((?:puppet|devices)(?:\.[a-z_]+)+)\.([A-Z][A-Z_]+)\b", text))
+    assert cited
+    for module, name in cited:
+        assert hasattr(importlib.import_module(module), name), f"schema.json cites {module}.{name}"

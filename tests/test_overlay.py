@@ -4,6 +4,7 @@ status and the channel monitor, and hidden it draws nothing."""
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -190,16 +191,15 @@ def test_the_window_does_not_calibrate_a_shipped_mapping_or_while_recording(tmp_
         session.close()
 
 
-def test_an_audio_input_shows_its_level_against_its_gate_and_its_xruns(tmp_path, headless_window):
+def test_an_audio_input_shows_its_level_against_its_gate_and_its_xruns(tmp_path, headless_window, capsys):
     """A microphone (here a wav:// file at real-time pace) gets a level meter in the cockpit, green
-    above its gate; its overruns and underruns are counted beside it."""
-    import subprocess
+    above its gate; its overruns and underruns are counted beside it. A take recorded with it
+    is said to be saved with its length, frames and sound."""
+    from puppet.io.wavwriter import WavWriter
 
     wav = tmp_path / "ah.wav"
-    subprocess.run([sys.executable, "-c", "import numpy as np, sys; from puppet.io.wavwriter import WavWriter; "
-                    "t = np.arange(96000) / 48000; w = WavWriter(sys.argv[1], 48000); "
-                    "w.write((8000 * np.sin(2 * np.pi * 220 * t)).astype(np.int16)); w.close()", str(wav)],
-                   check=True, cwd=Path(__file__).resolve().parents[1])
+    with WavWriter(wav, 48000) as writer:
+        writer.write((8000 * np.sin(2 * np.pi * 220 * np.arange(96000) / 48000)).astype(np.int16))
     window = headless_window(SIZE)
     session = open_session(shipped_mappings()["arduino_sliders_voice"],
                            devices={**SIM_BOX, "mic": f"wav://{wav}?loop=1"}, record_root=tmp_path)
@@ -210,8 +210,13 @@ def test_an_audio_input_shows_its_level_against_its_gate_and_its_xruns(tmp_path,
         assert mic.state == "open" and mic.level_db > mic.gate_db and 0.5 < mic.meter < 1.0
         assert (mic.overruns, mic.underruns) == (session.devices["mic"].counters.overruns,
                                                  session.devices["mic"].counters.underruns)
+        live._on_key(_Keys.R, _Keys.ACTION_PRESS, None)
+        _steps(live, 20)
+        live._on_key(_Keys.R, _Keys.ACTION_PRESS, None)
+        saved = [line for line in capsys.readouterr().err.splitlines() if line.startswith("take saved: ")]
+        assert len(saved) == 1 and re.search(r"\(\d+\.\d s, \d+ frames at 30 fps, \d+ readings, with its sound\)$",
+                                             saved[0]), saved
         pixels = _pixels(window)
-        Image.fromarray(pixels).save(tmp_path / "cockpit.png")
         panel = pixels[8:300, 8:330].reshape(-1, 3).astype(int)
         bar = np.all(np.abs(panel - (76, 217, 89)) < 12, axis=1)  # the meter's green, not the text's
         assert bar.sum() > 300

@@ -92,6 +92,28 @@ def test_puppet_mappings_lists_and_copies_and_a_wrong_name_is_one_line(tmp_path,
     assert "did you mean 'midi_faders'" in err and "Traceback" not in err
 
 
+def test_puppet_mappings_says_each_description_in_whole_words_in_one_column(capsys):
+    """Each mapping's ``description:``, never cut mid-word (a long one ends at a word, with ...),
+    every description starting in the same column however long the names."""
+    import yaml
+
+    from puppet.cli import _summary, main
+
+    assert main(["mappings"]) == 0
+    lines = capsys.readouterr().out.splitlines()[:-1]
+    columns = {len(line) - len(line.split("  ", 1)[1].lstrip()) for line in lines}
+    assert len(columns) == 1
+    column = columns.pop()
+    for line, (name, path) in zip(lines, shipped_mappings().items()):
+        said = line[column:]
+        whole = yaml.safe_load(path.read_text())["description"]
+        assert line.startswith(name) and (said == whole or (said.endswith("...") and whole.startswith(said[:-3])
+                                                             and whole[len(said) - 3] in " ,;:"))
+    long = "word " * 40
+    cut = _summary(f"description: {long}")
+    assert len(cut) <= 90 and cut.endswith("word...")
+
+
 def test_live_takes_go_where_takes_says(monkeypatch, tmp_path):
     import puppet.view.livewindow
     from puppet.cli import main

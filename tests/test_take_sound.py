@@ -5,6 +5,7 @@ in step (or silent, saying why), and made offline from a recording by ``puppet l
 from __future__ import annotations
 
 import json
+import re
 import shutil
 import signal
 import subprocess
@@ -201,7 +202,11 @@ def test_lipsync_makes_a_take_that_renders_replays_and_exports_with_its_sound(tm
     assert main(["render", str(folder), "-o", str(tmp_path / "v.mp4"), "--size", "160x120"]) == 0
     pcm, _ = _decoded(tmp_path / "v.mp4")
     assert np.abs(pcm).max() > 5000
+    capsys.readouterr()
     assert main(["export", str(folder), "-o", str(tmp_path / "t.glb")]) == 0
+    said = re.search(r"largest vertex error ([\d.e-]+) mesh units \(([\d.e-]+)% of the face's ([\d.]+)-unit size\)",
+                     capsys.readouterr().out)
+    assert said and float(said[2]) == pytest.approx(100 * float(said[1]) / float(said[3]), rel=0.1)
     assert main(["lipsync", str(wav), "-o", str(folder)]) == 2        # never over a take
 
 

@@ -35,7 +35,7 @@ from pathlib import Path
 from typing import Any
 
 from puppet.io.shipped import mappings_folder
-from puppet.io.takes import TakeError, check_take_name
+from puppet.io.takes import TakeError, check_take_name, open_take
 from puppet.live.calibrate import CalibrationError, GuidedCalibration, calibration_channels, device_overrides
 from puppet.live.mappingfile import load_mapping
 from puppet.view.overlay import Cockpit, device_lines
@@ -84,6 +84,15 @@ def live_title(name: str, fps: float, latency_ms: float | None, states: dict[str
     if recording:
         parts.append(f"REC {recording}")
     return " | ".join(parts)
+
+
+def saved_line(folder: str | os.PathLike) -> str:
+    """A saved take as the terminal says it: its folder, length, frames and what it keeps."""
+    meta = open_take(folder).meta
+    frames, fps = meta.get("frames") or 0, meta["fps"]
+    sound = ", with its sound" if meta.get("sound") else ""
+    return (f"{folder} ({frames / fps:.1f} s, {frames} frames at {fps} fps, "
+            f"{meta.get('samples') or 0} readings{sound})")
 
 
 class LiveView:
@@ -184,7 +193,7 @@ class LiveView:
         if self.session.recording:
             folder = self.session.stop_recording()
             self.takes.append(Path(folder))
-            print(f"take saved: {folder}", file=sys.stderr)
+            print(f"take saved: {saved_line(folder)}", file=sys.stderr)
         self.take = None
 
     # -- calibration from the window ------------------------------------------------------------
