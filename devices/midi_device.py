@@ -42,10 +42,7 @@ WAIT = 0.03
 
 def open_port(name: str):
     """The first MIDI input port whose name contains ``name`` (OSError when there is none)."""
-    try:
-        names = mido.get_input_names()
-    except Exception as exc:  # rtmidi raises its own SystemError when there is no MIDI system
-        raise DeviceLost(f"no MIDI system: {exc}") from None
+    names = input_names()
     matches = [n for n in names if name.lower() in n.lower()]
     if not matches:
         raise DeviceLost(f"no MIDI input port matching {name!r} (ports: {names})")
@@ -206,17 +203,23 @@ ALSA_SEQUENCER = "/dev/snd/seq"
 """What MIDI needs on Linux: the ALSA sequencer's device (absent in many containers and VMs)."""
 
 
-def discover() -> list[Found]:
-    """The MIDI input ports there are now (mido's names)."""
+def input_names() -> list[str]:
+    """The MIDI input ports there are now (mido's names). A machine with no MIDI system is an
+    OSError saying so, not an unplugged port: no port was ever there (and ALSA's own complaint,
+    printed straight to file descriptor 2, is kept off the terminal)."""
     try:
-        with _quiet_stderr():  # ALSA prints its own complaint straight to fd 2 when there is no sequencer
-            names = mido.get_input_names()
+        with _quiet_stderr():
+            return mido.get_input_names()
     except Exception as exc:  # rtmidi's own SystemError when the machine has no MIDI system
         detail = str(exc).splitlines()[0]
         if sys.platform.startswith("linux") and not Path(ALSA_SEQUENCER).exists():
             detail = f"no {ALSA_SEQUENCER}: load the ALSA sequencer, sudo modprobe snd-seq"
         raise OSError(f"no MIDI system ({detail})") from None
-    return [Found("midi", f"midi://{quote(name, safe=' ')}", "MIDI input") for name in names]
+
+
+def discover() -> list[Found]:
+    """The MIDI input ports there are now, as URLs."""
+    return [Found("midi", f"midi://{quote(name, safe=' ')}", "MIDI input") for name in input_names()]
 
 @contextlib.contextmanager
 def _quiet_stderr() -> Iterator[None]:

@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import time
+from pathlib import Path
 
 import mido
 import pytest
 
 from devices import DeviceError, open_device
 from devices.base import DeviceLost, State
-from devices.midi_device import MidiDevice
+from devices.midi_device import ALSA_SEQUENCER, MidiDevice
 
 
 class FakePort:
@@ -93,3 +94,18 @@ def test_a_midi_url_names_the_port_and_channel():
     assert (device.port_name, device.channel, device.cc14) == ("nanoKONTROL2", 3, {0, 1})
     with pytest.raises(DeviceError, match="channel 16"):
         open_device("midi://box?channel=16")
+
+
+@pytest.mark.skipif(Path(ALSA_SEQUENCER).exists(), reason="this machine has a MIDI system (an ALSA sequencer)")
+def test_with_no_midi_system_a_midi_device_says_so_quietly_not_unplugged(capfd):
+    """A machine without an ALSA sequencer never had the port: the device is LOST with "no MIDI
+    system" and what to load, not "unplugged", and ALSA's own complaints stay off the terminal."""
+    device = open_device("midi://nanoKONTROL2", "faders").start()
+    try:
+        assert device.wait_state(State.LOST, 5)
+        time.sleep(0.2)  # a retry or two
+        reason = device.counters.last_error
+    finally:
+        device.close()
+    assert reason.startswith("no MIDI system (no /dev/snd/seq") and "unplugged" not in reason
+    assert "seq_hw.c" not in capfd.readouterr().err
