@@ -8,7 +8,9 @@ Two timed recordings, each started when the user presses Enter:
 2. **sweep** (``sweep_seconds``): every control moved through its whole travel. ``min`` / ``max``
    are the **0.5th / 99.5th percentiles** of the sweep samples (linear interpolation), not the
    true extremes: one glitched reading does not stretch the range, and a control held at an end
-   stop for any time at all still reaches it.
+   stop for any time at all still reaches it. A device that reads whole counts (every sample a
+   whole number: an ADC) gets whole limits: the min rounded down, the max up, the centre to the
+   nearest count.
 
 A channel **never moved** when its sweep span (max - min) is no more than 4x its rest noise (or
 exactly 0); one that **never reported** got no sample in either phase. Both are reported with a
@@ -185,9 +187,10 @@ def _analyse(channels: dict[str, bool], rest: dict[str, list[float]], sweep: dic
     warnings: list[str] = []
     for name, bipolar in channels.items():
         r, s = np.asarray(rest[name]), np.asarray(sweep[name])
-        centre = _num(np.median(r)) if r.size else None
-        lo = _num(np.percentile(s, LOW_PCT)) if s.size else None
-        hi = _num(np.percentile(s, HIGH_PCT)) if s.size else None
+        counts = bool(r.size + s.size) and bool(np.all(np.mod(r, 1) == 0) and np.all(np.mod(s, 1) == 0))
+        centre = _num(np.median(r), round if counts else None) if r.size else None
+        lo = _num(np.percentile(s, LOW_PCT), math.floor if counts else None) if s.size else None
+        hi = _num(np.percentile(s, HIGH_PCT), math.ceil if counts else None) if s.size else None
         result[name] = {"min": lo, "centre": centre, "max": hi, "samples": int(r.size + s.size)}
         if not r.size and not s.size:
             warnings.append(f"{name}: never reported (no samples at all): left as it was")
@@ -274,8 +277,12 @@ class GuidedCalibration:
         return result, warnings
 
 
-def _num(x) -> float | int:
-    """A tidy number for the YAML: 6 significant digits, an int when whole."""
+def _num(x, whole: Callable[[float], int] | None = None) -> float | int:
+    """A tidy number for the YAML: 6 significant digits, an int when whole; for a device that
+    reads whole counts (a 10-bit ADC), a count, by ``whole`` (floor for a min, ceil for a max,
+    round for a centre), since a limit between two counts means nothing to it."""
+    if whole is not None:
+        return int(whole(float(x)))
     v = float(f"{float(x):.6g}")
     return int(v) if v.is_integer() else v
 
