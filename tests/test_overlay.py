@@ -225,3 +225,11 @@ def test_an_audio_input_shows_its_level_against_its_gate_and_its_xruns(tmp_path,
         session.close()
     box = device_lines(session.states, session.devices)[0]
     assert box.level_db is None  # a slider box has no meter
+
+
+def test_the_channel_monitor_says_how_many_more_targets_a_channel_drives():
+    from puppet.view.overlay import targets_label
+
+    assert targets_label(("open_jaw",)) == "open_jaw"
+    assert targets_label(("raise_l_cornerlip", "stretch_l_cornerlip")) == "raise_l_cornerlip and 1 more target"
+    assert targets_label(tuple(f"t{k}" for k in range(6))) == "t0 and 5 more targets"

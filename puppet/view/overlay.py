@@ -172,9 +172,14 @@ class Cockpit:
             imgui.progress_bar(abs(shaped), (60, 0), f"{shaped:+.2f}")
             if channel.targets:
                 imgui.same_line()
-                more = f" +{len(channel.targets) - 1}" if len(channel.targets) > 1 else ""
-                imgui.text_disabled(f"{channel.targets[0][:26]}{more}")
+                imgui.text_disabled(targets_label(channel.targets))
         imgui.end()
+
+
+def targets_label(targets: tuple[str, ...], width: int = 26) -> str:
+    """What a channel drives, as the monitor says it: its first target, and how many more."""
+    more = len(targets) - 1
+    return targets[0][:width] + (f" and {more} more target{'s' * (more > 1)}" if more else "")
 
 
 def device_lines(states: Mapping[str, Any], devices: Mapping[str, Any]) -> list[DeviceLine]:
