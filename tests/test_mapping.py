@@ -377,6 +377,17 @@ def test_yaml_syntax_error_gives_the_line():
     assert str(err).startswith("tabs.yaml:2: YAML syntax error at line 2")
 
 
+def test_a_line_indented_too_little_is_the_line_named_not_the_one_after_it():
+    """PyYAML notices a key that lost its indentation only at the next, deeper line; the error
+    names the line that went wrong."""
+    text = ("devices:\n  box: {url: 'serial:///dev/x'}\nchannels:\n  box.ch0:\n    min: 0\n"
+            "  smoothing: {type: exponential, tau: 0.1}\n    dead_zone: 0.1\n")
+    err = str(yaml_error(text, "indent.yaml"))
+    assert err.startswith("indent.yaml:6: YAML indentation: line 6 is indented 2 spaces") and "line 7" in err
+    deeper = "devices:\n  box: {url: 'serial:///dev/x'}\nchannels:\n  box.ch0:\n    min: 0\n      max: 5\n"
+    assert str(yaml_error(deeper, "deeper.yaml")).startswith("deeper.yaml:6: YAML syntax error at line 6")
+
+
 @pytest.mark.parametrize("text, got", [("- 1\n- 2\n", "[1, 2]"), ("hello\n", "'hello'"), ("", "nothing"),
                                        ("# only a comment\n", "nothing")])
 def test_non_mapping_root(text, got):

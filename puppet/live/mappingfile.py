@@ -147,6 +147,33 @@ def load_mapping(path: str | os.PathLike) -> Mapping:
     return parse_mapping(text, file)
 
 
+def _misindented(text: str, line: int) -> int | None:
+    """The line whose indentation went wrong when PyYAML stops at ``line`` (0-based): the line
+    before it, when that one is indented less and opens no block (``key: value`` or a flow
+    value), so ``line`` cannot belong under it; PyYAML only notices at the deeper line."""
+    lines = text.splitlines()
+    if not 0 < line < len(lines):
+        return None
+    previous = next((k for k in range(line - 1, -1, -1) if lines[k].strip() and not lines[k].lstrip().startswith("#")),
+                    None)
+    if previous is None:
+        return None
+    body = lines[previous].split(" #", 1)[0].rstrip()
+    deeper = _indent(lines[line]) > _indent(lines[previous])
+    return previous if deeper and not body.endswith(":") and not body.lstrip().startswith("- ") else None
+
+
+def _indent(line: str) -> int:
+    return len(line) - len(line.lstrip(" "))
+
+
+def _indent_problem(text: str, culprit: int, stopped: int) -> str:
+    lines = text.splitlines()
+    return (f"YAML indentation: line {culprit + 1} is indented {_indent(lines[culprit])} spaces and opens no "
+            f"block, so line {stopped + 1}, indented {_indent(lines[stopped])}, fits nowhere; line "
+            f"{culprit + 1} is most likely indented wrong (give it the indentation of the keys it belongs with)")
+
+
 def parse_mapping(text: str, file: str = "<mapping>") -> Mapping:
     """A mapping from YAML text (``file`` names it in errors)."""
     if len(text) > MAX_MAPPING_CHARS:
@@ -161,6 +188,9 @@ def parse_mapping(text: str, file: str = "<mapping>") -> Mapping:
         if isinstance(exc, yaml.constructor.ConstructorError):  # a !!python/... tag, say
             kind, what = "unsupported YAML", f"{what}; expected plain data (mappings, lists, strings, numbers)"
         at = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
+        culprit = _misindented(text, mark.line) if mark is not None and "expected" in what else None
+        if culprit is not None:
+            raise MappingError(file, [Problem("", culprit + 1, _indent_problem(text, culprit, mark.line))]) from None
         raise MappingError(file, [Problem("", mark.line + 1 if mark else None, f"{kind}{at}: {what}")]) from None
     except RecursionError:
         raise MappingError(file, [Problem("", None, "the YAML is nested too deeply")]) from None
