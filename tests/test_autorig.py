@@ -101,6 +101,22 @@ def test_landmark_errors_are_clear(default, tmp_path, landmarks, message):
         load_face(mesh, landmarks=landmarks if isinstance(landmarks, list) else source)
 
 
+def test_a_landmark_file_like_ict_facekits_gives_its_68_ibug_points_from_its_key(tmp_path):
+    """ICT-FaceKit ships ``vertex_indices.json``: an object of lists, the 68 iBUG landmark
+    vertices under ``idx_to_landmark_verts``. That list is read; two such lists are named."""
+    ibug = list(range(100, 168))
+    path = tmp_path / "vertex_indices.json"
+    path.write_text(json.dumps({"expressions": ["browDown_L"] * 53, "idx_to_landmark_verts": ibug,
+                                "idx_to_rigid_landmark_idx": [0, 36, 39]}))
+    assert read_landmarks(path, 500) == ibug
+    path.write_text(json.dumps({"a": ibug, "b": ibug}))
+    with pytest.raises(LandmarkError, match="several keys hold 68 vertex indices \\('a', 'b'\\)"):
+        read_landmarks(path, 500)
+    path.write_text(json.dumps({"expressions": ["x"], "fitting": [1, 2]}))
+    with pytest.raises(LandmarkError, match="unknown FDP id.*68 iBUG vertex indices, as a list or under one key"):
+        read_landmarks(path, 500)
+
+
 def test_a_landmark_file_that_is_not_json_is_named(tmp_path):
     bad = tmp_path / "bad.json"
     bad.write_text("{2.1: 3")

@@ -105,7 +105,11 @@ def read_landmarks(source, n_vertices: int) -> dict[str, int] | list[int]:
         except json.JSONDecodeError as exc:
             raise LandmarkError(f"{name}:{exc.lineno}: not valid JSON ({exc.msg})") from None
     if isinstance(source, dict):
-        return {fid: _index(v, n_vertices, f"{name}: FDP {fid}") for fid, v in _fdp_items(source, name)}
+        held = _ibug_key(source, name)
+        if held is not None:
+            source = source[held]
+        else:
+            return {fid: _index(v, n_vertices, f"{name}: FDP {fid}") for fid, v in _fdp_items(source, name)}
     if isinstance(source, (list, tuple)):
         if len(source) != 68:
             raise LandmarkError(f"{name}: a landmark list must hold the 68 iBUG points, got {len(source)}")
@@ -114,11 +118,31 @@ def read_landmarks(source, n_vertices: int) -> dict[str, int] | list[int]:
                         f"got {type(source).__name__}")
 
 
+def _ibug_key(data: dict, name: str) -> str | None:
+    """The key of an object with no FDP ids that holds the 68 iBUG vertex indices as one list (as
+    ICT-FaceKit's ``vertex_indices.json`` does under ``idx_to_landmark_verts``); None for an object
+    of FDP ids. Several such lists are a LandmarkError naming them."""
+    if any(_is_fdp(key) for key in data):
+        return None
+    lists = [key for key, value in data.items() if isinstance(value, list) and len(value) == 68
+             and all(isinstance(v, int) and not isinstance(v, bool) for v in value)]
+    if len(lists) > 1:
+        raise LandmarkError(f"{name}: several keys hold 68 vertex indices ({', '.join(map(repr, lists))}): "
+                            "give a file with the iBUG 68 list alone, or an object of FDP ids")
+    return lists[0] if lists else None
+
+
 def _fdp_items(data: dict, name: str) -> list[tuple[str, object]]:
     bad = [k for k in data if not _is_fdp(k)]
     if bad:
-        raise LandmarkError(f"{name}: unknown FDP id(s) {bad} (MPEG-4 ids look like '2.1' .. '11.6')")
+        raise LandmarkError(f"{name}: unknown FDP id(s) {_clip_list(bad)} (MPEG-4 ids look like '2.1' .. '11.6'; "
+                            "or give the 68 iBUG vertex indices, as a list or under one key)")
     return list(data.items())
+
+
+def _clip_list(items: list, most: int = 5) -> str:
+    shown = ", ".join(map(repr, items[:most]))
+    return f"[{shown}{f', ... ({len(items)} in all)' if len(items) > most else ''}]"
 
 
 def _is_fdp(key: str) -> bool:
