@@ -277,3 +277,24 @@ def test_lipsync_with_a_script_presses_the_lips_on_each_closure_and_replays_exac
 
 def _runs(flags: np.ndarray) -> int:
     return int(np.sum(np.diff(np.concatenate([[0], flags.astype(int)])) == 1))
+
+
+def test_every_audio_device_of_a_take_gets_its_own_wav(tmp_path):
+    """Two microphones: the first in take.wav, the second in take.NAME.wav, each with its own
+    rate and first sample's time in take.json; a device without sound writes none."""
+    from devices.base import Sample, Sound
+    from puppet.io.takes import TakeRecorder
+
+    recorder = TakeRecorder(tmp_path, "duet", 30)
+    for k in range(3):
+        recorder.sample(Sample(1000 + k, "box", {"ch0": 1.0}))
+        recorder.sample(Sample(2000 + k, "alto", {"level": 0.5}, Sound(np.full(480, k, np.int16), 48000, 500 + k)))
+        recorder.sample(Sample(3000 + k, "tenor", {"level": 0.5}, Sound(np.full(441, -k, np.int16), 44100, 700 + k)))
+    folder = recorder.close()
+    sounds = {s.device: s for s in open_take(folder).sounds()}
+    assert set(sounds) == {"alto", "tenor"}
+    assert (sounds["alto"].path.name, sounds["alto"].rate, sounds["alto"].first_ns) == ("take.wav", 48000, 500)
+    assert (sounds["tenor"].path.name, sounds["tenor"].rate, sounds["tenor"].first_ns) == ("take.tenor.wav", 44100, 700)
+    tenor, rate = read_sound(sounds["tenor"].path)
+    assert rate == 44100 and np.array_equal(tenor, np.repeat([0, -1, -2], 441).astype(np.int16))
+    assert json.loads((folder / "take.json").read_text())["sound"]["alto"]["frames"] == 3 * 480
