@@ -233,3 +233,20 @@ def test_the_channel_monitor_says_how_many_more_targets_a_channel_drives():
     assert targets_label(("open_jaw",)) == "open_jaw"
     assert targets_label(("raise_l_cornerlip", "stretch_l_cornerlip")) == "raise_l_cornerlip and 1 more target"
     assert targets_label(tuple(f"t{k}" for k in range(6))) == "t0 and 5 more targets"
+
+
+def test_a_layered_pass_shows_its_base_take_in_the_cockpit(tmp_path, headless_window):
+    from puppet.view.demo import demo_take
+
+    window = headless_window(SIZE)
+    session = open_session(shipped_mappings()["arduino_sliders"], devices=SIM_BOX, record_root=tmp_path,
+                           layer_over=demo_take(), arm=["box.ch0"])
+    live = LiveView(session, window)
+    try:
+        _steps(live, 3)
+        assert session.layer_status().startswith("over demo_take.fap, frame 1 of 98; armed: open_jaw")
+        panel = _pixels(window)[8:320, 8:400].reshape(-1, 3).astype(int)
+        assert np.all(np.abs(panel - (140, 204, 255)) < 40, axis=1).sum() > 30  # the layer line's blue
+    finally:
+        live.close()
+        session.close()

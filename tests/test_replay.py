@@ -258,3 +258,25 @@ def test_a_can_joystick_take_replays_through_can_frames_to_the_identical_fap(sha
             session.close()
     assert take.meta["samples"] > 50
     assert retake(take, tmp_path / "wire.fap", through_devices=True).identical
+
+
+def test_a_layered_pass_says_its_base_take_where_it_is_and_what_is_armed(live_take, shared_runtime, tmp_path):
+    """What the cockpit shows under REC for a layered pass: the base take playing under it, its
+    frame now, and what the pass replaces; a session without a layer says nothing."""
+    session = _session(shared_runtime, tmp_path, layer_over=live_take.folder, arm=["box.ch0", "viseme"])
+    try:
+        _open(session)
+        total = live_take.meta["frames"]
+        assert session.layer_status() == f"over {live_take.folder.name}, frame 1 of {total}; armed: open_jaw, viseme"
+        start = time.monotonic_ns()
+        session.start_recording(start)
+        assert session.layer_status(start + 500_000_000) == (f"over {live_take.folder.name}, frame 16 of {total}; "
+                                                             "armed: open_jaw, viseme")
+        session.stop_recording()
+    finally:
+        session.close()
+    plain = _session(shared_runtime, tmp_path)
+    try:
+        assert plain.layer_status() is None
+    finally:
+        plain.close()

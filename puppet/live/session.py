@@ -275,10 +275,19 @@ class LiveSession:
 
     def _layered(self, now: int, pose: Pose):
         """The layered pass as shown: the base take where the take is now (its start before)."""
-        k = 0
-        if self._clock is not None:
-            k = max(0, (now - self._clock.t0_ns) * self.fps // 1_000_000_000)
-        return self.layer.merge(k, pose)
+        return self.layer.merge(self._layer_frame(now), pose)
+
+    def _layer_frame(self, now: int) -> int:
+        if self._clock is None:
+            return 0
+        return max(0, (now - self._clock.t0_ns) * self.fps // 1_000_000_000)
+
+    def layer_status(self, now_ns: int | None = None) -> str | None:
+        """A layered pass as the cockpit says it (the base take, its frame now, what is armed);
+        None when the session records no layered pass."""
+        if self.layer is None:
+            return None
+        return self.layer.describe(self._layer_frame(time.monotonic_ns() if now_ns is None else now_ns))
 
     @property
     def states(self) -> dict[str, State]:

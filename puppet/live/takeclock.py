@@ -95,6 +95,17 @@ class Layer:
         expression = pose.expression if self.expression else base.expression
         return fap, viseme, expression
 
+    def describe(self, k: int) -> str:
+        """The pass as the performer needs it: the base take, where it is, and what is armed."""
+        with iter_fap(self.base_fap) as reader:
+            total = reader.header.declared_frames
+        names = {f.number - 1: f.name for f in faps()}
+        armed = [names[slot] for slot in self.slots] + ["viseme"] * self.viseme + ["expression"] * self.expression
+        shown = ", ".join(armed[:4]) + (f" and {len(armed) - 4} more" if len(armed) > 4 else "")
+        where = f"frame {k + 1}" + (f" of {total}" if total else "")
+        base = self.base_fap.parent.name if self.base_fap.name == "take.fap" else self.base_fap.name
+        return f"over {base}, {where}; armed: {shown}"
+
     def spec(self) -> dict:
         """What a take's metadata keeps to rebuild this layer."""
         return {"over": str(self.base_fap.resolve()), "slots": self.slots.tolist(),

@@ -254,7 +254,7 @@ class LiveView:
         channels = self.session.mapping.channels() if self.cockpit.monitor else ()
         notice = self.notice if time.monotonic() < self._notice_until else ""
         self.cockpit.draw(self.stats.fps, self.stats.latency_ms, device_lines(states, self.session.devices),
-                          recording, channels, notice)
+                          recording, channels, notice, layer=self.session.layer_status())
 
     def _set_title(self, states: dict[str, Any]) -> None:
         recording = self.take.name if self.take is not None and self.session.recording else None

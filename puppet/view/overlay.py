@@ -8,7 +8,8 @@ is rendered into the window's framebuffer:
 * **devices**: each one's state, and while it is LOST the reason its adapter gave (port missing,
   permission denied, unplugged); an audio input also gets a level meter (dBFS, the noise gate's
   threshold marked by the bar's colour) and its overrun and underrun counts;
-* **REC**: the take's name and how long it has been recording;
+* **REC**: the take's name and how long it has been recording; for a layered pass, the base take
+  playing under it (its frame) and what is armed;
 * a **notice** line: the steps of a calibration run from the window (K), then its result;
 * **channel monitor** (M): per channel a bar of its raw value within its calibrated range and one
   of its shaped value's size (the signed value written on it), with the first target it drives;
@@ -83,11 +84,13 @@ class Cockpit:
         self.latency.append(latency_ms or 0.0)
 
     def draw(self, fps: float, latency_ms: float | None, devices: Iterable[DeviceLine],
-             recording: tuple[str, float] | None, channels: Iterable[Any], notice: str = "") -> None:
+             recording: tuple[str, float] | None, channels: Iterable[Any], notice: str = "",
+             layer: str | None = None) -> None:
         """Draw the cockpit over the current framebuffer (nothing when hidden: the caller skips
         gathering what it shows too). ``recording``: (take name, seconds) while a take runs;
         ``channels``: ``Mapping.channels()``; ``notice``: a line for the performer (the window's
-        calibration steps, its result)."""
+        calibration steps, its result); ``layer``: a layered pass's base take and what is armed
+        (``LiveSession.layer_status``)."""
         if not self.visible:
             return
         imgui = self.imgui
@@ -98,7 +101,7 @@ class Cockpit:
         io.display_size = self.window.size
         self._last = now
         imgui.new_frame()
-        self._status(fps, latency_ms, list(devices), recording, notice)
+        self._status(fps, latency_ms, list(devices), recording, notice, layer)
         if self.monitor:
             self._monitor(list(channels))
         imgui.render()
@@ -111,7 +114,7 @@ class Cockpit:
     # -- panels --------------------------------------------------------------------------------
 
     def _status(self, fps: float, latency_ms: float | None, devices: list[DeviceLine],
-                recording: tuple[str, float] | None, notice: str) -> None:
+                recording: tuple[str, float] | None, notice: str, layer: str | None = None) -> None:
         imgui = self.imgui
         imgui.set_next_window_pos((8, 8), imgui.Cond_.first_use_ever)
         imgui.set_next_window_bg_alpha(0.7)
@@ -134,6 +137,9 @@ class Cockpit:
         if recording is not None:
             name, seconds = recording
             imgui.text_colored((1.0, 0.2, 0.2, 1.0), f"REC {name}  {int(seconds) // 60}:{seconds % 60:04.1f}")
+        if layer is not None:
+            imgui.text_colored((0.55, 0.8, 1.0, 1.0), f"layer {layer}" if recording else
+                               f"layer {layer} (R records a pass)")
         if notice:
             imgui.text_colored((1.0, 0.85, 0.3, 1.0), notice)
         imgui.separator()
