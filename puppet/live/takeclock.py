@@ -71,6 +71,8 @@ class Layer:
         self.base_fap = Path(base_fap)
         self.slots = np.array(sorted(set(slots)), dtype=int)
         self.viseme, self.expression = viseme, expression
+        with iter_fap(self.base_fap) as reader:
+            self.total = reader.header.declared_frames  # the base's frame count, as its header says
         self._frames: Iterator = iter(iter_fap(self.base_fap))
         self._held = HeldFaps.neutral()
         self._index = -1
@@ -97,8 +99,7 @@ class Layer:
 
     def describe(self, k: int) -> str:
         """The pass as the performer needs it: the base take, where it is, and what is armed."""
-        with iter_fap(self.base_fap) as reader:
-            total = reader.header.declared_frames
+        total = self.total
         names = {f.number - 1: f.name for f in faps()}
         armed = [names[slot] for slot in self.slots] + ["viseme"] * self.viseme + ["expression"] * self.expression
         shown = ", ".join(armed[:4]) + (f" and {len(armed) - 4} more" if len(armed) > 4 else "")
