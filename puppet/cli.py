@@ -361,10 +361,13 @@ def _rig(args: argparse.Namespace) -> int:
 
     output, rig_file = _rig_output(args.output)
     start = time.perf_counter()
+    _step("rig", 1, 3, f"reading {args.mesh} and placing its feature points")
     face = load_face(args.mesh, landmarks=args.landmarks)
+    _step("rig", 2, 3, f"regions, control points and muscles on {len(face.vertices):,} vertices")
     rig = build_rig(face)
     seconds = time.perf_counter() - start
     start = time.perf_counter()
+    _step("rig", 3, 3, "fold limits: how far each FAP goes before a triangle folds (the longest step)")
     rig = fold_limited(face, rig)
     limits = time.perf_counter() - start
     if rig_file:
@@ -380,6 +383,11 @@ def _rig(args: argparse.Namespace) -> int:
     if not rig_file:
         print(f"  use it with --face {args.output} (play, render, replay, live, export)")
     return 0
+
+
+def _step(command: str, k: int, n: int, what: str) -> None:
+    """A long command's progress: the step it starts, on stderr as it starts."""
+    print(f"{command} {k}/{n}: {what}", file=sys.stderr, flush=True)
 
 
 def _rig_output(path: str) -> tuple[Path, bool]:

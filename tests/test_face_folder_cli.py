@@ -3,6 +3,8 @@ mesh says how to rig it."""
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 
 import numpy as np
@@ -27,12 +29,22 @@ def rigged(tmp_path_factory):
     mesh.write_text("\n".join(lines) + "\n")
     points = root / "points.json"
     points.write_text(json.dumps(face.feature_vertices))
-    assert main(["rig", str(mesh), "--landmarks", str(points), "-o", str(root / "head")]) == 0
+    said = io.StringIO()
+    with contextlib.redirect_stderr(said):
+        assert main(["rig", str(mesh), "--landmarks", str(points), "-o", str(root / "head")]) == 0
+    (root / "rig_stderr.txt").write_text(said.getvalue())
     take = root / "take.fap"
     frames = np.zeros((10, 68))
     frames[:, 2] = np.linspace(0, 300, 10)  # open_jaw
     write_fap(take, frames, fps=25)
     return root
+
+
+def test_puppet_rig_says_each_step_as_it_starts(rigged):
+    """The minute a big mesh takes is not silent: each step is said on stderr as it begins."""
+    steps = (rigged / "rig_stderr.txt").read_text().splitlines()
+    assert [line.split(":")[0] for line in steps] == ["rig 1/3", "rig 2/3", "rig 3/3"]
+    assert "head.obj" in steps[0] and "vertices" in steps[1] and "fold limits" in steps[2]
 
 
 def test_the_folder_holds_mesh_feature_points_and_rig_and_loads_with_its_own_rig(rigged):
