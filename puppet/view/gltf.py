@@ -24,6 +24,7 @@ from __future__ import annotations
 import json
 import os
 import struct
+from collections.abc import Callable
 
 import numpy as np
 
@@ -114,8 +115,10 @@ def _unit(normals: np.ndarray) -> np.ndarray:
 
 def export_glb(take_or_fap_path: str | os.PathLike, out_path: str | os.PathLike, *,
                mode: str = "morph", max_frames: int | None = None,
-               face: Face | None = None, tolerance: float | None = None) -> dict:
-    """Export a take (a .fap or a take folder) on the face (default: the default face) to .glb.
+               face: Face | None = None, tolerance: float | None = None,
+               step: Callable[[int, int, str], None] | None = None) -> dict:
+    """Export a take (a .fap or a take folder) on the face (default: the default face) to .glb;
+    ``step(k, n, what)`` hears each of its ``n`` steps as it starts (``puppet export``'s progress).
 
     Returns {"frames", "targets", "max_error", "extent", "bytes", "mode", "fps"}; ``max_error`` is
     the largest distance (mesh units) between a played vertex and its glTF reconstruction,
@@ -128,11 +131,14 @@ def export_glb(take_or_fap_path: str | os.PathLike, out_path: str | os.PathLike,
     if max_frames is not None and max_frames < 1:
         raise ValueError(f"max_frames must be at least 1, got {max_frames}")
     out_path = writable(out_path, ".glb")
+    step = step or (lambda k, n, what: None)
     playback = FapPlayback(take_or_fap_path, face)
     rest = np.asarray(playback.runtime.rest, dtype=np.float64)
     rest32 = rest.astype(np.float32)
+    step(1, 3, "playing the take on the face")
     D = _displacements(playback, take_or_fap_path, rest32, mode, max_frames)
     frames, n = len(D), len(rest)
+    step(2, 3, f"the morph targets of {frames} frames" if mode == "morph" else f"a morph target per frame ({frames})")
     if mode == "morph":
         if tolerance is None:
             tolerance = 1e-3 * float(np.ptp(rest, axis=0).max())
@@ -141,6 +147,7 @@ def export_glb(take_or_fap_path: str | os.PathLike, out_path: str | os.PathLike,
         weights, targets = np.eye(frames), D
     weights32 = weights.astype(np.float32)
     targets32 = targets.astype(np.float32).reshape(len(targets), n, 3)
+    step(3, 3, "every frame played again against its reconstruction, and the file written")
     max_error = _max_error(playback, rest32, weights32, targets32, frames)
     interpolation = "LINEAR" if mode == "morph" else "STEP"
     b = _Builder()
