@@ -611,7 +611,8 @@ def _face_from_photo(args: argparse.Namespace) -> int:
     """``puppet face-from-photo``: a face folder from a photo and its landmarks."""
     from puppet.photo.build import build_face_folder
 
-    print(build_face_folder(args.photo, args.landmarks, args.output))
+    print(build_face_folder(args.photo, args.landmarks, args.output,
+                            step=lambda k, n, what: _step("face-from-photo", k, n, what)))
     return 0
 
 

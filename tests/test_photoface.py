@@ -89,7 +89,7 @@ def test_texture_coordinates_land_inside_the_image(shot, fdp11):
     assert r > g > b
 
 
-def test_the_command_writes_a_folder_that_loads_rigs_and_animates(shot, fdp11, tmp_path):
+def test_the_command_writes_a_folder_that_loads_rigs_and_animates(shot, fdp11, tmp_path, capsys):
     from puppet.view.renderer import render_face, save_png
 
     photo, _ = shot
@@ -97,6 +97,8 @@ def test_the_command_writes_a_folder_that_loads_rigs_and_animates(shot, fdp11, t
     (tmp_path / "points.json").write_text(json.dumps({"layout": "fdp11", "points": fdp11.points.tolist()}))
     assert main(["face-from-photo", str(tmp_path / "photo.png"), "--landmarks", str(tmp_path / "points.json"),
                  "-o", str(tmp_path / "me")]) == 0
+    steps = [line.split(":")[0] for line in capsys.readouterr().err.splitlines()]
+    assert steps == [f"face-from-photo {k}/4" for k in range(1, 5)]  # its half minute is not silent
     for name in ("face.obj", "texture.png", "face.json", "face.rig"):
         assert (tmp_path / "me" / name).is_file()
     face = load_face_folder(tmp_path / "me")

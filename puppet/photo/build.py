@@ -46,6 +46,7 @@ import hashlib
 import importlib.resources
 import json
 import os
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -599,24 +600,32 @@ def read_photo(path: str | os.PathLike) -> np.ndarray:
 
 
 def build_face_folder(photo_path: str | os.PathLike, landmarks_path: str | os.PathLike | None,
-                      out: str | os.PathLike) -> Path:
+                      out: str | os.PathLike, step: Callable[[int, int, str], None] | None = None) -> Path:
     """``puppet face-from-photo``: fit, texture, write ``out`` (``puppet.face.folder``) and rig the
     written face with its fold limits (``fold_limited``). With no
     ``landmarks_path`` the landmarks are detected (``puppet.photo.detect``); the camera's focal
-    length comes from the photo's EXIF where it says it (``puppet.photo.depth.focal_from_exif``)."""
+    length comes from the photo's EXIF where it says it (``puppet.photo.depth.focal_from_exif``).
+    ``step(k, n, what)`` hears each of the ``n`` steps as it starts."""
     from puppet.face.autorig import build_rig
     from puppet.face.folder import FACE_RIG, load_face_folder, write_face_folder
     from puppet.face.rig import save_rig
     from puppet.photo.detect import detect_landmarks
     from puppet.runtime.foldlimits import fold_limited
 
+    step = step or (lambda k, n, what: None)
     photo = read_photo(photo_path)
     if landmarks_path is None:
+        step(1, 4, f"finding the face's landmarks in {photo_path} (MediaPipe)")
         landmarks = parse_landmarks(detect_landmarks(photo_path), f"{photo_path} (detected landmarks)")
     else:
+        step(1, 4, f"reading the landmarks {landmarks_path}")
         landmarks = read_landmarks(landmarks_path)
+    step(2, 4, "fitting the face's shape to the landmarks, the expression taken out, and its texture")
     face, report = face_from_photo(photo, landmarks, Path(photo_path).stem, focal=focal_from_exif(photo_path))
     folder = write_face_folder(face, out, source_photo=str(photo_path), report=report)
     written = load_face_folder(folder)
-    save_rig(fold_limited(written, build_rig(written)), folder / FACE_RIG)
+    step(3, 4, "regions, control points and muscles")
+    rig = build_rig(written)
+    step(4, 4, "fold limits: how far each FAP goes before a triangle folds (the longest step)")
+    save_rig(fold_limited(written, rig), folder / FACE_RIG)
     return folder
