@@ -361,13 +361,12 @@ def _rig(args: argparse.Namespace) -> int:
 
     output, rig_file = _rig_output(args.output)
     start = time.perf_counter()
-    _step("rig", 1, 3, f"reading {args.mesh} and placing its feature points")
-    face = load_face(args.mesh, landmarks=args.landmarks)
-    _step("rig", 2, 3, f"regions, control points and muscles on {len(face.vertices):,} vertices")
+    face = load_face(args.mesh, landmarks=args.landmarks)  # the inputs checked before any step is said
+    _step("rig", 1, 2, f"regions, control points and muscles on {len(face.vertices):,} vertices")
     rig = build_rig(face)
     seconds = time.perf_counter() - start
     start = time.perf_counter()
-    _step("rig", 3, 3, "fold limits: how far each FAP goes before a triangle folds (the longest step)")
+    _step("rig", 2, 2, "fold limits: how far each FAP goes before a triangle folds (the longest step)")
     rig = fold_limited(face, rig)
     limits = time.perf_counter() - start
     if rig_file:

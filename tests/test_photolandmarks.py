@@ -33,6 +33,12 @@ def test_the_astronauts_landmarks_are_found_on_her_face(astronaut):
     assert left_eye[0] < nose[0] < right_eye[0] and nose[1] > max(left_eye[1], right_eye[1])
 
 
+def refusals(err: str) -> list[str]:
+    """The refusal lines of a command's stderr (its progress lines, "face-from-photo 1/4: ...",
+    come before them)."""
+    return [line for line in err.splitlines() if line.startswith("puppet ")]
+
+
 @needs_detector
 def test_face_from_photo_with_no_landmarks_detects_them_and_builds_a_face(astronaut, tmp_path):
     from puppet import cli
@@ -53,7 +59,7 @@ def test_a_photo_with_no_face_or_two_is_refused_in_one_line(astronaut, tmp_path,
     Image.fromarray(np.concatenate([face, face], axis=1)).save(two)
     assert cli.main(["face-from-photo", str(blank), "-o", str(tmp_path / "a")]) == 2
     assert cli.main(["face-from-photo", str(two), "-o", str(tmp_path / "b")]) == 2
-    err = capsys.readouterr().err.splitlines()
+    err = refusals(capsys.readouterr().err)
     assert err == [f"puppet face-from-photo: {blank}: no face found: expected a frontal photo with the whole "
                    "face in view",
                    f"puppet face-from-photo: {two}: 2 faces found: crop the photo to the one face to build"]
@@ -108,7 +114,7 @@ def test_a_turned_or_profile_photo_is_refused_in_one_line(default_face_views, tm
     paths, _ = default_face_views
     assert cli.main(["face-from-photo", str(paths[60]), "-o", str(tmp_path / "a")]) == 2
     assert cli.main(["face-from-photo", str(paths[90]), "-o", str(tmp_path / "b")]) == 2
-    turned, profile = capsys.readouterr().err.splitlines()
+    turned, profile = refusals(capsys.readouterr().err)
     assert "not a frontal face" in turned and "the head is turned" in turned
     assert profile == f"puppet face-from-photo: {paths[90]}: no face found: expected a frontal photo with the whole face in view"
     assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()

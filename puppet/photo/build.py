@@ -613,13 +613,13 @@ def build_face_folder(photo_path: str | os.PathLike, landmarks_path: str | os.Pa
     from puppet.runtime.foldlimits import fold_limited
 
     step = step or (lambda k, n, what: None)
-    photo = read_photo(photo_path)
+    photo = read_photo(photo_path)  # the inputs checked before any step is said
     if landmarks_path is None:
         step(1, 4, f"finding the face's landmarks in {photo_path} (MediaPipe)")
         landmarks = parse_landmarks(detect_landmarks(photo_path), f"{photo_path} (detected landmarks)")
     else:
-        step(1, 4, f"reading the landmarks {landmarks_path}")
         landmarks = read_landmarks(landmarks_path)
+        step(1, 4, f"{len(landmarks.points)} landmarks read from {landmarks_path}")
     step(2, 4, "fitting the face's shape to the landmarks, the expression taken out, and its texture")
     face, report = face_from_photo(photo, landmarks, Path(photo_path).stem, focal=focal_from_exif(photo_path))
     folder = write_face_folder(face, out, source_photo=str(photo_path), report=report)
