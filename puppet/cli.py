@@ -331,8 +331,8 @@ def _mappings(args: argparse.Namespace) -> int:
 def _summary(text: str, most: int = 90) -> str:
     """A mapping's ``description:`` line (else its first comment), cut at a word within ``most``."""
     found = re.search(r"^description:[ \t]*(.+)$", text, re.M)
-    line = found.group(1).strip().strip("'\"") if found else next(
-        (line.lstrip("# ").strip() for line in text.splitlines() if line.lstrip("# ").strip() and "$schema" not in line), "")
+    comments = (line.lstrip("# ").strip() for line in text.splitlines() if "$schema" not in line)
+    line = found.group(1).strip().strip("'\"") if found else next((c for c in comments if c), "")
     if len(line) <= most:
         return line
     return line[:most - 3].rsplit(" ", 1)[0].rstrip(",;:") + "..."

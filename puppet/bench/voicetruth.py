@@ -151,7 +151,8 @@ def clip_from_video(video: str | Path, folder: str | Path, name: str | None = No
         writer.writerow(["frame", "t_s", "opening", "mouth_width", "face_width", "found"])
         for k, (t, line) in enumerate(zip(times, measured.stdout.splitlines())):
             row = json.loads(line)
-            sizes = [round(row[key], 3) for key in ("opening", "mouth_width", "face_width")] if row["found"] else [""] * 3
+            keys = ("opening", "mouth_width", "face_width")
+            sizes = [round(row[key], 3) for key in keys] if row["found"] else [""] * len(keys)
             writer.writerow([k, round(t, 6), *sizes, int(row["found"])])
     return wav
 
