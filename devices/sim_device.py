@@ -77,6 +77,11 @@ class SimulatedSerialDevice(SerialDevice):
         self.joystick.start()
         self._joystick_started = True
 
+    def restart_motion(self) -> None:
+        """The simulated hand starts its motion over (``motion=calibrate``: rests, then sweeps):
+        the live window asks it to when K starts a calibration, as it would ask a performer."""
+        self.joystick.restart_motion()
+
     def close(self, timeout: float = 2.0) -> None:
         super().close(timeout)
         self.joystick.close()

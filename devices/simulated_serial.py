@@ -122,6 +122,7 @@ class PtyJoystick:
         if signal is None:
             signal = sine_sliders(self.channels, integer=(protocol == "ascii" or fmt == "i16"))
         self._signal = signal if callable(signal) else None
+        self._origin = self._next = 0  # reading numbers: where the signal's time starts, the next to send
         self._script = None if callable(signal) else list(signal)
         self._own_dir = link is None
         self.path = link or os.path.join(tempfile.mkdtemp(prefix="pty-joystick-"), "joystick")
@@ -241,7 +242,12 @@ class PtyJoystick:
     def _readings(self, start: int, stop: int) -> list[Sequence[float]]:
         if self._script is not None:
             return self._script[start:stop]
-        return [self._signal(i / self.rate) for i in range(start, stop)]
+        return [self._signal((i - self._origin) / self.rate) for i in range(start, stop)]
+
+    def restart_motion(self) -> None:
+        """Start the signal over from now: a hand doing what calibration asks (``motion=calibrate``)
+        rests again, then sweeps, as a performer does when told to."""
+        self._origin = self._next
 
     def _run(self) -> None:
         if math.isinf(self.rate):
@@ -259,6 +265,7 @@ class PtyJoystick:
                 self.dropped += due - k - limit
                 k = due - limit
             readings = self._readings(k, due)
+            self._next = due
             if readings:
                 self._submit(b"".join(map(self.encode, readings)), len(readings))
             else:

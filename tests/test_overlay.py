@@ -250,3 +250,31 @@ def test_a_layered_pass_shows_its_base_take_in_the_cockpit(tmp_path, headless_wi
     finally:
         live.close()
         session.close()
+
+
+@pytest.mark.slow
+def test_k_starts_the_simulated_hand_over_however_long_the_window_took_to_open(tmp_path, headless_window):
+    """The guide's simulated box (motion=calibrate, rest=4) rests for 4 s after it opens, then
+    sweeps; a window that took longer than that to open would calibrate a sweep as the rest.
+    K tells the simulated hand to start over: it rests again while the cockpit says to."""
+    mapping = tmp_path / "sliders.yaml"
+    mapping.write_bytes(shipped_mappings()["arduino_sliders"].read_bytes())
+    window = headless_window(SIZE)
+    box = {"box": "sim://joystick?protocol=ascii&rate=200&channels=6&motion=calibrate&rest=4"}
+    session = open_session(mapping, devices=box, record_root=tmp_path)
+    live = LiveView(session, window)
+
+    def away_from_rest() -> float:
+        return max(abs(c.raw - 512) for c in session.mapping.channels() if c.raw is not None)
+
+    try:
+        start = time.monotonic()
+        while time.monotonic() - start < 5.0:  # the window "opening": the box's rest is over
+            live.step()
+        assert away_from_rest() > 100
+        live._on_key(_Keys.K, _Keys.ACTION_PRESS, None)
+        _steps(live, 30)
+        assert live.calibration.phase()[0] == "ready" and away_from_rest() < 40  # at rest again
+    finally:
+        live.close()
+        session.close()

@@ -209,6 +209,10 @@ class LiveView:
                       f"(puppet mappings --copy {path.stem})")
         else:
             self.calibration = GuidedCalibration(path, calibration_channels(self.session.mapping))
+            for device in self.session.devices.values():  # a simulated hand (sim://...&motion=calibrate)
+                restart = getattr(device, "restart_motion", None)  # follows the steps, as a performer does
+                if restart is not None:
+                    restart()
 
     def _calibrating(self) -> None:
         calibration = self.calibration
@@ -225,8 +229,9 @@ class LiveView:
         self.session.mapping = load_mapping(calibration.path)  # the new ranges from the next frame on
         for line in warnings:
             print(f"calibrate: {line}", file=sys.stderr)
+        first = f": {warnings[0]}" + (" ..." if len(warnings) > 1 else "") if warnings else ""
         self._say(f"calibrated {len(result) - len(warnings)} of {len(result)} channels into "
-                  f"{calibration.path.name} ({len(warnings)} left as they were; details on the terminal)")
+                  f"{calibration.path.name} ({len(warnings)} left as they were{first})")
 
     def _say(self, text: str, seconds: float = 6.0) -> None:
         """A notice in the cockpit for ``seconds`` (and on the terminal)."""
