@@ -125,6 +125,16 @@ def test_a_screenshot_of_the_real_window_under_xvfb_shows_everything_and_so_does
     assert face.std() > 20  # the face under it
 
 
+def _calibrating_box(tmp_path: Path, window, rest: float):
+    """(mapping, session, view): a copy of the slider box mapping, live on the simulated box's
+    calibration motion (hands off for ``rest`` s, then sweeping)."""
+    mapping = tmp_path / "sliders.yaml"
+    mapping.write_bytes(shipped_mappings()["arduino_sliders"].read_bytes())
+    box = {"box": f"sim://joystick?protocol=ascii&rate=200&channels=6&motion=calibrate&rest={rest:g}"}
+    session = open_session(mapping, devices=box, record_root=tmp_path)
+    return mapping, session, LiveView(session, window)
+
+
 @pytest.mark.slow
 def test_calibration_from_the_window_guides_rest_then_sweep_and_writes_the_mapping(tmp_path, headless_window):
     """K, against the simulated box's calibration motion (hands off for its first 6 s, then
@@ -134,12 +144,7 @@ def test_calibration_from_the_window_guides_rest_then_sweep_and_writes_the_mappi
     from puppet.live.calibrate import GuidedCalibration
     from puppet.live.mappingfile import load_mapping
 
-    mapping = tmp_path / "sliders.yaml"
-    mapping.write_bytes(shipped_mappings()["arduino_sliders"].read_bytes())
-    window = headless_window(SIZE)
-    box = {"box": "sim://joystick?protocol=ascii&rate=200&channels=6&motion=calibrate&rest=6"}
-    session = open_session(mapping, devices=box, record_root=tmp_path)
-    live = LiveView(session, window)
+    mapping, session, live = _calibrating_box(tmp_path, headless_window(SIZE), rest=6)
     try:
         live._on_key(_Keys.K, _Keys.ACTION_PRESS, None)
         calibration = live.calibration
@@ -257,12 +262,7 @@ def test_k_starts_the_simulated_hand_over_however_long_the_window_took_to_open(t
     """The guide's simulated box (motion=calibrate, rest=4) rests for 4 s after it opens, then
     sweeps; a window that took longer than that to open would calibrate a sweep as the rest.
     K tells the simulated hand to start over: it rests again while the cockpit says to."""
-    mapping = tmp_path / "sliders.yaml"
-    mapping.write_bytes(shipped_mappings()["arduino_sliders"].read_bytes())
-    window = headless_window(SIZE)
-    box = {"box": "sim://joystick?protocol=ascii&rate=200&channels=6&motion=calibrate&rest=4"}
-    session = open_session(mapping, devices=box, record_root=tmp_path)
-    live = LiveView(session, window)
+    _, session, live = _calibrating_box(tmp_path, headless_window(SIZE), rest=4)
 
     def away_from_rest() -> float:
         return max(abs(c.raw - 512) for c in session.mapping.channels() if c.raw is not None)
