@@ -116,7 +116,7 @@ class Voice:
     def restore(self, state: Mapping) -> None:
         """Continue from a ``state()``; a ValueError names what does not fit this analysis."""
         ring = np.asarray(state["ring"], dtype=np.int64)
-        if ring.shape != (self.n_pitch,) or np.any(np.abs(ring) > 32768):
+        if ring.shape != (self.n_pitch,) or np.any((ring < -32768) | (ring > 32767)):
             raise ValueError(f"a voice state's window holds {ring.shape} samples, expected {self.n_pitch} 16-bit ones")
         out = {name: float(state["out"][name]) for name in CHANNELS}
         self._ring = ring.astype(np.int16)
@@ -152,7 +152,7 @@ class Voice:
 
     def _targets(self, db: float) -> dict[str, float]:
         """What each channel heads for in this block, before the attack and release."""
-        level = min(1.0, max(0.0, (db - self.gate_db) / SPAN_DB)) if self._gate else 0.0
+        level = _unit((db - self.gate_db) / SPAN_DB) if self._gate else 0.0
         ring = self._ring.astype(np.float64) / 32768.0
         power = np.abs(np.fft.rfft(ring[-self.n:] * self._window)) ** 2 + 1e-18
         voiced = self._voicing(ring)
@@ -161,8 +161,8 @@ class Voice:
         weights = {v: math.exp(-((f1 - a) ** 2 + (f2 - b) ** 2) / VOWEL_SPREAD) for v, (a, b) in VOWELS.items()}
         total = sum(weights.values()) or 1.0
         hiss_share = float(power[self._hiss].sum() / power[self._speech].sum())
-        hiss = level * (1.0 - voiced) * min(1.0, max(0.0, (hiss_share - 0.3) / 0.4))
-        strong = min(1.0, max(0.0, (db - self.gate_db - 12.0) / 12.0))
+        hiss = level * (1.0 - voiced) * _unit((hiss_share - 0.3) / 0.4)
+        strong = _unit((db - self.gate_db - 12.0) / 12.0)
         pressed = 1.0 if (self._gate and level < 0.08 and self._quiet_s < CLOSURE_S) else 0.0
         rounded = speaking * (1.0 - f2) * (1.0 - f1)
         target = {"level": level, "voiced": voiced,
@@ -187,8 +187,8 @@ class Voice:
         if peak > 0.45:
             hz = self.rate / (self._lags.start + best)
             low, high = PITCH_RANGE
-            self._pitch = min(1.0, max(0.0, math.log(hz / low) / math.log(high / low)))
-        return min(1.0, max(0.0, (peak - 0.3) / 0.5))
+            self._pitch = _unit(math.log(hz / low) / math.log(high / low))
+        return _unit((peak - 0.3) / 0.5)
 
     def _formants(self, power: np.ndarray) -> tuple[float, float]:
         """F1 and F2 of the cepstrally smoothed spectrum, each on a 0..1 scale."""
@@ -196,13 +196,19 @@ class Voice:
         cepstrum[self._lifter:-self._lifter] = 0.0
         envelope = np.exp(np.fft.rfft(cepstrum).real)
         f1 = _peak(self._freqs[self._f1], envelope[self._f1])
-        f2 = _peak(self._freqs[self._f2 & (self._freqs > f1 + 250)], envelope[self._f2 & (self._freqs > f1 + 250)])
-        return min(1.0, max(0.0, (f1 - 300.0) / 500.0)), min(1.0, max(0.0, (f2 - 1000.0) / 1400.0))
+        above = self._f2 & (self._freqs > f1 + 250)
+        f2 = _peak(self._freqs[above], envelope[above])
+        return _unit((f1 - 300.0) / 500.0), _unit((f2 - 1000.0) / 1400.0)
 
 
 def json_state(state: Mapping) -> dict:
     """A ``Voice.state()`` (or any analysis state with arrays in it) as JSON can hold it."""
     return {key: value.tolist() if isinstance(value, np.ndarray) else value for key, value in state.items()}
+
+
+def _unit(x: float) -> float:
+    """``x`` held within 0..1."""
+    return min(1.0, max(0.0, x))
 
 
 def _peak(freqs: np.ndarray, envelope: np.ndarray) -> float:

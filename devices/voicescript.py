@@ -98,23 +98,22 @@ def align(readings: list[Mapping[str, float]], words: list[list[str]]) -> list[s
     scores = shape_scores(readings)[:, [SHAPES.index(shape) for shape, _, _ in states]]
     n = len(states)
     stay = np.array([can_stay for _, can_stay, _ in states])
-    skip_from = [skippable for _, _, skippable in states]
+    skip_from = np.array([skippable for _, _, skippable in states])
+    to = np.arange(n)
+    sources = np.stack([to, to - 1, to - 2])  # stay, advance, jump over an optional silence
     best = np.full(n, -np.inf)
     best[0] = scores[0, 0]
     if skip_from[0] and n > 1:
         best[1] = scores[0, 1]
     back = np.zeros((len(readings), n), dtype=np.int32)
+    values = np.full((3, n), -np.inf)
     for t in range(1, len(readings)):
-        advance = np.concatenate([[-np.inf], best[:-1]])
-        held = np.where(stay, best, -np.inf)
-        candidates = [(held, np.arange(n)), (advance, np.arange(n) - 1)]
-        jump = np.full(n, -np.inf)       # over an optional silence: from state k - 2
-        jump[2:] = np.where(skip_from[1:-1], best[:-2], -np.inf)
-        candidates.append((jump, np.arange(n) - 2))
-        values = np.stack([c for c, _ in candidates])
+        values[0] = np.where(stay, best, -np.inf)
+        values[1, 1:] = best[:-1]
+        values[2, 2:] = np.where(skip_from[1:-1], best[:-2], -np.inf)
         which = np.argmax(values, axis=0)
-        best = values[which, np.arange(n)] + scores[t]
-        back[t] = np.stack([f for _, f in candidates])[which, np.arange(n)]
+        best = values[which, to] + scores[t]
+        back[t] = sources[which, to]
     ends = [n - 1] + ([n - 2] if skip_from[n - 1] else [])
     state = max(ends, key=lambda k: best[k])
     path = [state]
@@ -143,7 +142,7 @@ def scripted(readings: list[dict[str, float]], words: list[list[str]]) -> list[d
     for reading, shape in zip(readings, align(readings, words)):
         r = dict(reading)
         strength = max(r["level"], 0.3) if shape != "silence" else 0.0
-        for name in (*VOWELS, "closed", "ss", "ff"):
+        for name in (*VOWELS, "ss", "ff"):
             r[name] = strength if name == shape else 0.0
         r["closed"] = 1.0 if shape == "closed" else 0.0
         r["round"] = strength if shape in ("o", "u") else 0.0

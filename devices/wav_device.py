@@ -110,12 +110,12 @@ class WavDevice(SoundDevice):
 
     def _open(self) -> None:
         self.load()
-        self._start_ns = time.monotonic_ns() - int(self.block_index * self.block / self.rate * 1e9 / (self.speed or 1))
+        self._start_ns = time.monotonic_ns() - self._played_ns(self.block_index * self.block / self.rate)
 
     def _blocks(self) -> list[tuple[np.ndarray, int]]:
         if self.block_index >= self.blocks and self.loop:
             self.block_index = 0
-            self._start_ns += int(self.blocks * self.block / self.rate * 1e9 / (self.speed or 1))
+            self._start_ns += self._played_ns(self.blocks * self.block / self.rate)
         if self.block_index >= self.blocks:
             self.finished = True
             self._stop.wait(0.02)
@@ -138,11 +138,15 @@ class WavDevice(SoundDevice):
 
     def heard_at(self, seconds: float) -> int:
         """When the sound ``seconds`` into the file is heard (``time.monotonic_ns()``), once open."""
-        return self._start_ns + int(seconds * 1e9 / (self.speed or 1))
+        return self._start_ns + self._played_ns(seconds)
 
     def _due(self, k: int) -> int:
         """When block k's first frame is heard (block k - 1 is complete then)."""
-        return self._start_ns + int(k * self.block / self.rate * 1e9 / self.speed)
+        return self.heard_at(k * self.block / self.rate)
+
+    def _played_ns(self, seconds: float) -> int:
+        """How long ``seconds`` of the file take to play at its speed (as at 1 when unpaced)."""
+        return int(seconds * 1e9 / (self.speed or 1))
 
     def _next(self, start_ns: int) -> tuple[np.ndarray, int]:
         k = self.block_index
@@ -164,9 +168,6 @@ class SoundTwin(Twin):
     stepped ``WavDevice`` with the device's analysis settings and the state it had before the
     take's first block (``wire_info``: ``rate``, ``block``, ``gate`` from the device;
     ``sound_file`` and ``sound_state`` from the take)."""
-
-    def __init__(self, device: WavDevice, url: str) -> None:
-        super().__init__(device, url)
 
     @classmethod
     def from_url(cls, url: str, name: str, wire_info: Mapping) -> SoundTwin:
