@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import soundfile
-from test_voice import RATE, vowel, write_wav
+from test_voice import RATE, episodes, vowel, write_wav
 
 from devices import open_device
 from devices.soundread import read_sound
@@ -272,13 +272,9 @@ def test_lipsync_with_a_script_presses_the_lips_on_each_closure_and_replays_exac
     take = open_take(folder)
     assert "script=mama+papa+bobo" in take.meta["devices"]["mic"]
     viseme = read_fap(folder / "take.fap").viseme[:, 0]  # FAP 1's select: the strongest viseme
-    assert _runs(viseme == 1) >= 5             # p b m, pressed (30 frames/s may merge two)
+    assert episodes(viseme == 1) >= 5             # p b m, pressed (30 frames/s may merge two)
     assert retake(take, tmp_path / "replay.fap", through_devices=True).identical
     assert main(["lipsync", str(wav), "-o", str(tmp_path / "x"), "--script", "hi", "--live"]) == 2
-
-
-def _runs(flags: np.ndarray) -> int:
-    return int(np.sum(np.diff(np.concatenate([[0], flags.astype(int)])) == 1))
 
 
 def test_every_audio_device_of_a_take_gets_its_own_wav(tmp_path):

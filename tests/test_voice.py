@@ -254,7 +254,7 @@ def test_garbage_in_a_sound_file_is_read_or_refused_with_a_sound_file_error(tmp_
         assert pcm.dtype == np.int16 and rate == RATE and len(pcm) > 0
 
 
-def _episodes(flags: np.ndarray) -> int:
+def episodes(flags: np.ndarray) -> int:
     """How many runs of True a sequence holds."""
     return int(np.sum(np.diff(np.concatenate([[0], flags.astype(int)])) == 1))
 
@@ -276,14 +276,14 @@ def test_a_script_puts_each_closure_and_vowel_where_the_voice_says_it(tmp_path):
                      ["closed", "o", "closed", "o"]]
     rows = offline(blocks, RATE, script=words)
     closed = np.array([r["closed"] for r in rows]) > 0.5
-    assert _episodes(closed) == 6
+    assert episodes(closed) == 6
     first = int(np.argmax(closed))
     assert all(r["closed"] < 0.05 for r in rows[:max(0, first - 10)])
     vowel_order = [max(("aa", "e", "o"), key=lambda v: r[v]) for r in rows if r["level"] > 0.3 and r["closed"] < 0.2]
     assert vowel_order.index("o") > vowel_order.index("aa")          # bobo after mama and papa
     assert sum(v == "o" for v in vowel_order[-10:]) >= 5
     unaided = np.array([r["closed"] for r in offline(blocks, RATE)]) > 0.5
-    assert _episodes(unaided) < 6
+    assert episodes(unaided) < 6
 
 
 def test_a_script_needs_the_offline_analysis_and_espeak_reads_it(tmp_path):

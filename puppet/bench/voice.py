@@ -22,9 +22,11 @@ from pathlib import Path
 
 import numpy as np
 
+from devices.soundread import read_sound
 from devices.voice import Voice
 from devices.wav_device import WavDevice
 from puppet.bench.pipeline import live_box, live_renderer
+from puppet.bench.voicetruth import inner_lip_gap
 from puppet.io.shipped import shipped_mapping
 from puppet.io.wavwriter import WavWriter
 from puppet.live.session import LiveSession
@@ -73,7 +75,6 @@ def voice(runtime: Runtime, size: tuple[int, int] = (640, 480), fps_seconds: flo
 
 def _sound_to_drawn(runtime: Runtime, wav: Path, onsets: list[float], size: tuple[int, int]) -> list[float]:
     face = runtime.face
-    top, bottom = face.feature_vertices["2.2"], face.feature_vertices["2.3"]
     mic = WavDevice("mic", wav)
     drawn: list[tuple[int, float]] = []
     with LiveSession(shipped_mapping("voice"), face=runtime, devices={"mic": mic}) as session:
@@ -85,12 +86,12 @@ def _sound_to_drawn(runtime: Runtime, wav: Path, onsets: list[float], size: tupl
                 session.wait_for_input(0.05)
                 frame = session.frame()
                 renderer.render(frame.vertices, frame.normals)
-                drawn.append((time.monotonic_ns(), float(np.linalg.norm(frame.vertices[top] - frame.vertices[bottom]))))
+                drawn.append((time.monotonic_ns(), inner_lip_gap(face, frame.vertices)))
         finally:
             renderer.release()
     times = np.array([t for t, _ in drawn])
     gaps = np.array([g for _, g in drawn])
-    rest = float(np.linalg.norm(runtime.rest[top] - runtime.rest[bottom]))
+    rest = inner_lip_gap(face, runtime.rest)
     lags = []
     for onset in onsets:
         start = mic.heard_at(onset)
@@ -103,13 +104,13 @@ def _sound_to_drawn(runtime: Runtime, wav: Path, onsets: list[float], size: tupl
 
 
 def _analysis_ms(wav: Path) -> float:
-    device = WavDevice("mic", wav)
-    device.load()
+    pcm, _ = read_sound(wav, RATE)
+    block = RATE // 100
     voice = Voice(RATE)
     costs = []
-    for sound, _ in device.readings():
+    for k in range(0, len(pcm) - block + 1, block):
         start = time.process_time_ns()
-        voice(sound.pcm)
+        voice(pcm[k:k + block])
         costs.append((time.process_time_ns() - start) / 1e6)
     return statistics.median(costs)
 

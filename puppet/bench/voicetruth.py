@@ -57,16 +57,18 @@ def read_lips(path: Path) -> tuple[np.ndarray, np.ndarray]:
     return np.array(times), np.array(opening)
 
 
+def inner_lip_gap(face, vertices: np.ndarray) -> float:
+    """How far apart the face's inner lips are (feature points 2.2 and 2.3) in ``vertices``."""
+    return float(np.linalg.norm(vertices[face.feature_vertices["2.2"]] - vertices[face.feature_vertices["2.3"]]))
+
+
 def lip_gap(take: Path, runtime: Runtime) -> tuple[np.ndarray, np.ndarray]:
-    """Each frame's time and the face's inner-lip gap (2.2 to 2.3) in a take."""
-    face = runtime.face
-    top, bottom = face.feature_vertices["2.2"], face.feature_vertices["2.3"]
+    """Each frame's time and the face's inner-lip gap in a take."""
     gaps = []
     with iter_fap(take / "take.fap") as reader:
         fps = reader.header.fps
         for values in held_low_level(reader):
-            v = runtime.deform_pose(Pose(values), normals=False)[0]
-            gaps.append(float(np.linalg.norm(v[top] - v[bottom])))
+            gaps.append(inner_lip_gap(runtime.face, runtime.deform_pose(Pose(values), normals=False)[0]))
     return np.arange(len(gaps)) / fps, np.array(gaps)
 
 

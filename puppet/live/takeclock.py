@@ -99,13 +99,17 @@ class Layer:
 
     def describe(self, k: int) -> str:
         """The pass as the performer needs it: the base take, where it is, and what is armed."""
-        total = self.total
+        where = f"frame {k + 1}" + (f" of {self.total}" if self.total else "")
+        return f"over {self._said[0]}, {where}; armed: {self._said[1]}"
+
+    @functools.cached_property
+    def _said(self) -> tuple[str, str]:
+        """The base take's name and what is armed, as ``describe`` says them (made once, not per frame)."""
         names = {f.number - 1: f.name for f in faps()}
         armed = [names[slot] for slot in self.slots] + ["viseme"] * self.viseme + ["expression"] * self.expression
         shown = ", ".join(armed[:4]) + (f" and {len(armed) - 4} more" if len(armed) > 4 else "")
-        where = f"frame {k + 1}" + (f" of {total}" if total else "")
         base = self.base_fap.parent.name if self.base_fap.name == "take.fap" else self.base_fap.name
-        return f"over {base}, {where}; armed: {shown}"
+        return base, shown
 
     def spec(self) -> dict:
         """What a take's metadata keeps to rebuild this layer."""

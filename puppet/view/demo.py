@@ -16,10 +16,11 @@ from pathlib import Path
 
 import numpy as np
 
+from puppet.io.fapfile import iter_fap
 from puppet.io.soundtrack import soundtrack
 from puppet.live.lipsync import lipsync
-from puppet.view.muxsound import mux_sound
-from puppet.view.renderer import Renderer, save_png, write_video
+from puppet.view.muxsound import write_video_with_sound
+from puppet.view.renderer import Renderer, save_png
 from puppet.view.rendertake import FapPlayback, aim_at_head
 
 
@@ -40,20 +41,19 @@ def run_demo(out: Path, size: tuple[int, int] = (640, 480), view: str = "three_q
     take = out / "demo_take"
     if take.exists():
         shutil.rmtree(take)
-    header = FapPlayback(demo_take()).header
-    lipsync(demo_speech(), take, over=demo_take(), fps=round(header.fps))
+    with iter_fap(demo_take()) as reader:
+        fps = round(reader.header.fps)
+    lipsync(demo_speech(), take, over=demo_take(), fps=fps)
     playback = FapPlayback(take)
     face = playback.face
     neutral = face.vertices
-    video, silent = out / "demo_take.mp4", out / ".demo_take.silent.mp4"
+    video = out / "demo_take.mp4"
     with Renderer.for_face(face, width=size[0], height=size[1]) as renderer:
         aim_at_head(renderer, face, view)
         still = _Still(face.feature_vertices["2.2"], face.feature_vertices["2.3"])
         frames = (still.keep(renderer.render(v, n), v) for v, n in playback)
-        count = write_video(frames, silent, playback.fps)
+        write_video_with_sound(frames, video, playback.fps, soundtrack(take))
         rest = renderer.render(neutral.astype(np.float32))
-    mux_sound(silent, soundtrack(take), count, playback.fps, video)
-    silent.unlink()
     picture = out / "demo_still.png"
     save_png(np.hstack([rest, still.image]), picture)
     return [video, picture]

@@ -23,8 +23,8 @@ from puppet.io.outputs import writable
 from puppet.io.soundtrack import soundtrack
 from puppet.io.takes import TakeError, take_fap
 from puppet.runtime.runtime import Runtime
-from puppet.view.muxsound import mux_sound
-from puppet.view.renderer import VIEW_DIRECTIONS, Renderer, write_video
+from puppet.view.muxsound import write_video_with_sound
+from puppet.view.renderer import VIEW_DIRECTIONS, Renderer
 
 VIEWS = tuple(VIEW_DIRECTIONS)
 
@@ -68,26 +68,22 @@ def render_take(path: str | os.PathLike, out: str | os.PathLike, *, face: Face |
     out = writable(out, "video")
     playback = FapPlayback(path, face, runtime)
     sound = soundtrack(path)
+    rate = playback.fps if fps is None else fps
+    if sound and rate != playback.fps:
+        warnings.warn(f"{path}: drawn at {rate:g} frames/s, not the take's {playback.fps:g}: its sound "
+                      "keeps its own pace and drifts from the face", stacklevel=2)
     partial = out.with_name(f".{out.stem}.partial{out.suffix}")
-    silent = out.with_name(f".{out.stem}.silent{out.suffix}")
     try:
         with Renderer.for_face(playback.face, width=size[0], height=size[1], antialias=antialias) as renderer:
             aim_at_head(renderer, playback.face, view)
             playback.normals = not renderer.gpu_normals
             total = playback.header.declared_frames
             frames = _progress((renderer.render(v, n) for v, n in playback), total, progress)
-            rate = playback.fps if fps is None else fps
-            count = write_video(_not_empty(frames, path), silent if sound else partial, rate)
-        if sound:
-            if rate != playback.fps:
-                warnings.warn(f"{path}: drawn at {rate:g} frames/s, not the take's {playback.fps:g}: its sound "
-                              "keeps its own pace and drifts from the face", stacklevel=2)
-            mux_sound(silent, sound, count, rate, partial)
+            count = write_video_with_sound(_not_empty(frames, path), partial, rate, sound)
         partial.replace(out)
         return count
     finally:
         partial.unlink(missing_ok=True)
-        silent.unlink(missing_ok=True)
 
 
 def _not_empty(frames: Iterator[np.ndarray], path: str | os.PathLike) -> Iterator[np.ndarray]:
