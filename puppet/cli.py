@@ -312,8 +312,8 @@ def _pick_landmarks_arguments(pick: argparse.ArgumentParser) -> None:
     pick.add_argument("photo", help="the photo, or a face mesh (.obj, .glb, ...: its feature points on a front render)")
     pick.add_argument("--layout", choices=("fdp11", "ibug68", "mediapipe468"), default="fdp11",
                       help="a photo: points to click (fdp11, the default; ibug68) or to drag into place (mediapipe468)")
-    pick.add_argument("--start", help="mediapipe468: landmark JSON to start from (default: detected, the photo set-up); "
-                                      "a mesh: its landmark JSON, as puppet rig wrote it (default: found on renders)")
+    pick.add_argument("--start", help="mediapipe468: landmark JSON to start from (default: detected, the photo "
+                                      "set-up); a mesh: its landmark JSON, as puppet rig wrote it (default: found)")
     pick.add_argument("-o", "--output", required=True, help="the landmark JSON to write")
     pick.add_argument("--port", type=_port, default=0, help="port 1-65535 (default: a free one)")
     pick.add_argument("--no-browser", action="store_true", help="print the address only")
@@ -405,9 +405,11 @@ def _found_landmarks(mesh: str, out: Path):
 
     from puppet.face.landmarks import apply_landmarks
     from puppet.face.meshfile import load_mesh
+    from puppet.photo.detect import detector_python
     from puppet.view.meshlandmarks import find_landmarks
 
     bare = load_mesh(mesh)
+    detector_python(mesh)
     _step("rig", 1, 3, "landmarks: the mesh rendered from 5 sides, MediaPipe's landmarks found and lifted onto it")
     found = find_landmarks(bare, mesh, step=lambda text: print(f"rig: {text}", file=sys.stderr, flush=True))
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -760,13 +762,14 @@ COMMANDS: dict[str, Command] = {
     "calibrate": Command("record rest and a sweep per channel; write them into the mapping", _calibrate_arguments,
                          _calibrate),
     "bench": Command("measure Sibson precompute, rig load and per-frame deform", _bench_arguments, _bench),
-    "rig": Command("rig a face mesh (its landmarks given or found) into a face folder for --face", _rig_arguments, _rig),
+    "rig": Command("rig a face mesh (its landmarks given or found) into a face folder for --face", _rig_arguments,
+                   _rig),
     "calibrate-face": Command("learn how the FAPs move a face's skin from example shapes of it",
                               _calibrate_face_arguments, _calibrate_face),
     "face-from-photo": Command("build a rigged, textured face from one frontal photo", _face_from_photo_arguments,
                                _face_from_photo),
-    "pick-landmarks": Command("click a photo's or a mesh's landmarks in a web page on 127.0.0.1", _pick_landmarks_arguments,
-                              _pick_landmarks),
+    "pick-landmarks": Command("click a photo's or a mesh's landmarks in a web page on 127.0.0.1",
+                              _pick_landmarks_arguments, _pick_landmarks),
 }
 """The dispatch table: ``puppet NAME`` runs ``COMMANDS[NAME].run`` (in this order in ``--help``)."""
 

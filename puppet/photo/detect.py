@@ -51,15 +51,22 @@ def detect_landmarks(photo: str | os.PathLike) -> dict:
     return {"layout": "mediapipe468", "points": found["points"]}
 
 
-def detect_faces(photos: list[str | os.PathLike], name: str) -> list[dict]:
-    """What the detector finds in each photo, in one run (the model loads once): per photo
-    ``{"faces": N, "size": [W, H], "points": [[x, y, z] * 478] or []}`` (``mediapipe_detect``).
-    ``name`` is what an error names (the photo, or the mesh the photos are views of)."""
+def detector_python(name: str) -> Path:
+    """The photo environment's Python; a ``DetectionError`` naming ``name`` (what the landmarks
+    were wanted for) and how to get it when there is none."""
     python = photo_python()
     if python is None or not python.exists():
         raise DetectionError(f"{name}: finding landmarks needs the photo environment (mediapipe 0.10.21): "
                              f"run tools/setup.sh, or set {PHOTO_PYTHON} to a Python that has it; "
                              "or click them: puppet pick-landmarks")
+    return python
+
+
+def detect_faces(photos: list[str | os.PathLike], name: str) -> list[dict]:
+    """What the detector finds in each photo, in one run (the model loads once): per photo
+    ``{"faces": N, "size": [W, H], "points": [[x, y, z] * 478] or []}`` (``mediapipe_detect``).
+    ``name`` is what an error names (the photo, or the mesh the photos are views of)."""
+    python = detector_python(name)
     try:
         done = subprocess.run([str(python), str(DETECTOR), *map(str, photos)], capture_output=True, text=True,
                               timeout=TIMEOUT)

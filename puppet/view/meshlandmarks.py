@@ -145,7 +145,8 @@ def _find_face(shots: Shots, folder: Path, name: str,
         if frames:
             return frames, tried
     raise DetectionError(f"no face found in {tried} rendered views of {name}: its {len(ORIENTATIONS)} right-angle "
-                         "turns, seen from the front; is it a face, with eyes, nose and mouth? (or give its --landmarks)")
+                         "turns, seen from the front; is it a face, with eyes, nose and mouth? "
+                         "(or give its --landmarks)")
 
 
 def _angle(a: np.ndarray, b: np.ndarray) -> float:

@@ -53,11 +53,12 @@ class MeshPickerServer(PickerServer):
         rotation = fit_rotation(self.vertices[[self.fdp[f] for f in known]], np.array([reference[f] for f in known]))
         self._scratch = tempfile.TemporaryDirectory(prefix="puppet-pick-")
         with Shots(face, size) as shots:
-            camera = shots.framing(rotation, marked, SHARE)
-            image, self.surface = shots.shoot(camera)
-        self.photo, self.layout, self.out, self.size = Path(self._scratch.name) / "front.png", "mesh", Path(out), (size, size)
+            self.camera = shots.framing(rotation, marked, SHARE)
+            image, self.surface = shots.shoot(self.camera)
+        self.photo, self.layout, self.out = Path(self._scratch.name) / "front.png", "mesh", Path(out)
+        self.size = (size, size)
         save_png(image, self.photo)
-        self.start = project(camera, marked, self.size).tolist()
+        self.start = project(self.camera, marked, self.size).tolist()
         self.skin = skin_vertices(self.vertices, face.triangles, marked[None])
         self.hints, self.dragged, self.labels = [HINT], True, ids
         self._serve(port)

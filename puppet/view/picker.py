@@ -86,7 +86,8 @@ function draw() {
   ctx.setTransform(1, 0, 0, 1, 0, 0);
   pts.forEach(([x, y], i) => { const big = keys.includes(i); ctx.fillStyle = big ? '#ff3' : '#f33';
     ctx.beginPath(); ctx.arc(x * scale + ox, y * scale + oy, big ? 3.5 : 2, 0, 7); ctx.fill();
-    if (labels.length) { ctx.font = '11px sans-serif'; ctx.fillText(labels[i], x * scale + ox + 5, y * scale + oy - 4); } });
+    if (labels.length) { ctx.font = '11px sans-serif';
+                         ctx.fillText(labels[i], x * scale + ox + 5, y * scale + oy - 4); } });
   document.getElementById('next').textContent = dragged ? hints[0] :
     (pts.length < hints.length ? 'Click, in order: ' + hints[pts.length] : 'done');
   document.getElementById('count').textContent = pts.length + ' of ' + total();
