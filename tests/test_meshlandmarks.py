@@ -94,7 +94,7 @@ def test_a_mesh_with_no_face_is_refused_in_one_line(tmp_path, capsys):
     mesh = write_obj(sphere.vertices, sphere.faces, tmp_path / "ball.obj")
     assert cli.main(["rig", str(mesh), "-o", str(tmp_path / "ball")]) == 2
     lines = refusals(capsys.readouterr().err)
-    assert len(lines) == 1 and lines[0].startswith(f"puppet rig: no face found in 24 rendered views of {mesh}")
+    assert len(lines) == 1 and lines[0].startswith(f"puppet rig: no face found in 25 rendered views of {mesh}: its 24")
     assert not (tmp_path / "ball").exists()
 
 

@@ -4,8 +4,9 @@ points ``puppet rig`` needs.
 
 1. **Which way is the face?** A mesh file says nothing about it. The mesh is rendered from its
    +z side first (the front of glTF, OBJ heads, MediaPipe's canonical face and ICT), upright
-   (+y up) and rolled by quarter turns; when MediaPipe finds no face in those 4, the 20 other
-   axis-aligned turns are rendered and searched in one run (``ORIENTATIONS``: 24 renders at most).
+   (+y up) and rolled by quarter turns, and upright framed on its top (``HEAD_SHARE``: the head
+   of a standing figure); when MediaPipe finds no face in those 5, the 20 other axis-aligned
+   turns are rendered and searched in one run (``ORIENTATIONS``: 25 renders at most).
    The landmarks found in a turn are lifted (below) and fitted to where MediaPipe finds the same
    landmarks on the default face (``data/mediapipe_map.json``, in the face frame): the fit's
    rotation is a face frame, however the mesh was turned in its file, by right angles or not.
@@ -63,6 +64,7 @@ VIEWS = {"front": (0.0, 0.0), "left": (25.0, 0.0), "right": (-25.0, 0.0), "above
 FOV = 20.0  # degrees, vertical
 FACE_SHARE = 0.55  # of the image's height the face's landmarks span in the views
 FIND_SHARE = 0.85  # of the image the whole mesh spans in the search for the face
+HEAD_SHARE = 0.15  # of a mesh's height (+y) its top is, framed too: the head of a standing figure
 SAME_FRAME = 30.0  # degrees: face frames closer than this are one
 MIN_FACING = 0.5  # cos of the angle between a lift's surface normal and the view: under it, seen too obliquely
 FACE_SIDES = (234, 454)  # MediaPipe's face-side points: their distance is the face width
@@ -125,7 +127,7 @@ def _find_face(shots: Shots, folder: Path, name: str,
                say: Callable[[str], None]) -> tuple[list[tuple[np.ndarray, np.ndarray]], int]:
     """(the face frames the face may be in: (file -> face rotation, the landmarks lifted onto the
     mesh), how many renders it took): the file's front (+z) turned about it a quarter at a time
-    first, then the 20 other right-angle turns in one run. Every turn that shows a face gives a
+    and its top framed alone first, then the 20 other right-angle turns in one run. Every turn that shows a face gives a
     frame (its landmarks fitted to the default face's, ``_fit``) unless it lies within
     ``SAME_FRAME`` of a better fitting one. MediaPipe finds an upside-down face too, labelled as if
     upright, and seen askew a face may fit worse than upside down (30 degrees off: 0.11 against
@@ -135,6 +137,10 @@ def _find_face(shots: Shots, folder: Path, name: str,
         if tried:
             say(f"no face with +z to the front: trying the mesh's {len(turns)} other right-angle turns")
         cameras = [shots.framing(turn, shots.vertices, FIND_SHARE) for turn in turns]
+        if not tried:
+            top = shots.vertices[:, 1] >= shots.vertices[:, 1].max() - HEAD_SHARE * np.ptp(shots.vertices[:, 1])
+            cameras.append(shots.framing(turns[0], shots.vertices[top], FIND_SHARE))
+            turns = [*turns, turns[0]]
         found, lifts = shots.detect(cameras, folder, f"find{tried:02d}-", name)
         tried += len(cameras)
         fits = sorted((fit for landmarks, (points, _) in zip(found, lifts) if landmarks
