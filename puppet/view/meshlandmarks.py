@@ -92,8 +92,7 @@ class FoundLandmarks:
     """What was found on a mesh: the FDP landmarks and how sure they are."""
 
     fdp: dict[str, int]  # FDP id -> vertex index (file order): ``--landmarks`` JSON
-    points: np.ndarray  # (468, 3) MediaPipe's landmarks on the mesh (file coordinates), NaN where not seen
-    vertices: np.ndarray  # (468,) the vertex each landmark was snapped to, -1 where not seen
+    vertices: np.ndarray  # (468,) the vertex each MediaPipe landmark was snapped to, -1 where not seen
     spread: dict[str, float]  # FDP id -> agreement between views, in face widths
     views_found: int  # views MediaPipe found the face in
     views: int  # views rendered (the search for the face's orientation included)
@@ -231,7 +230,6 @@ def _combine(face: Face, lifts: np.ndarray, facing: np.ndarray, found: np.ndarra
     tree = cKDTree(vertices[skin])
     chosen = np.full(N_MESH, -1)
     spread = np.full(N_MESH, np.nan)
-    points = np.full((N_MESH, 3), np.nan)
     for i in range(N_MESH):
         seen = found & np.isfinite(lifts[:, i]).all(axis=1)
         if not seen.any():
@@ -242,16 +240,17 @@ def _combine(face: Face, lifts: np.ndarray, facing: np.ndarray, found: np.ndarra
         near = skin[tree.query(lifts[use, i])[1]]
         cost = np.linalg.norm(vertices[near][:, None] - lifts[use, i][None], axis=2).sum(axis=1)
         chosen[i] = near[np.argmin(cost)]
-        points[i] = np.median(lifts[use, i], axis=0)
         spread[i] = np.median(np.linalg.norm(lifts[use, i] - vertices[chosen[i]], axis=1))
     missing = sorted({MEDIAPIPE_FDP[i] for i in MEDIAPIPE_FDP if chosen[i] < 0} & set(FDP_NEEDED))
     if missing:
         raise DetectionError(f"{name}: the face was found but FDP(s) {missing} were seen in no view "
                              "(give its --landmarks, or correct them: puppet pick-landmarks)")
-    width = float(np.linalg.norm(vertices[chosen[FACE_SIDES[0]]] - vertices[chosen[FACE_SIDES[1]]]))
     fdp = {fid: int(chosen[i]) for i, fid in sorted(MEDIAPIPE_FDP.items(), key=lambda kv: kv[1]) if chosen[i] >= 0}
+    sides = chosen[list(FACE_SIDES)]
+    width = float(np.linalg.norm(np.subtract(*vertices[sides])) if (sides >= 0).all()
+                  else np.ptp(vertices[list(fdp.values())] @ rotation[0]))  # else the feature points' span
     agree = {MEDIAPIPE_FDP[i]: float(spread[i] / width) for i in MEDIAPIPE_FDP if chosen[i] >= 0}
-    return FoundLandmarks(fdp=fdp, points=points, vertices=chosen, spread=agree, views_found=int(found.sum()),
+    return FoundLandmarks(fdp=fdp, vertices=chosen, spread=agree, views_found=int(found.sum()),
                           views=views, rotation=rotation, face_width=width)
 
 
