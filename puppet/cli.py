@@ -27,6 +27,9 @@ VIEWS = ("front", "three_quarter", "profile")
 so ``puppet devices`` starts in well under a second)."""
 ANTIALIAS_MODES = ("fxaa", "none")
 """``puppet render --antialias`` choices (``puppet.view.renderer.ANTIALIAS_MODES``)."""
+PHOTO_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".gif", ".tif", ".tiff", ".webp")
+"""What ``puppet pick-landmarks`` opens as a photo; anything else is a face mesh."""
+LANDMARKS_FILE = "landmarks.json"  # what `puppet rig` writes into the face folder when it found the landmarks
 BENCH_SECTIONS = ("deform", "frames", "muscles", "inputs", "latency", "voice", "flood", "long_take")
 """``puppet bench --only`` choices (``puppet.bench.run.SECTIONS``; the bench is imported only when run)."""
 FACE_HELP = "a face folder (puppet rig ... -o FOLDER/, puppet face-from-photo) (default: the embedded face)"
@@ -290,8 +293,9 @@ def _bench(args: argparse.Namespace) -> int:
 
 def _rig_arguments(rig: argparse.ArgumentParser) -> None:
     rig.add_argument("mesh", help="the face mesh (.obj or any format trimesh reads)")
-    rig.add_argument("--landmarks", required=True,
-                     help="JSON: {FDP id: vertex index} or a list of the 68 iBUG landmark vertex indices")
+    rig.add_argument("--landmarks", default=None,
+                     help="JSON: {FDP id: vertex index} or a list of the 68 iBUG landmark vertex indices; default: "
+                          "found on renders of the mesh (MediaPipe, the photo set-up) and written to landmarks.json")
     rig.add_argument("-o", "--output", required=True,
                      help="the face folder to write (mesh, feature points, rig); a name ending .rig writes the rig alone")
 
@@ -305,10 +309,11 @@ def _face_from_photo_arguments(from_photo: argparse.ArgumentParser) -> None:
 
 
 def _pick_landmarks_arguments(pick: argparse.ArgumentParser) -> None:
-    pick.add_argument("photo", help="the photo")
+    pick.add_argument("photo", help="the photo, or a face mesh (.obj, .glb, ...: its feature points on a front render)")
     pick.add_argument("--layout", choices=("fdp11", "ibug68", "mediapipe468"), default="fdp11",
-                      help="points to click (fdp11, the default; ibug68) or to drag into place (mediapipe468)")
-    pick.add_argument("--start", help="mediapipe468: landmark JSON to start from (default: detected, the photo set-up)")
+                      help="a photo: points to click (fdp11, the default; ibug68) or to drag into place (mediapipe468)")
+    pick.add_argument("--start", help="mediapipe468: landmark JSON to start from (default: detected, the photo "
+                                      "set-up); a mesh: its landmark JSON, as puppet rig wrote it (default: found)")
     pick.add_argument("-o", "--output", required=True, help="the landmark JSON to write")
     pick.add_argument("--port", type=_port, default=0, help="port 1-65535 (default: a free one)")
     pick.add_argument("--no-browser", action="store_true", help="print the address only")
@@ -361,12 +366,17 @@ def _rig(args: argparse.Namespace) -> int:
 
     output, rig_file = _rig_output(args.output)
     start = time.perf_counter()
-    face = load_face(args.mesh, landmarks=args.landmarks)  # the inputs checked before any step is said
-    _step("rig", 1, 2, f"regions, control points and muscles on {len(face.vertices):,} vertices")
+    found, marks = None, output.with_suffix(".landmarks.json") if rig_file else output / LANDMARKS_FILE
+    if args.landmarks is None:
+        face, found = _found_landmarks(args.mesh, marks)
+    else:
+        face = load_face(args.mesh, landmarks=args.landmarks)  # the inputs checked before any step is said
+    steps = 2 + (found is not None)
+    _step("rig", steps - 1, steps, f"regions, control points and muscles on {len(face.vertices):,} vertices")
     rig = build_rig(face)
     seconds = time.perf_counter() - start
     start = time.perf_counter()
-    _step("rig", 2, 2, "fold limits: how far each FAP goes before a triangle folds (the longest step)")
+    _step("rig", steps, steps, "fold limits: how far each FAP goes before a triangle folds (the longest step)")
     rig = fold_limited(face, rig)
     limits = time.perf_counter() - start
     if rig_file:
@@ -375,6 +385,9 @@ def _rig(args: argparse.Namespace) -> int:
         write_rigged_folder(face, rig, output, source_mesh=str(args.mesh))
     counts = {role: sum(p.role == role for p in rig.control_points) for role in ("active", "fixed", "passive", "interpolated")}
     print(f"rigged {args.mesh} ({len(face.vertices)} vertices) in {seconds:.2f} s -> {args.output}")
+    if found is not None:
+        print(f"  landmarks: {found.summary()}; written to {marks}: correct them with "
+              f"`puppet pick-landmarks {args.mesh} --start {marks} -o FILE`, then rig with --landmarks FILE")
     print(f"  regions: {', '.join(f'{r.name} ({len(r.vertices)})' for r in rig.regions)}")
     print(f"  control points: {len(rig.control_points)} ({', '.join(f'{n} {k}' for k, n in counts.items())})")
     print(f"  muscles: {len(getattr(rig, 'muscles', []))}")
@@ -382,6 +395,26 @@ def _rig(args: argparse.Namespace) -> int:
     if not rig_file:
         print(f"  use it with --face {args.output} (play, render, replay, live, export)")
     return 0
+
+
+def _found_landmarks(mesh: str, out: Path):
+    """``puppet rig`` without ``--landmarks``: the mesh (checked before any step is said), its
+    landmarks found on renders (``puppet.view.meshlandmarks``) and applied; the landmarks written
+    to ``out`` ({FDP id: vertex}, what ``--landmarks`` takes), for the user to correct."""
+    import json
+
+    from puppet.face.landmarks import apply_landmarks
+    from puppet.face.meshfile import load_mesh
+    from puppet.photo.detect import detector_python
+    from puppet.view.meshlandmarks import find_landmarks
+
+    bare = load_mesh(mesh)
+    detector_python(mesh)
+    _step("rig", 1, 3, "landmarks: the mesh rendered from 5 sides, MediaPipe's landmarks found and lifted onto it")
+    found = find_landmarks(bare, mesh, step=lambda text: print(f"rig: {text}", file=sys.stderr, flush=True))
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(found.fdp, indent=1) + "\n", encoding="utf-8")
+    return apply_landmarks(bare, found.fdp), found
 
 
 def _step(command: str, k: int, n: int, what: str) -> None:
@@ -623,13 +656,19 @@ def _pick_landmarks(args: argparse.Namespace) -> int:
     from puppet.view.picker import PickerServer
 
     start = None
-    if args.layout == "mediapipe468":
-        from puppet.photo.build import read_landmarks_json
-        from puppet.photo.detect import detect_landmarks
+    out = writable(args.output, "landmark file")
+    if Path(args.photo).suffix.lower() in PHOTO_SUFFIXES:
+        if args.layout == "mediapipe468":
+            from puppet.photo.build import read_landmarks_json
+            from puppet.photo.detect import detect_landmarks
 
-        start = read_landmarks_json(args.start) if args.start else detect_landmarks(args.photo)
-    picker = PickerServer(args.photo, args.layout, writable(args.output, "landmark file"), port=args.port, start=start)
-    print(f"{'drag' if start else 'click'} the points at {picker.url} (Ctrl-C to give up)")
+            start = read_landmarks_json(args.start) if args.start else detect_landmarks(args.photo)
+        picker = PickerServer(args.photo, args.layout, out, port=args.port, start=start)
+    else:
+        from puppet.view.meshpicker import MeshPickerServer
+
+        picker = MeshPickerServer(args.photo, out, port=args.port, start=args.start)
+    print(f"{'drag' if picker.start else 'click'} the points at {picker.url} (Ctrl-C to give up)")
     if not args.no_browser:
         webbrowser.open(picker.url)
     try:
@@ -723,13 +762,14 @@ COMMANDS: dict[str, Command] = {
     "calibrate": Command("record rest and a sweep per channel; write them into the mapping", _calibrate_arguments,
                          _calibrate),
     "bench": Command("measure Sibson precompute, rig load and per-frame deform", _bench_arguments, _bench),
-    "rig": Command("rig a face mesh from its landmarks into a face folder for --face", _rig_arguments, _rig),
+    "rig": Command("rig a face mesh (its landmarks given or found) into a face folder for --face", _rig_arguments,
+                   _rig),
     "calibrate-face": Command("learn how the FAPs move a face's skin from example shapes of it",
                               _calibrate_face_arguments, _calibrate_face),
     "face-from-photo": Command("build a rigged, textured face from one frontal photo", _face_from_photo_arguments,
                                _face_from_photo),
-    "pick-landmarks": Command("click a photo's landmarks in a web page on 127.0.0.1", _pick_landmarks_arguments,
-                              _pick_landmarks),
+    "pick-landmarks": Command("click a photo's or a mesh's landmarks in a web page on 127.0.0.1",
+                              _pick_landmarks_arguments, _pick_landmarks),
 }
 """The dispatch table: ``puppet NAME`` runs ``COMMANDS[NAME].run`` (in this order in ``--help``)."""
 

@@ -43,22 +43,36 @@ def photo_python() -> Path | None:
 def detect_landmarks(photo: str | os.PathLike) -> dict:
     """The photo's 478 MediaPipe landmarks as landmark JSON (``{"layout": "mediapipe468",
     "points": [[x, y, z], ...]}``, pixels), for ``puppet.photo.build.parse_landmarks``."""
-    python = photo_python()
-    if python is None or not python.exists():
-        raise DetectionError(f"{photo}: finding landmarks needs the photo environment (mediapipe 0.10.21): "
-                             f"run tools/setup.sh, or set {PHOTO_PYTHON} to a Python that has it; "
-                             "or click them: puppet pick-landmarks")
-    try:
-        done = subprocess.run([str(python), str(DETECTOR), str(photo)], capture_output=True, text=True,
-                              timeout=TIMEOUT)
-    except (OSError, subprocess.TimeoutExpired) as exc:
-        raise DetectionError(f"{photo}: the landmark detector did not run: {exc}") from None
-    if done.returncode != 0:
-        last = (done.stderr.strip().splitlines() or ["no message"])[-1]
-        raise DetectionError(f"{photo}: the landmark detector failed: {last}")
-    found = json.loads(done.stdout)
+    found = detect_faces([photo], str(photo))[0]
     if found["faces"] == 0:
         raise DetectionError(f"{photo}: no face found: expected a frontal photo with the whole face in view")
     if found["faces"] > 1:
         raise DetectionError(f"{photo}: {found['faces']} faces found: crop the photo to the one face to build")
     return {"layout": "mediapipe468", "points": found["points"]}
+
+
+def detector_python(name: str) -> Path:
+    """The photo environment's Python; a ``DetectionError`` naming ``name`` (what the landmarks
+    were wanted for) and how to get it when there is none."""
+    python = photo_python()
+    if python is None or not python.exists():
+        raise DetectionError(f"{name}: finding landmarks needs the photo environment (mediapipe 0.10.21): "
+                             f"run tools/setup.sh, or set {PHOTO_PYTHON} to a Python that has it; "
+                             "or click them: puppet pick-landmarks")
+    return python
+
+
+def detect_faces(photos: list[str | os.PathLike], name: str) -> list[dict]:
+    """What the detector finds in each photo, in one run (the model loads once): per photo
+    ``{"faces": N, "size": [W, H], "points": [[x, y, z] * 478] or []}`` (``mediapipe_detect``).
+    ``name`` is what an error names (the photo, or the mesh the photos are views of)."""
+    python = detector_python(name)
+    try:
+        done = subprocess.run([str(python), str(DETECTOR), *map(str, photos)], capture_output=True, text=True,
+                              timeout=TIMEOUT)
+    except (OSError, subprocess.TimeoutExpired) as exc:
+        raise DetectionError(f"{name}: the landmark detector did not run: {exc}") from None
+    if done.returncode != 0:
+        last = (done.stderr.strip().splitlines() or ["no message"])[-1]
+        raise DetectionError(f"{name}: the landmark detector failed: {last}")
+    return [json.loads(line) for line in done.stdout.splitlines() if line.strip()]

@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from puppet.errors import PuppetError
 from puppet.photo.build import (
     FDP11,
     FDP11_HINTS,
@@ -60,7 +61,7 @@ touch-action:none}</style></head><body>
 move it; 0: fit</small></p>
 <canvas id="view" width="960" height="720"></canvas>
 <script>
-const hints = HINTS, layout = LAYOUT, dragged = DRAGGED, keys = KEYS;
+const hints = HINTS, layout = LAYOUT, dragged = DRAGGED, keys = KEYS, labels = LABELS;
 let pts = [], moving = -1, press = null, scale = 1, ox = 0, oy = 0;
 const canvas = document.getElementById('view'), ctx = canvas.getContext('2d'), img = new Image();
 const total = () => dragged ? pts.length : hints.length;
@@ -84,7 +85,9 @@ function draw() {
   ctx.imageSmoothingEnabled = scale < 4; ctx.setTransform(scale, 0, 0, scale, ox, oy); ctx.drawImage(img, 0, 0);
   ctx.setTransform(1, 0, 0, 1, 0, 0);
   pts.forEach(([x, y], i) => { const big = keys.includes(i); ctx.fillStyle = big ? '#ff3' : '#f33';
-    ctx.beginPath(); ctx.arc(x * scale + ox, y * scale + oy, big ? 3.5 : 2, 0, 7); ctx.fill(); });
+    ctx.beginPath(); ctx.arc(x * scale + ox, y * scale + oy, big ? 3.5 : 2, 0, 7); ctx.fill();
+    if (labels.length) { ctx.font = '11px sans-serif';
+                         ctx.fillText(labels[i], x * scale + ox + 5, y * scale + oy - 4); } });
   document.getElementById('next').textContent = dragged ? hints[0] :
     (pts.length < hints.length ? 'Click, in order: ' + hints[pts.length] : 'done');
   document.getElementById('count').textContent = pts.length + ' of ' + total();
@@ -136,6 +139,11 @@ class PickerServer:
         image = read_photo(self.photo)
         self.size = (image.shape[1], image.shape[0])
         self.start = self._start(start)
+        self.hints, self.dragged, self.labels = LAYOUT_HINTS[layout], layout in DRAGGED, []
+        self._serve(port)
+
+    def _serve(self, port: int) -> None:
+        """Start serving the page on 127.0.0.1:``port`` (0: a free one) in a thread."""
         self.saved = threading.Event()
         self._server = ThreadingHTTPServer(("127.0.0.1", port), _handler(self))
         self._thread = threading.Thread(target=self._server.serve_forever, daemon=True)
@@ -160,10 +168,12 @@ class PickerServer:
         return f"http://{host}:{port}/"
 
     def page(self) -> bytes:
-        """The page, with this layout's hints and (for MediaPipe) its feature points drawn large."""
-        keys = sorted(MEDIAPIPE_FDP) if self.layout == "mediapipe468" else []
-        fills = {"HINTS": json.dumps(LAYOUT_HINTS[self.layout]), "LAYOUT": json.dumps(self.layout),
-                 "DRAGGED": json.dumps(self.layout in DRAGGED), "KEYS": json.dumps(keys)}
+        """The page, with this layout's hints, (for MediaPipe) its feature points drawn large and
+        the points' ``labels`` (none for a photo) drawn beside them."""
+        keys = sorted(MEDIAPIPE_FDP) if self.layout == "mediapipe468" else list(range(len(self.labels)))
+        fills = {"HINTS": json.dumps(self.hints), "LAYOUT": json.dumps(self.layout),
+                 "DRAGGED": json.dumps(self.dragged), "KEYS": json.dumps(keys),
+                 "LABELS": json.dumps(self.labels)}
         page = _PAGE
         for name, value in fills.items():
             page = page.replace(name, value)
@@ -218,7 +228,7 @@ def _handler(picker: PickerServer) -> type[BaseHTTPRequestHandler]:
             body = self.rfile.read(int(self.headers.get("Content-Length", 0)))
             try:
                 self._reply(200, picker.save(body).encode(), "text/plain; charset=utf-8")
-            except PhotoFaceError as exc:
+            except PuppetError as exc:  # PhotoFaceError (a photo's points), LandmarkError (a mesh's)
                 self._reply(400, html.escape(str(exc)).encode(), "text/plain; charset=utf-8")
 
         def _reply(self, status: int, body: bytes, kind: str) -> None:

@@ -1,0 +1,396 @@
+"""Landmarks found on a mesh by themselves: the head rendered from a few sides, MediaPipe's
+landmarks found on the renders, lifted back onto the surface, turned into the MPEG-4 feature
+points ``puppet rig`` needs.
+
+1. **Which way is the face?** A mesh file says nothing about it. The mesh is rendered from its
+   +z side first (the front of glTF, OBJ heads, MediaPipe's canonical face and ICT), upright
+   (+y up) and rolled by quarter turns, and upright framed on its top (``HEAD_SHARE``: the head
+   of a standing figure); when MediaPipe finds no face in those 5, the 20 other axis-aligned
+   turns are rendered and searched in one run (``ORIENTATIONS``: 25 renders at most).
+   The landmarks found in a turn are lifted (below) and fitted to where MediaPipe finds the same
+   landmarks on the default face (``data/mediapipe_map.json``, in the face frame): the fit's
+   rotation is a face frame, however the mesh was turned in its file, by right angles or not.
+2. **The views.** In each face frame found (two, typically: MediaPipe also finds an upside-down
+   face, labelled as if upright), the face, framed on its landmarks, is rendered from the front
+   and turned (``VIEWS``: yaw +-25 degrees, pitch +-10 degrees), lit and painted as
+   ``Renderer.for_face`` draws it (skin tone where the mesh has no colours, which MediaPipe takes
+   for a face), and MediaPipe runs once over all of them (``puppet.photo.detect``). The frame
+   whose front view fits the default face best is the face's.
+3. **The lift.** Beside each render, a pass of its own writes every pixel's surface point (the
+   mesh's position, interpolated: what unprojecting the depth buffer gives, without its precision
+   loss); a landmark's pixel reads its 3D point there. Each lift is snapped to the nearest skin
+   vertex (the skin: the connected component most landmarks land on). A landmark is taken from
+   the views that see its surface within ``MIN_FACING`` of head-on (the most frontal one when none
+   does): of their vertices, the one nearest all their lifts (a medoid: it stays on the surface).
+4. **Feature points.** MediaPipe landmark -> FDP as ``face-from-photo`` reads them
+   (``puppet.photo.build.MEDIAPIPE_FDP``: eye corners and lids, brows, nose, lips, chin): the
+   {FDP id: vertex} landmark dict ``puppet.face.landmarks.apply_landmarks`` takes.
+
+How sure: the views the face was found in, and the agreement between views, per feature point
+the median distance of its lifts from the chosen vertex, in % of the face's width (between
+MediaPipe's face-side points 234 and 454). A mesh where no view shows a face is refused in one
+line (``DetectionError``). On the default face, ICT-FaceKit and MediaPipe's canonical face, the
+points found lie within 2-2.5% of the face width of the given ones (median;
+``tools/landmark_accuracy.py``).
+"""
+
+from __future__ import annotations
+
+import functools
+import itertools
+import tempfile
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import moderngl
+import numpy as np
+import scipy.sparse as sp
+from PIL import Image
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+from puppet.face.default import default_face
+from puppet.face.landmarks import FDP_NEEDED
+from puppet.face.model import Face
+from puppet.photo.build import MEDIAPIPE_FDP, mediapipe_points
+from puppet.photo.detect import DetectionError, detect_faces
+from puppet.runtime.normals import VertexNormals
+from puppet.view.renderer import Camera, Renderer
+
+SIZE = 640  # pixels, square renders
+VIEWS = {"front": (0.0, 0.0), "left": (25.0, 0.0), "right": (-25.0, 0.0), "above": (0.0, 10.0), "below": (0.0, -10.0)}
+"""View name -> (yaw, pitch) in degrees, turned about the face frame's y and x axes."""
+FOV = 20.0  # degrees, vertical
+FACE_SHARE = 0.55  # of the image's height the face's landmarks span in the views
+FIND_SHARE = 0.85  # of the image the whole mesh spans in the search for the face
+HEAD_SHARE = 0.15  # of a mesh's height (+y) its top is, framed too: the head of a standing figure
+SAME_FRAME = 30.0  # degrees: face frames closer than this are one
+MIN_FACING = 0.5  # cos of the angle between a lift's surface normal and the view: under it, seen too obliquely
+FACE_SIDES = (234, 454)  # MediaPipe's face-side points: their distance is the face width
+N_MESH = 468  # MediaPipe's mesh landmarks (478 with the irises, which are not used)
+
+
+def _orientations() -> list[np.ndarray]:
+    """The 24 axis-aligned rotations (file -> face frame): the identity, then the quarter turns
+    about z (the file's front kept), then the others."""
+    turns = []
+    for perm in itertools.permutations(range(3)):
+        for signs in itertools.product((1.0, -1.0), repeat=3):
+            r = np.zeros((3, 3))
+            r[np.arange(3), perm] = signs
+            if np.linalg.det(r) > 0:
+                turns.append(r)
+    return sorted(turns, key=lambda r: (-r[2, 2], -np.trace(r)))
+
+
+ORIENTATIONS = _orientations()
+
+
+@dataclass
+class FoundLandmarks:
+    """What was found on a mesh: the FDP landmarks and how sure they are."""
+
+    fdp: dict[str, int]  # FDP id -> vertex index (file order): ``--landmarks`` JSON
+    vertices: np.ndarray  # (468,) the vertex each MediaPipe landmark was snapped to, -1 where not seen
+    spread: dict[str, float]  # FDP id -> agreement between views, in face widths
+    views_found: int  # views MediaPipe found the face in
+    views: int  # views rendered (the search for the face's orientation included)
+    rotation: np.ndarray  # (3, 3) file -> face frame, as the landmarks fitted it
+    face_width: float  # mesh units
+
+    def summary(self) -> str:
+        """One line: how many points, in how many views, and how well the views agree."""
+        spread = np.array(list(self.spread.values())) * 100
+        worst = max(self.spread, key=self.spread.get)
+        return (f"found {len(self.fdp)} feature points in {self.views_found} of {len(VIEWS)} views "
+                f"({self.views} rendered); views agree within {np.median(spread):.1f}% of the face width "
+                f"(median; worst {spread.max():.1f}% at FDP {worst})")
+
+
+def find_landmarks(face: Face, name: str, *, size: int = SIZE, keep: str | Path | None = None,
+                   step: Callable[[str], None] | None = None) -> FoundLandmarks:
+    """The FDP landmarks of the mesh ``face`` (file coordinates, as ``load_mesh`` gives it),
+    found on its renders (module docstring); ``name`` names it in messages. ``keep``: a folder to
+    leave the renders in (BMP), to look at. Raises ``DetectionError`` when no view shows a face."""
+    say = step or (lambda text: None)
+    with tempfile.TemporaryDirectory(prefix="puppet-marks-") as scratch, Shots(face, size) as shots:
+        folder = Path(keep) if keep is not None else Path(scratch)
+        folder.mkdir(parents=True, exist_ok=True)
+        frames, tried = _find_face(shots, folder, name, say)
+        rotation, lifts, facing, found = _views(shots, folder, name, frames)
+    return _combine(face, lifts, facing, found, tried + len(VIEWS) * len(frames), rotation, name)
+
+
+def _find_face(shots: Shots, folder: Path, name: str,
+               say: Callable[[str], None]) -> tuple[list[tuple[np.ndarray, np.ndarray]], int]:
+    """(the face frames the face may be in: (file -> face rotation, the landmarks lifted onto the
+    mesh), how many renders it took): the file's front (+z) turned about it a quarter at a time
+    and its top framed alone first, then the 20 other right-angle turns in one run. Every turn that shows a face gives a
+    frame (its landmarks fitted to the default face's, ``_fit``) unless it lies within
+    ``SAME_FRAME`` of a better fitting one. MediaPipe finds an upside-down face too, labelled as if
+    upright, and seen askew a face may fit worse than upside down (30 degrees off: 0.11 against
+    0.06 face widths): the frames left are told apart by ``_views``, seen straight on."""
+    tried = 0
+    for turns in (ORIENTATIONS[:4], ORIENTATIONS[4:]):
+        if tried:
+            say(f"no face with +z to the front: trying the mesh's {len(turns)} other right-angle turns")
+        cameras = [shots.framing(turn, shots.vertices, FIND_SHARE) for turn in turns]
+        if not tried:
+            top = shots.vertices[:, 1] >= shots.vertices[:, 1].max() - HEAD_SHARE * np.ptp(shots.vertices[:, 1])
+            cameras.append(shots.framing(turns[0], shots.vertices[top], FIND_SHARE))
+            turns = [*turns, turns[0]]
+        found, lifts = shots.detect(cameras, folder, f"find{tried:02d}-", name)
+        tried += len(cameras)
+        fits = sorted((fit for landmarks, (points, _) in zip(found, lifts) if landmarks
+                       for fit in [_fit(points)] if fit is not None), key=lambda fit: fit[0])
+        frames: list[tuple[np.ndarray, np.ndarray]] = []
+        for _, rotation, points in fits:
+            if all(_angle(rotation, other) > SAME_FRAME for other, _ in frames):
+                frames.append((rotation, points))
+        if frames:
+            return frames, tried
+    raise DetectionError(f"no face found in {tried} rendered views of {name}: its {len(ORIENTATIONS)} right-angle "
+                         "turns, seen from the front; is it a face, with eyes, nose and mouth? "
+                         "(or give its --landmarks)")
+
+
+def _angle(a: np.ndarray, b: np.ndarray) -> float:
+    """The angle between two rotations, degrees."""
+    return float(np.degrees(np.arccos(np.clip((np.trace(a @ b.T) - 1) / 2, -1.0, 1.0))))
+
+
+def _fit(points: np.ndarray) -> tuple[float, np.ndarray, np.ndarray] | None:
+    """(the residual, the rotation, the points) of the landmarks lifted in a view fitted to where
+    MediaPipe finds them on the default face (``data/mediapipe_map.json``, face frame: similarity,
+    RMS in face widths); None when fewer than half were lifted."""
+    model = _model_points()
+    seen = np.isfinite(points[:N_MESH]).all(axis=1)
+    if seen.sum() < N_MESH // 2:
+        return None
+    p, q = points[:N_MESH][seen], model[seen]
+    rotation = fit_rotation(p, q)
+    turned, q = (p - p.mean(axis=0)) @ rotation.T, q - q.mean(axis=0)
+    scale = (turned * q).sum() / (turned ** 2).sum()
+    rms = np.sqrt(((scale * turned - q) ** 2).sum(axis=1).mean())
+    return float(rms / np.linalg.norm(model[FACE_SIDES[0]] - model[FACE_SIDES[1]])), rotation, points
+
+
+@functools.cache
+def _model_points() -> np.ndarray:
+    """MediaPipe's 468 landmarks on the default face, in the face frame."""
+    reference = default_face()
+    return mediapipe_points(reference).on(reference.vertices)
+
+
+def fit_rotation(points: np.ndarray, model: np.ndarray) -> np.ndarray:
+    """The rotation (no reflection) that best turns ``points`` onto their counterparts ``model``
+    in the face frame, up to shift and scale (Procrustes): file -> face frame."""
+    p, q = points - points.mean(axis=0), model - model.mean(axis=0)
+    u, _, vt = np.linalg.svd(q.T @ p)
+    return u @ np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt))]) @ vt
+
+
+def project(camera: Camera, points: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """Pixel coordinates (M, 2), (column, row) with row 0 at the top, of ``points`` seen by ``camera``
+    in an image of ``size`` (width, height)."""
+    clip = camera.projection_matrix(size[0] / size[1]) @ camera.view_matrix() @ np.c_[points, np.ones(len(points))].T
+    ndc = clip[:2] / clip[3]
+    return np.stack([(ndc[0] + 1.0) / 2.0 * size[0], (1.0 - ndc[1]) / 2.0 * size[1]], axis=1)
+
+
+def _views(shots: Shots, folder: Path, name: str, frames: list[tuple[np.ndarray, np.ndarray]]
+           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The face seen in each of ``VIEWS`` in each of the ``frames``, framed on its landmarks (one
+    detector run), and of the frames the one whose front view's landmarks fit the default face's
+    best (``_fit``): (its rotation, the landmarks lifted per view (V, 468, 3), facing (V, 468): cos
+    of the surface's angle to the view, whether each view found the face (V,))."""
+    cameras = []
+    for rotation, first in frames:
+        face_points = first[:N_MESH][np.isfinite(first[:N_MESH]).all(axis=1)]
+        cameras += [shots.framing(rotation, face_points, FACE_SHARE, yaw, pitch) for yaw, pitch in VIEWS.values()]
+    found, lifts = shots.detect(cameras, folder, "view", name)
+    n = len(VIEWS)
+    fits = [_fit(lifts[k * n][0]) if found[k * n] else None for k in range(len(frames))]
+    best = min(range(len(frames)), key=lambda k: np.inf if fits[k] is None else fits[k][0])
+    views = slice(best * n, best * n + n)
+    points = np.stack([p[:N_MESH] for p, _ in lifts[views]])
+    facing = np.stack([f[:N_MESH] for _, f in lifts[views]])
+    rotation = frames[best][0] if fits[best] is None else fits[best][1]
+    return rotation, points, facing, np.array(found[views], dtype=bool)
+
+
+def _combine(face: Face, lifts: np.ndarray, facing: np.ndarray, found: np.ndarray, views: int,
+             rotation: np.ndarray, name: str) -> FoundLandmarks:
+    """Per landmark, the skin vertex its views agree on (module docstring, 3), and the FDPs."""
+    if not found.any():
+        raise DetectionError(f"no face found in {len(VIEWS)} rendered views of {name} turned to face the camera")
+    vertices = np.asarray(face.vertices, float)
+    skin = skin_vertices(vertices, face.triangles, lifts[found])
+    tree = cKDTree(vertices[skin])
+    chosen = np.full(N_MESH, -1)
+    spread = np.full(N_MESH, np.nan)
+    for i in range(N_MESH):
+        seen = found & np.isfinite(lifts[:, i]).all(axis=1)
+        if not seen.any():
+            continue
+        use = seen & (facing[:, i] >= MIN_FACING)
+        if not use.any():
+            use = seen & (facing[:, i] == facing[seen, i].max())
+        near = skin[tree.query(lifts[use, i])[1]]
+        cost = np.linalg.norm(vertices[near][:, None] - lifts[use, i][None], axis=2).sum(axis=1)
+        chosen[i] = near[np.argmin(cost)]
+        spread[i] = np.median(np.linalg.norm(lifts[use, i] - vertices[chosen[i]], axis=1))
+    missing = sorted({MEDIAPIPE_FDP[i] for i in MEDIAPIPE_FDP if chosen[i] < 0} & set(FDP_NEEDED))
+    if missing:
+        raise DetectionError(f"{name}: the face was found but FDP(s) {missing} were seen in no view "
+                             "(give its --landmarks, or correct them: puppet pick-landmarks)")
+    fdp = {fid: int(chosen[i]) for i, fid in sorted(MEDIAPIPE_FDP.items(), key=lambda kv: kv[1]) if chosen[i] >= 0}
+    sides = chosen[list(FACE_SIDES)]
+    width = float(np.linalg.norm(np.subtract(*vertices[sides])) if (sides >= 0).all()
+                  else np.ptp(vertices[list(fdp.values())] @ rotation[0]))  # else the feature points' span
+    agree = {MEDIAPIPE_FDP[i]: float(spread[i] / width) for i in MEDIAPIPE_FDP if chosen[i] >= 0}
+    return FoundLandmarks(fdp=fdp, vertices=chosen, spread=agree, views_found=int(found.sum()),
+                          views=views, rotation=rotation, face_width=width)
+
+
+def skin_vertices(vertices: np.ndarray, triangles: np.ndarray, lifts: np.ndarray) -> np.ndarray:
+    """The vertices of the connected component most lifted landmarks lie nearest (the skin)."""
+    t = np.asarray(triangles)
+    n = len(vertices)
+    graph = sp.coo_matrix((np.ones(t.size), (t.ravel(), np.roll(t, 1, axis=1).ravel())), shape=(n, n))
+    component = connected_components(graph, directed=False)[1]
+    points = lifts.reshape(-1, 3)
+    points = points[np.isfinite(points).all(axis=1)]
+    hits = component[cKDTree(vertices).query(points)[1]]
+    return np.flatnonzero(component == np.bincount(hits).argmax())
+
+
+class Shots:
+    """Renders of one mesh with, beside each, its surface points per pixel; a context of its own."""
+
+    def __init__(self, face: Face, size: int) -> None:
+        self.face, self.size = face, size
+        self.vertices = np.asarray(face.vertices, float)
+        self.centre = (self.vertices.min(axis=0) + self.vertices.max(axis=0)) / 2
+        self.normals = VertexNormals(np.asarray(face.triangles), len(self.vertices))(self.vertices)
+        self.ctx = moderngl.create_context(standalone=True, backend="egl")
+        try:
+            with self.ctx:
+                self.renderer = Renderer.for_face(face, detail=False, ctx=self.ctx, width=size, height=size,
+                                                  cull=False)
+                self.surface = SurfacePass(self.ctx, self.vertices - self.centre, face.triangles, (size, size))
+        except BaseException:
+            self.ctx.release()
+            raise
+
+    def __enter__(self) -> Shots:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        with self.ctx:
+            self.renderer.release()
+            self.surface.release()
+        self.ctx.release()
+
+    def framing(self, rotation: np.ndarray, points: np.ndarray, share: float, yaw: float = 0.0,
+                pitch: float = 0.0) -> Camera:
+        """A camera in the face frame ``rotation`` (file -> face) turned by yaw and pitch (degrees),
+        aimed at the box of ``points`` (file coordinates) so that it spans ``share`` of the image."""
+        local = (np.asarray(points, float) - self.centre) @ rotation.T
+        middle = (local.min(axis=0) + local.max(axis=0)) / 2
+        extent = np.ptp(local, axis=0)
+        a, b = np.radians(yaw), np.radians(pitch)
+        direction = np.array([np.sin(a) * np.cos(b), np.sin(b), np.cos(a) * np.cos(b)])
+        distance = max(extent[0], extent[1]) / share / (2 * np.tan(np.radians(FOV) / 2)) + extent[2] / 2
+        target = self.centre + rotation.T @ middle
+        reach = np.linalg.norm(np.ptp(self.vertices, axis=0))
+        return Camera(eye=target + rotation.T @ (distance * direction), target=target, up=rotation.T @ [0.0, 1.0, 0.0],
+                      fov=FOV, near=max(distance - reach, distance / 100), far=distance + reach)
+
+    def shoot(self, camera: Camera) -> tuple[np.ndarray, np.ndarray]:
+        """(the render (H, W, 3) uint8, the surface point per pixel (H, W, 3) file coordinates, NaN
+        where no surface is)."""
+        self.renderer.camera = camera
+        with self.ctx:
+            image = self.renderer.render(self.vertices.astype(np.float32))
+            shifted = replace(camera, eye=camera.eye - self.centre, target=camera.target - self.centre)
+            surface = self.surface.points(shifted) + self.centre
+        return image, surface
+
+    def detect(self, cameras: list[Camera], folder: Path, stem: str,
+               name: str) -> tuple[list[bool], list[tuple[np.ndarray, np.ndarray]]]:
+        """Render each camera's view, find landmarks on all in one run, lift them: (whether a face
+        was found per view, per view (points (478, 3), facing (478,)), NaN / 0 where unseen)."""
+        shots, paths = [], []
+        for k, camera in enumerate(cameras):
+            image, surface = self.shoot(camera)
+            paths.append(folder / f"{stem}{k:02d}.bmp")  # uncompressed: encoding 14 PNGs took 1.1 s of 4.6
+            Image.fromarray(image).save(paths[-1])
+            shots.append((camera, surface))
+        results = detect_faces(paths, name)
+        lifts = [self._lift(camera, surface, result["points"]) for (camera, surface), result in zip(shots, results)]
+        return [result["faces"] >= 1 for result in results], lifts
+
+    def _lift(self, camera: Camera, surface: np.ndarray, pixels: list) -> tuple[np.ndarray, np.ndarray]:
+        """Landmark pixels -> (surface points (478, 3), cos of the angle between the surface there
+        and the view (478,)); NaN and 0 where a landmark falls off the mesh or none was found."""
+        points, facing = np.full((478, 3), np.nan), np.zeros(478)
+        if not pixels:
+            return points, facing
+        xy = np.asarray(pixels, float)[:, :2]
+        col = np.clip(xy[:, 0].astype(int), 0, self.size - 1)
+        row = np.clip(xy[:, 1].astype(int), 0, self.size - 1)
+        points = surface[row, col]
+        hit = np.isfinite(points).all(axis=1)
+        nearest = cKDTree(self.vertices).query(points[hit])[1]
+        view = camera.eye - points[hit]
+        view /= np.linalg.norm(view, axis=1, keepdims=True)
+        facing[hit] = np.abs(np.einsum("ij,ij->i", self.normals[nearest], view))
+        return points, facing
+
+
+class SurfacePass:
+    """An offscreen pass that writes, per pixel, the position of the mesh surface seen there
+    (float32, relative to the positions uploaded), both faces drawn, depth tested."""
+
+    _VERTEX = """#version 330
+    uniform mat4 view_projection;
+    in vec3 in_position;
+    out vec3 position;
+    void main() { position = in_position; gl_Position = view_projection * vec4(in_position, 1.0); }"""
+    _FRAGMENT = """#version 330
+    in vec3 position;
+    out vec4 surface;
+    void main() { surface = vec4(position, 1.0); }"""
+
+    def __init__(self, ctx: moderngl.Context, vertices: np.ndarray, triangles: np.ndarray,
+                 size: tuple[int, int]) -> None:
+        self.ctx, self.size = ctx, size
+        self.program = ctx.program(vertex_shader=self._VERTEX, fragment_shader=self._FRAGMENT)
+        self.buffers = [ctx.buffer(np.ascontiguousarray(vertices, dtype="f4")),
+                        ctx.buffer(np.ascontiguousarray(triangles, dtype="u4"))]
+        self.array = ctx.vertex_array(self.program, [(self.buffers[0], "3f", "in_position")],
+                                      index_buffer=self.buffers[1], index_element_size=4)
+        self.targets = [ctx.renderbuffer(size, components=4, dtype="f4"), ctx.depth_renderbuffer(size)]
+        self.framebuffer = ctx.framebuffer(color_attachments=[self.targets[0]], depth_attachment=self.targets[1])
+
+    def points(self, camera: Camera) -> np.ndarray:
+        """(H, W, 3) surface points seen by ``camera`` (uploaded coordinates: the caller adds back
+        what it took off), top row first; NaN where no surface is. The context must be current."""
+        aspect = self.size[0] / self.size[1]
+        self.program["view_projection"].write(
+            np.ascontiguousarray((camera.projection_matrix(aspect) @ camera.view_matrix()).T, dtype="f4"))
+        self.framebuffer.use()
+        self.framebuffer.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+        self.ctx.enable(moderngl.DEPTH_TEST)
+        self.ctx.disable(moderngl.CULL_FACE)
+        self.array.render(moderngl.TRIANGLES)
+        data = np.frombuffer(self.framebuffer.read(components=4, dtype="f4"), dtype=np.float32)
+        grid = data.reshape(self.size[1], self.size[0], 4)[::-1].astype(float)
+        grid[grid[..., 3] < 0.5] = np.nan
+        return grid[..., :3]
+
+    def release(self) -> None:
+        for obj in (self.array, self.program, self.framebuffer, *self.targets, *self.buffers):
+            obj.release()

@@ -1,0 +1,161 @@
+"""Landmarks found on a mesh by themselves (puppet.view.meshlandmarks): on the default face written
+out as a bare OBJ, however it is turned in its file; a mesh with no face refused in one line;
+``puppet rig`` without --landmarks making a face folder that loads and poses; and the picker on
+a mesh (puppet.view.meshpicker), which needs no detector."""
+
+from __future__ import annotations
+
+import json
+import urllib.error
+import urllib.request
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from puppet import cli
+from puppet.face.autorig import rig_for_face
+from puppet.face.default import default_face
+from puppet.face.landmarks import FDP_NEEDED, read_landmarks
+from puppet.face.load import load_face
+from puppet.face.meshfile import load_mesh
+from puppet.photo.detect import PHOTO_PYTHON, photo_python
+from puppet.runtime.runtime import Runtime
+
+needs_detector = pytest.mark.skipif(photo_python() is None,
+                                    reason="no photo environment (.venv-photo: tools/setup.sh makes it)")
+TURNS = {"upside down": Rotation.from_euler("z", 180, degrees=True),
+         "looking along +x": Rotation.from_euler("y", 90, degrees=True),
+         "tilted 30 and rolled 20 degrees": Rotation.from_euler("xz", [30, 20], degrees=True)}
+
+
+def write_obj(vertices: np.ndarray, triangles: np.ndarray, path: Path) -> Path:
+    """A bare OBJ, as a user's mesh comes: positions and triangles, nothing else."""
+    lines = [f"v {x:.17g} {y:.17g} {z:.17g}" for x, y, z in np.asarray(vertices, float)]
+    lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in np.asarray(triangles)]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+@pytest.fixture(scope="module")
+def default_obj(tmp_path_factory) -> Path:
+    face = default_face()
+    return write_obj(face.vertices, face.triangles, tmp_path_factory.mktemp("mesh") / "head.obj")
+
+
+@pytest.fixture(scope="module")
+def found(default_obj):
+    from puppet.view.meshlandmarks import find_landmarks
+
+    return find_landmarks(load_mesh(default_obj), str(default_obj))
+
+
+def errors(found, truth: dict[str, int]) -> dict[str, float]:
+    """Per FDP both have, the distance between the found and the true vertex, in face widths."""
+    v = default_face().vertices
+    return {f: float(np.linalg.norm(v[found.fdp[f]] - v[truth[f]])) / found.face_width
+            for f in set(found.fdp) & set(truth)}
+
+
+@needs_detector
+def test_the_default_faces_landmarks_are_found_near_its_own(found):
+    own = {f: int(v) for f, v in default_face().feature_vertices.items()}
+    error = errors(found, own)
+    assert set(FDP_NEEDED) <= set(found.fdp) and len(error) >= 40
+    assert np.median(list(error.values())) < 0.03  # 1.8% measured (tools/landmark_accuracy.py)
+    assert np.percentile(list(error.values()), 90) < 0.10
+    assert max(error[f] for f in ("3.7", "3.8", "3.11", "3.12", "8.3", "8.4", "9.3")) < 0.03  # corners, nose tip
+    assert found.views_found == 5 and "5 of 5 views" in found.summary()
+
+
+@needs_detector
+@pytest.mark.parametrize("turn", TURNS)
+def test_a_face_turned_in_its_file_is_found_the_same(found, turn, tmp_path):
+    from puppet.view.meshlandmarks import find_landmarks
+
+    face = default_face()
+    turned = write_obj(TURNS[turn].apply(face.vertices) + [3.0, -2.0, 1.0], face.triangles, tmp_path / "turned.obj")
+    again = find_landmarks(load_mesh(turned), str(turned))
+    assert np.median(list(errors(again, found.fdp).values())) < 0.01
+    assert np.degrees(Rotation.from_matrix(again.rotation @ TURNS[turn].as_matrix()).magnitude()) < 10
+
+
+def refusals(err: str) -> list[str]:
+    """A command's refusal lines (its progress lines, "rig 1/3: ...", come before them)."""
+    return [line for line in err.splitlines() if line.startswith("puppet ")]
+
+
+@needs_detector
+def test_a_mesh_with_no_face_is_refused_in_one_line(tmp_path, capsys):
+    import trimesh
+
+    sphere = trimesh.creation.icosphere(subdivisions=3, radius=10.0)
+    mesh = write_obj(sphere.vertices, sphere.faces, tmp_path / "ball.obj")
+    assert cli.main(["rig", str(mesh), "-o", str(tmp_path / "ball")]) == 2
+    lines = refusals(capsys.readouterr().err)
+    assert len(lines) == 1 and lines[0].startswith(f"puppet rig: no face found in 25 rendered views of {mesh}: its 24")
+    assert not (tmp_path / "ball").exists()
+
+
+def test_without_the_photo_environment_rig_says_how_to_get_it_in_one_line(default_obj, tmp_path, capsys,
+                                                                          monkeypatch):
+    monkeypatch.setenv(PHOTO_PYTHON, str(tmp_path / "no-python"))
+    assert cli.main(["rig", str(default_obj), "-o", str(tmp_path / "me")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"puppet rig: {default_obj}: finding landmarks needs the photo")
+    assert not (tmp_path / "me").exists()
+
+
+@needs_detector
+def test_rig_without_landmarks_makes_a_face_folder_that_loads_and_poses(default_obj, tmp_path, capsys):
+    folder = tmp_path / "me"
+    assert cli.main(["rig", str(default_obj), "-o", str(folder)]) == 0
+    out = capsys.readouterr().out
+    assert "landmarks: found 42 feature points in 5 of 5 views" in out and "pick-landmarks" in out
+    marks = read_landmarks(folder / "landmarks.json", len(default_face().vertices))
+    face = load_face(folder)
+    assert isinstance(marks, dict) and all(face.feature_vertices[f] == v for f, v in marks.items())
+    runtime = Runtime(face, rig_for_face(face))
+    rest, joy = runtime.deform_faps(), runtime.deform_faps(expression=(1, 63, 0, 0))
+    corners = [face.feature_vertices[f] for f in ("8.3", "8.4")]
+    mouth = np.linalg.norm(face.vertices[corners[0]] - face.vertices[corners[1]])
+    assert np.allclose(rest, face.vertices) and (joy - rest)[corners, 1].min() > 0.02 * mouth  # the corners rise
+
+
+def test_the_picker_on_a_mesh_moves_a_dragged_point_onto_the_vertex_under_it(default_obj, tmp_path):
+    from puppet.view.meshlandmarks import project
+    from puppet.view.meshpicker import MeshPickerServer
+
+    face = default_face()
+    start = {f: int(face.feature_vertices[f]) for f in FDP_NEEDED}
+    picker = MeshPickerServer(default_obj, tmp_path / "marks.json", start=start)
+    try:
+        page = urllib.request.urlopen(picker.url, timeout=5).read().decode()
+        assert '"9.3"' in page and "LABELS" not in page
+        served = json.loads(urllib.request.urlopen(picker.url + "start", timeout=5).read())
+        points = np.array(served["points"])
+        assert served["layout"] == "mesh" and points.shape == (len(start), 2)
+        off = points.copy()
+        off[0] = [1.0, 1.0]  # the background, off the mesh
+        with pytest.raises(urllib.error.HTTPError) as refused:
+            urllib.request.urlopen(_post(picker.url, off), timeout=5)
+        assert refused.value.code == 400 and "off the mesh" in refused.value.read().decode()
+        assert not picker.saved.is_set()
+        target = int(face.feature_vertices["9.1"])  # the nose's side: drag the tip onto it
+        moved = points.copy()
+        moved[picker.labels.index("9.3")] = project(picker.camera, face.vertices[[target]], picker.size)[0]
+        urllib.request.urlopen(_post(picker.url, moved), timeout=5)
+    except BaseException:
+        picker.close()
+        raise
+    saved = json.loads(picker.wait(timeout=5).read_text())
+    assert {f: v for f, v in saved.items() if f != "9.3"} == {f: v for f, v in start.items() if f != "9.3"}
+    width = np.ptp(face.vertices[:, 0])
+    assert np.linalg.norm(face.vertices[saved["9.3"]] - face.vertices[target]) < 0.01 * width
+    assert read_landmarks(tmp_path / "marks.json", len(face.vertices)) == saved  # rig --landmarks reads it
+
+
+def _post(url: str, points: np.ndarray) -> urllib.request.Request:
+    return urllib.request.Request(url + "points", data=json.dumps({"points": points.tolist()}).encode(),
+                                  headers={"Content-Type": "application/json"})
