@@ -27,7 +27,7 @@ VIEWS = ("front", "three_quarter", "profile")
 so ``puppet devices`` starts in well under a second)."""
 ANTIALIAS_MODES = ("fxaa", "none")
 """``puppet render --antialias`` choices (``puppet.view.renderer.ANTIALIAS_MODES``)."""
-BENCH_SECTIONS = ("deform", "frames", "muscles", "inputs", "latency", "voice", "flood", "long_take")
+BENCH_SECTIONS = ("deform", "frames", "muscles", "inputs", "rig", "latency", "voice", "flood", "long_take")
 """``puppet bench --only`` choices (``puppet.bench.run.SECTIONS``; the bench is imported only when run)."""
 FACE_HELP = "a face folder (puppet rig ... -o FOLDER/, puppet face-from-photo) (default: the embedded face)"
 MAX_SIDE = 8192
@@ -378,7 +378,7 @@ def _rig(args: argparse.Namespace) -> int:
     print(f"  regions: {', '.join(f'{r.name} ({len(r.vertices)})' for r in rig.regions)}")
     print(f"  control points: {len(rig.control_points)} ({', '.join(f'{n} {k}' for k, n in counts.items())})")
     print(f"  muscles: {len(getattr(rig, 'muscles', []))}")
-    print(f"  {_fold_limits_line(rig)} (found in {limits:.0f} s)")
+    print(f"  {_fold_limits_line(rig)} (found in {limits:.1f} s)")
     if not rig_file:
         print(f"  use it with --face {args.output} (play, render, replay, live, export)")
     return 0
