@@ -13,25 +13,35 @@ sets up a new runtime: on the ICT head (26,719 vertices) 3,500 deformations and 
   linear in its value, so for most FAPs the model is the face itself; a jaw's or lid's turn and a
   lip pair's follow bend it, and trials added there straighten it. On a stretch where the vertices
   move linearly, a triangle's normal is a quadratic in the value, so the model tests a trial with a
-  few products per triangle, and only on the triangles the FAP moves (the others keep their rest
-  normal and cannot fold).
+  few products per triangle, and only on the triangles that came near folding on the faces tried
+  (``NEAR``): a model that misses a fold is caught by the check below, and where the motion is
+  linear it makes none up.
 * **Checked on the face.** The bisection runs on the model; its last bracket (good, bad) is then
   deformed for real: good must fold nothing and bad must fold. Where both hold, every halving of
   the plain bisection goes the same way (its trials below good fold nothing and those from bad on
   fold, as the values that fold nothing run on from 0: the plain search assumes it too); where one
   does not, that trial joins the model and the bisection runs again. The rounded value is tried on
-  the face where it lies inside the bracket. A linear FAP costs two or three deformations.
+  the face where it lies inside the bracket. A face tried is tested only on the triangles whose
+  corners moved far enough to turn them over (``FoldSearch.touched``): its answer is the whole
+  face's. A linear FAP costs three or four deformations, a lip FAP whose pair follows five to
+  nine, a lid twenty.
 * **Each search once.** A FAP's reach depends only on the follow of the lip pairs it belongs to
   (``foldlimits``' follow moves a pair's other FAP, and nothing else): a search is kept by its FAPs,
   end and those follows, and a FAP outside the pairs is searched once for all three follows the
   limits try. A new follow is a new FAP engine on the same runtime (``Runtime.with_follow``).
 
-On the ICT head ``foldlimits.fold_limits`` takes about a second this way (``puppet bench --only
-rig`` measures both in one run); the values are the plain search's, to the digit on the default
-face's shipped rig.
+On the ICT head the search takes 920 deformations and one runtime, about 3 s (``puppet bench
+--only rig`` times both searches in one run); the limits are the plain search's to the digit, on
+ICT and on the default face (``tests/test_foldsearch.py``). Trusting the model's answer at bad
+where the face at good lay on its line to 1e-5 would save a deformation a limit, but moved one
+limit of the default face by 0.3 MNS (a fold is a near-cancellation: the model's error counts
+against the triangle's size, not the motion's), so every bracket is checked.
 """
 
 from __future__ import annotations
+
+import bisect
+import math
 
 import numpy as np
 
@@ -43,8 +53,6 @@ from puppet.runtime.runtime import Runtime
 CLEAR = 0.5
 """The share of a triangle's rest |n0|^2 that ``FoldSearch.touched`` keeps as the margin of one it
 leaves out: far beyond rounding, so its fold test is the whole face's to the last bit."""
-
-
 NEAR = 0.5
 """A triangle whose normal . rest normal falls below this share of |n0|^2 on a face tried is one
 the model follows on the stretches beside it."""
@@ -78,8 +86,9 @@ class FoldSearch(Bisection):
         self.rest = rest = np.asarray(runtime.rest, dtype=float)
         self.rest_normals = _normals(rest, self.triangles)
         a, b, c = (rest[corner] for corner in self._corners)
-        self._size = np.linalg.norm(b - a, axis=1) + np.linalg.norm(c - a, axis=1)
+        size = np.linalg.norm(b - a, axis=1) + np.linalg.norm(c - a, axis=1)
         self._area = np.linalg.norm(self.rest_normals, axis=1)
+        self._clear = ((np.sqrt(size * size + 4 * CLEAR * self._area) - size) / 4) ** 2
         self._found: dict[tuple, float | None] = {}
 
     def with_follow(self, fap_follow: dict) -> FoldSearch:
@@ -99,27 +108,32 @@ class FoldSearch(Bisection):
         return self._found[key]
 
     def moved(self, face: np.ndarray) -> np.ndarray:
-        """How far each vertex of ``face`` (the whole face, float64) lies from rest."""
+        """How far each vertex of ``face`` (the whole face, float64) lies from rest, squared."""
         step = face - self.rest
-        return np.sqrt(np.einsum("ij,ij->i", step, step))
+        return np.einsum("ij,ij->i", step, step)
 
-    def folds(self, face: np.ndarray, moved: np.ndarray) -> tuple[bool, np.ndarray]:
-        """Does any triangle of ``face`` (the whole face, float64; its vertices ``moved`` from rest)
-        turn against its rest normal? Only those that might (``touched``) are tested. With the
-        triangles that come near it (normal . rest normal below ``NEAR`` of |n0|^2)."""
+    def folds(self, face: np.ndarray, moved: np.ndarray, likely: np.ndarray | None = None) -> tuple[bool, np.ndarray]:
+        """Does any triangle of ``face`` (the whole face, float64; its vertices ``moved`` from rest,
+        squared) turn against its rest normal, and which come near it (normal . rest normal below
+        ``NEAR`` of |n0|^2)? Only those that might fold (``touched``) are tested, the ``likely``
+        ones first: where one of them folds, that is the answer (and they the near ones)."""
+        if likely is not None and len(likely):
+            dots = _dots(face[self.triangles[likely]], self.rest_normals[likely])
+            if (dots < 0).any():
+                return True, likely[dots < NEAR * self._area[likely] ** 2]
         touched = self.touched(moved)
         dots = _dots(face[self.triangles[touched]], self.rest_normals[touched])
         return bool((dots < 0).any()), touched[dots < NEAR * self._area[touched] ** 2]
 
     def touched(self, moved: np.ndarray) -> np.ndarray:
-        """The triangles that might fold with their corners moved at most ``moved`` (per vertex)
-        from rest: with its corners moved at most d, a triangle's normal n keeps n . n0 >= |n0|^2 -
-        |n0| (2 d (|e1| + |e2|) + 4 d^2) (n0, e1, e2 its rest normal and edges). The others stay
-        well clear (``CLEAR`` of their rest |n0|^2), so testing only these gives the whole face's
-        answer; on a line between two faces a corner moves at most as far as at either end."""
+        """The triangles that might fold with their corners moved at most sqrt(``moved``) (per
+        vertex) from rest: with its corners moved at most d, a triangle's normal n keeps n . n0 >=
+        |n0|^2 - |n0| (2 d (|e1| + |e2|) + 4 d^2) (n0, e1, e2 its rest normal and edges). The
+        others stay well clear (``CLEAR`` of their rest |n0|^2: d below sqrt(``_clear``)), so
+        testing only these gives the whole face's answer."""
         a, b, c = self._corners
         d = np.maximum(np.maximum(moved[a], moved[b]), moved[c])
-        return np.flatnonzero(d * (2 * self._size + 4 * d) >= CLEAR * self._area)
+        return np.flatnonzero(d >= self._clear)
 
 
 class _Trials:
@@ -130,8 +144,9 @@ class _Trials:
         self.search, self.numbers, self.end = search, numbers, end
         self.faces = {0.0: search.rest}
         self.near = {0.0: np.zeros(0, dtype=np.int64)}
+        self._tried = [0.0]  # |value| of each value tried, sorted
         self.folded = {0.0: False}
-        self._stretches: dict[tuple[float, float], tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        self._stretches: dict[tuple[float, float], tuple[np.ndarray, ...]] = {}
 
     def reach(self, steps: int) -> float | None:
         """``bisected_reach``'s value: None when the end folds nothing, else the last fold-free
@@ -158,8 +173,10 @@ class _Trials:
             values = np.zeros(N_FAPS)
             values[np.asarray(self.numbers) - 1] = value
             face = np.asarray(self.search.runtime.deform_faps(values), dtype=float)
+            likely = self._folding(value) if abs(value) < abs(self.end) else None
             self.faces[value] = face
-            self.folded[value], self.near[value] = self.search.folds(face, self.search.moved(face))
+            bisect.insort(self._tried, abs(value))
+            self.folded[value], self.near[value] = self.search.folds(face, self.search.moved(face), likely)
         return self.folded[value]
 
     def modelled(self, value: float) -> bool:
@@ -167,19 +184,24 @@ class _Trials:
         either side, interpolated linearly (the real answer at a value tried)?"""
         if value in self.folded:
             return self.folded[value]
+        return len(self._folding(value)) > 0
+
+    def _folding(self, value: float) -> np.ndarray:
+        """The triangles the model folds at ``value`` (between 0 and the end, not tried)."""
         before, beyond = self._around(value)
-        a, b, c = self._stretch(before, beyond)
+        a, b, c, triangles = self._stretch(before, beyond)
         s = (value - before) / (beyond - before)
-        return bool((a + s * (b + s * c) < 0).any())
+        return triangles[a + s * (b + s * c) < 0]
 
     def _around(self, value: float) -> tuple[float, float]:
-        """The values tried nearest ``value`` on either side (all lie between 0 and the end)."""
-        tried = sorted((t for t in self.folded if t != value), key=abs)
-        after = next(k for k, t in enumerate(tried) if abs(t) > abs(value))
-        return tried[after - 1], tried[after]
+        """The values tried nearest ``value`` (not tried itself) on either side: all lie between 0
+        and the end."""
+        tried = self._tried
+        before, beyond = tried[bisect.bisect_left(tried, abs(value)) - 1], tried[bisect.bisect_right(tried, abs(value))]
+        return math.copysign(before, self.end), math.copysign(beyond, self.end)
 
-    def _stretch(self, before: float, beyond: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(a, b, c): on the stretch from ``before`` to ``beyond``, each triangle near folding at
+    def _stretch(self, before: float, beyond: float) -> tuple[np.ndarray, ...]:
+        """(a, b, c, triangles): on the stretch from ``before`` to ``beyond``, each triangle near folding at
         either end (``FoldSearch.folds``) has normal . rest normal = a + b s + c s^2 at s in 0..1.
         A triangle that folds only inside the stretch is missed, and then the check on the face
         finds the model wrong: the model can miss a fold, never make one up where it is linear."""
@@ -196,7 +218,7 @@ class _Trials:
             a = np.einsum("ij,ij->i", np.cross(e1, e2), n0)
             b = np.einsum("ij,ij->i", np.cross(e1, d2) + np.cross(d1, e2), n0)
             c = np.einsum("ij,ij->i", np.cross(d1, d2), n0)
-            self._stretches[key] = (a, b, c)
+            self._stretches[key] = (a, b, c, touched)
         return self._stretches[key]
 
 

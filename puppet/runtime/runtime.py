@@ -515,14 +515,15 @@ class Runtime:
 
     def with_follow(self, fap_follow: Mapping[tuple[int, int], tuple[float, ...]]) -> Runtime:
         """This runtime on a copy of its rig with ``fap_follow`` in place of the rig's: only the FAP
-        engine reads the follow pairs (it is made anew, on first use), so the deformers, B and
-        the sliver guard are shared and the copy costs no set-up (a new runtime of the ICT head,
-        27k vertices, takes 1.7 s). The fold-limit search tries a face under several follows."""
+        engine reads the follow pairs (``FapEngine.with_follow``), so the deformers, B and the
+        sliver guard are shared and the copy costs no set-up (a new runtime of the ICT head, 27k
+        vertices, takes 1-2 s). The fold-limit search tries a face under several follows."""
         other = copy.copy(self)
         other.rig = copy.copy(self.rig)
         other.rig.fap_follow = dict(fap_follow)
         other.rig.validate()
-        other.__dict__.pop("faps", None)
+        if "faps" in self.__dict__:
+            other.faps = self.faps.with_follow(other)
         return other
 
     def deform_pose(self, pose: Pose, *, out: np.ndarray | None = None, normals_out: np.ndarray | None = None,
