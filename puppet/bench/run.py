@@ -72,7 +72,8 @@ def _steps(frames: int, ict: bool, flood_seconds: float, take_seconds: float, on
     if "inputs" in only:
         steps.append(("inputs", "every adapter", lambda: bench_inputs(0.5 if quick else 2.0)))
     if "rig" in only:
-        steps.append(("rig", "puppet rig, fold limits before and after", lambda: bench_rig(1 if quick else 3, ict=ict)))
+        rig_runs, rig_ict = (1, False) if quick else (3, ict)
+        steps.append(("rig", "puppet rig, fold limits before and after", lambda: bench_rig(rig_runs, ict=rig_ict)))
     live = _live_sections(default, flood_seconds, take_seconds, 3.0 if quick else pipeline.BOX_CYCLE_S)
     steps += [(name, label, fn) for name, (label, fn) in live.items() if name in only]
     return steps

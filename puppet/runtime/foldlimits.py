@@ -92,7 +92,8 @@ LIP_PAIRS = tuple((n, n + 47) for n in range(4, 14))
 ones 8.x beside them, along the same axes and in the same units."""
 
 
-def follow_ranges(search: Bisection, pairs=LIP_PAIRS, share: float = FOLLOW_SHARE) -> dict[tuple[int, int], tuple[float, ...]]:
+def follow_ranges(search: Bisection, pairs=LIP_PAIRS,
+                  share: float = FOLLOW_SHARE) -> dict[tuple[int, int], tuple[float, ...]]:
     """Per pair (a, b), the range (low, high) of value_a - value_b that folds nothing at rest: the
     tighter of each FAP's own fold-free reach (a alone at d, or b alone at -d), and the pair's
     common reach (m_low, m_high): where both moved together fold (``puppet.runtime.follow``: the

@@ -83,7 +83,7 @@ class FoldSearch(Bisection):
         super().__init__(runtime)
         self.triangles = np.asarray(runtime.face.triangles, dtype=np.int64)
         self._corners = [np.ascontiguousarray(self.triangles[:, k]) for k in range(3)]
-        self.rest = rest = np.asarray(runtime.rest, dtype=float)
+        rest = np.asarray(runtime.rest, dtype=float)
         self.rest_normals = _normals(rest, self.triangles)
         a, b, c = (rest[corner] for corner in self._corners)
         size = np.linalg.norm(b - a, axis=1) + np.linalg.norm(c - a, axis=1)
@@ -108,21 +108,22 @@ class FoldSearch(Bisection):
         return self._found[key]
 
     def moved(self, face: np.ndarray) -> np.ndarray:
-        """How far each vertex of ``face`` (the whole face, float64) lies from rest, squared."""
-        step = face - self.rest
+        """How far each vertex of ``face`` (the whole face, as the runtime gives it) lies from rest,
+        squared (in the runtime's precision: ``touched`` keeps a wide margin)."""
+        step = face - self.runtime.rest
         return np.einsum("ij,ij->i", step, step)
 
     def folds(self, face: np.ndarray, moved: np.ndarray, likely: np.ndarray | None = None) -> tuple[bool, np.ndarray]:
-        """Does any triangle of ``face`` (the whole face, float64; its vertices ``moved`` from rest,
-        squared) turn against its rest normal, and which come near it (normal . rest normal below
+        """Does any triangle of ``face`` (the whole face, as the runtime gives it; its vertices
+        ``moved`` from rest, squared) turn against its rest normal, and which come near it (normal . rest normal below
         ``NEAR`` of |n0|^2)? Only those that might fold (``touched``) are tested, the ``likely``
         ones first: where one of them folds, that is the answer (and they the near ones)."""
         if likely is not None and len(likely):
-            dots = _dots(face[self.triangles[likely]], self.rest_normals[likely])
+            dots = _dots(face[self.triangles[likely]].astype(float), self.rest_normals[likely])
             if (dots < 0).any():
                 return True, likely[dots < NEAR * self._area[likely] ** 2]
         touched = self.touched(moved)
-        dots = _dots(face[self.triangles[touched]], self.rest_normals[touched])
+        dots = _dots(face[self.triangles[touched]].astype(float), self.rest_normals[touched])
         return bool((dots < 0).any()), touched[dots < NEAR * self._area[touched] ** 2]
 
     def touched(self, moved: np.ndarray) -> np.ndarray:
@@ -137,12 +138,12 @@ class FoldSearch(Bisection):
 
 
 class _Trials:
-    """One end's search: the values deformed for real so far, their faces (float64) and how far
-    each vertex moved there, whether they fold, and the model between them (``FoldSearch``)."""
+    """One end's search: the values deformed for real so far, their faces, whether they fold and
+    which triangles came near it there, and the model between them (``FoldSearch``)."""
 
     def __init__(self, search: FoldSearch, numbers: list[int], end: float) -> None:
         self.search, self.numbers, self.end = search, numbers, end
-        self.faces = {0.0: search.rest}
+        self.faces = {0.0: search.runtime.rest}
         self.near = {0.0: np.zeros(0, dtype=np.int64)}
         self._tried = [0.0]  # |value| of each value tried, sorted
         self.folded = {0.0: False}
@@ -172,7 +173,7 @@ class _Trials:
         if value not in self.folded:
             values = np.zeros(N_FAPS)
             values[np.asarray(self.numbers) - 1] = value
-            face = np.asarray(self.search.runtime.deform_faps(values), dtype=float)
+            face = self.search.runtime.deform_faps(values)
             likely = self._folding(value) if abs(value) < abs(self.end) else None
             self.faces[value] = face
             bisect.insort(self._tried, abs(value))
@@ -210,8 +211,8 @@ class _Trials:
             search = self.search
             touched = np.union1d(self.near[before], self.near[beyond])
             corners = search.triangles[touched]
-            p = self.faces[before][corners]
-            d = self.faces[beyond][corners] - p
+            p = self.faces[before][corners].astype(float)
+            d = self.faces[beyond][corners].astype(float) - p
             e1, e2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
             d1, d2 = d[:, 1] - d[:, 0], d[:, 2] - d[:, 0]
             n0 = search.rest_normals[touched]
