@@ -30,12 +30,15 @@ sets up a new runtime: on the ICT head (26,719 vertices) 3,500 deformations and 
   end and those follows, and a FAP outside the pairs is searched once for all three follows the
   limits try. A new follow is a new FAP engine on the same runtime (``Runtime.with_follow``).
 
-On the ICT head the search takes 920 deformations and one runtime, about 3 s (``puppet bench
+On the ICT head the search takes 916 deformations and one runtime, 4-6 s here (``puppet bench
 --only rig`` times both searches in one run); the limits are the plain search's to the digit, on
 ICT and on the default face (``tests/test_foldsearch.py``). Trusting the model's answer at bad
 where the face at good lay on its line to 1e-5 would save a deformation a limit, but moved one
 limit of the default face by 0.3 MNS (a fold is a near-cancellation: the model's error counts
-against the triangle's size, not the motion's), so every bracket is checked.
+against the triangle's size, not the motion's), so every bracket is checked. The check holds
+where the face, once folded, stays folded further on; it does not quite everywhere (FAP 59
+alone folds at -358.5 MNS on the default face, not at -358.6): trying the rounded value in
+good's stead moved that limit by 0.3 MNS, so good itself is tried, as the plain search did.
 """
 
 from __future__ import annotations
@@ -100,9 +103,10 @@ class FoldSearch(Bisection):
         return other
 
     def __call__(self, numbers: list[int], end: float, steps: int) -> float | None:
+        """``Bisection``'s value, found once per FAPs, end and follow of the pairs they are in."""
         follow = self.runtime.rig.fap_follow
-        touched = tuple(sorted((pair, follow[pair]) for pair in follow if set(pair) & set(numbers)))
-        key = (tuple(numbers), end, steps, touched)
+        theirs = tuple(sorted((pair, follow[pair]) for pair in follow if set(pair) & set(numbers)))
+        key = (tuple(numbers), end, steps, theirs)
         if key not in self._found:
             self._found[key] = _Trials(self, numbers, end).reach(steps)
         return self._found[key]
@@ -113,11 +117,13 @@ class FoldSearch(Bisection):
         step = face - self.runtime.rest
         return np.einsum("ij,ij->i", step, step)
 
-    def folds(self, face: np.ndarray, moved: np.ndarray, likely: np.ndarray | None = None) -> tuple[bool, np.ndarray]:
+    def folds(self, face: np.ndarray, moved: np.ndarray,
+              likely: np.ndarray | None = None) -> tuple[bool, np.ndarray]:
         """Does any triangle of ``face`` (the whole face, as the runtime gives it; its vertices
-        ``moved`` from rest, squared) turn against its rest normal, and which come near it (normal . rest normal below
-        ``NEAR`` of |n0|^2)? Only those that might fold (``touched``) are tested, the ``likely``
-        ones first: where one of them folds, that is the answer (and they the near ones)."""
+        ``moved`` from rest, squared) turn against its rest normal, and which come near it (normal
+        . rest normal below ``NEAR`` of |n0|^2)? Only those that might fold (``touched``) are
+        tested, the ``likely`` ones first: where one of them folds, that is the answer (and they
+        the near ones)."""
         if likely is not None and len(likely):
             dots = _dots(face[self.triangles[likely]].astype(float), self.rest_normals[likely])
             if (dots < 0).any():
@@ -202,10 +208,11 @@ class _Trials:
         return math.copysign(before, self.end), math.copysign(beyond, self.end)
 
     def _stretch(self, before: float, beyond: float) -> tuple[np.ndarray, ...]:
-        """(a, b, c, triangles): on the stretch from ``before`` to ``beyond``, each triangle near folding at
-        either end (``FoldSearch.folds``) has normal . rest normal = a + b s + c s^2 at s in 0..1.
-        A triangle that folds only inside the stretch is missed, and then the check on the face
-        finds the model wrong: the model can miss a fold, never make one up where it is linear."""
+        """(a, b, c, triangles): on the stretch from ``before`` to ``beyond``, each triangle near
+        folding at either end (``FoldSearch.folds``) has normal . rest normal = a + b s + c s^2 at
+        s in 0..1. A triangle that folds only inside the stretch is missed, and then the check on
+        the face finds the model wrong: the model can miss a fold, never make one up where it is
+        linear."""
         key = (before, beyond)
         if key not in self._stretches:
             search = self.search
