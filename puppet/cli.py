@@ -30,7 +30,7 @@ ANTIALIAS_MODES = ("fxaa", "none")
 PHOTO_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".gif", ".tif", ".tiff", ".webp")
 """What ``puppet pick-landmarks`` opens as a photo; anything else is a face mesh."""
 LANDMARKS_FILE = "landmarks.json"  # what `puppet rig` writes into the face folder when it found the landmarks
-BENCH_SECTIONS = ("deform", "frames", "muscles", "inputs", "latency", "voice", "flood", "long_take")
+BENCH_SECTIONS = ("deform", "frames", "muscles", "inputs", "rig", "latency", "voice", "flood", "long_take")
 """``puppet bench --only`` choices (``puppet.bench.run.SECTIONS``; the bench is imported only when run)."""
 FACE_HELP = "a face folder (puppet rig ... -o FOLDER/, puppet face-from-photo) (default: the embedded face)"
 MAX_SIDE = 8192
@@ -391,7 +391,7 @@ def _rig(args: argparse.Namespace) -> int:
     print(f"  regions: {', '.join(f'{r.name} ({len(r.vertices)})' for r in rig.regions)}")
     print(f"  control points: {len(rig.control_points)} ({', '.join(f'{n} {k}' for k, n in counts.items())})")
     print(f"  muscles: {len(getattr(rig, 'muscles', []))}")
-    print(f"  {_fold_limits_line(rig)} (found in {limits:.0f} s)")
+    print(f"  {_fold_limits_line(rig)} (found in {limits:.1f} s)")
     if not rig_file:
         print(f"  use it with --face {args.output} (play, render, replay, live, export)")
     return 0

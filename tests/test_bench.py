@@ -71,3 +71,12 @@ def test_the_cli_sections_are_the_bench_sections():
     from puppet.cli import BENCH_SECTIONS
 
     assert BENCH_SECTIONS == SECTIONS
+
+
+@pytest.mark.slow
+def test_the_rig_section_times_both_fold_searches_on_the_same_face():
+    from puppet.bench.rigtime import bench_rig
+
+    [row] = bench_rig(runs=1, ict=False)
+    assert row["face"] == "default" and row["vertices"] > 0 and row["same"]
+    assert row["before_s"] > row["after_s"] > 0 and row["total_s"] == row["rig_s"] + row["after_s"]

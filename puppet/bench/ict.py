@@ -21,10 +21,18 @@ from puppet.face.rig import Rig
 
 def ict_face_and_rig(root: Path | None = None) -> tuple[Face, Rig] | None:
     """The ICT face (in the face frame) and its auto-rig, or None when the assets are absent."""
+    found = ict_inputs(root)
+    if found is None:
+        return None
+    face = load_face(found[0], landmarks=found[1])
+    face.name = "ict"
+    return face, build_rig(face)
+
+
+def ict_inputs(root: Path | None = None) -> tuple[Path, list[int]] | None:
+    """The ICT mesh and its 68 iBUG landmark vertices, or None when the assets are absent."""
     folder = (root or shared_assets()) / "ict_facekit"
     mesh, indices = folder / "generic_neutral_mesh.obj", folder / "vertex_indices.json"
     if not (mesh.is_file() and indices.is_file()):
         return None
-    face = load_face(mesh, landmarks=json.loads(indices.read_text())["idx_to_landmark_verts"])
-    face.name = "ict"
-    return face, build_rig(face)
+    return mesh, json.loads(indices.read_text())["idx_to_landmark_verts"]

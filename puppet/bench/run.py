@@ -2,7 +2,8 @@
 
 The sections are the deform and whole-frame tables and the muscle modes (``puppet.bench.deform``),
 the device adapters (``puppet.bench.inputs``) and the live pipeline: latency, a flood of input
-and a long take (``puppet.bench.pipeline``).
+and a long take (``puppet.bench.pipeline``), and how long ``puppet rig`` takes, its fold-limit
+search before and after in one run (``puppet.bench.rigtime``).
 """
 
 from __future__ import annotations
@@ -15,10 +16,11 @@ from collections.abc import Callable
 from puppet.bench import pipeline
 from puppet.bench.deform import bench_face, bench_faces, bench_frame_split, bench_muscles
 from puppet.bench.inputs import bench_inputs
+from puppet.bench.rigtime import bench_rig
 from puppet.bench.voice import voice
 from puppet.runtime.runtime import MUSCLE_MODES, Runtime
 
-SECTIONS = ("deform", "frames", "muscles", "inputs", "latency", "voice", "flood", "long_take")
+SECTIONS = ("deform", "frames", "muscles", "inputs", "rig", "latency", "voice", "flood", "long_take")
 """What ``puppet bench --only`` can pick, in the order they run and print."""
 
 
@@ -69,6 +71,9 @@ def _steps(frames: int, ict: bool, flood_seconds: float, take_seconds: float, on
         steps.append(("muscles", "default", lambda: bench_muscles(faces()[0][0], frames)))
     if "inputs" in only:
         steps.append(("inputs", "every adapter", lambda: bench_inputs(0.5 if quick else 2.0)))
+    if "rig" in only:
+        rig_runs, rig_ict = (1, False) if quick else (3, ict)
+        steps.append(("rig", "puppet rig, fold limits before and after", lambda: bench_rig(rig_runs, ict=rig_ict)))
     live = _live_sections(default, flood_seconds, take_seconds, 3.0 if quick else pipeline.BOX_CYCLE_S)
     steps += [(name, label, fn) for name, (label, fn) in live.items() if name in only]
     return steps
@@ -102,6 +107,9 @@ def _print_report(report: dict) -> None:
         for row in inputs:
             if "error" in row:
                 print(f"{row['adapter']}: not measured ({row['error']})")
+        print()
+    if "rig" in report:
+        _table(report["rig"], ("face", "vertices", "rig_s", "before_s", "after_s", "ratio", "total_s", "same"))
         print()
     _print_live(report)
 

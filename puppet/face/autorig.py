@@ -154,6 +154,7 @@ class _Builder:
         self.fp = {k: np.array(p, dtype=float) for k, p in face.feature_points.items()}
         self.fv = dict(face.feature_vertices)
         self.points: list[ControlPoint] = []
+        self._named: set[str] = set()  # the points' names: ``_add`` asks thousands of times on a grid
         self.region_of = np.full(len(self.v), "", dtype=object)
 
     # -- regions ------------------------------------------------------------------------
@@ -347,12 +348,12 @@ class _Builder:
 
     def _add(self, region: str, name: str, role: str, *, vertex: int | None = None,
              position: np.ndarray | None = None, **kw) -> str:
-        existing = {p.name for p in self.points}
-        if name not in existing:
+        if name not in self._named:
             if position is None:
                 position = self.v[vertex]
             weight = INDIRECT_WEIGHT if vertex is None else 1.0
             self.points.append(ControlPoint(name, np.asarray(position, float), role, weight, vertex, **kw))
+            self._named.add(name)
         self.members.setdefault(region, [])
         if name not in self.members[region]:
             self.members[region].append(name)

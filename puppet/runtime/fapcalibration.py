@@ -207,42 +207,52 @@ def fit_faps(runtime: Runtime, displacement: np.ndarray, *, refine: int = 2, whe
     return values
 
 
-def fold_free_reach(runtime: Runtime, *, steps: int = 12, numbers=None) -> dict[int, tuple[float, float]]:
+def fold_free_reach(runtime: Runtime, *, steps: int = 12, numbers=None, reach=None) -> dict[int, tuple[float, float]]:
     """Per FAP, the values (low, high) it can take alone without folding a triangle: each end of
     its range (``clamp_ranges``; twice it, as files go beyond) is kept when nothing folds there,
     else the fold-free value found by bisection toward 0. FAPs that fold nowhere are left out;
-    ``numbers`` restricts the search to those FAPs."""
-    free = copy.copy(runtime.rig)
-    free.fap_reach = {}
-    runtime = Runtime(runtime.face, free, dtype=runtime.dtype)
+    ``numbers`` restricts the search to those FAPs. The runtime's own reach does not apply (the
+    rig's response is searched); ``reach`` searches one end (``common_reach``) on a runtime
+    without one (``puppet.runtime.foldsearch``), else each trial deforms the whole face."""
+    if runtime.rig.fap_reach:
+        if reach is not None:
+            raise ValueError("fold_free_reach: a given reach search needs a runtime without fap_reach")
+        free = copy.copy(runtime.rig)
+        free.fap_reach = {}
+        runtime = Runtime(runtime.face, free, dtype=runtime.dtype)
     out = {}
     for f in faps():
         if f.number < 3 or (numbers is not None and f.number not in numbers):
             continue
-        low, high = common_reach(runtime, [f.number], steps=steps)
+        low, high = common_reach(runtime, [f.number], steps=steps, reach=reach)
         if np.isfinite(low) or np.isfinite(high):
             out[f.number] = (low, high)
     return out
 
 
-def common_reach(runtime: Runtime, numbers: list[int], *, steps: int = 12) -> tuple[float, float]:
+def common_reach(runtime: Runtime, numbers: list[int], *, steps: int = 12, reach=None) -> tuple[float, float]:
     """The values (low, high) that the FAPs ``numbers`` moved together to the same value can take
     without folding a triangle, toward each end of the narrowest of their ranges (twice it, as in
     ``fold_free_reach``, which is this for one FAP); infinite toward an end where nothing folds.
-    The runtime's own limits apply (pass one without them for the rig's response)."""
-    triangles = np.asarray(runtime.face.triangles)
+    The runtime's own limits apply (pass one without them for the rig's response). ``reach``
+    (numbers, end, steps) -> value or None searches one end on ``runtime``: ``bisected_reach``
+    unless given (``puppet.runtime.foldsearch.FoldSearch`` finds the same with fewer trials)."""
+    reach = reach or functools.partial(bisected_reach, runtime)
     lo, hi = clamp_ranges()
     index = np.asarray(numbers) - 1
     out = []
     for end, unlimited in ((np.max(lo[index]), -np.inf), (np.min(hi[index]), np.inf)):
-        reach = _reach(runtime, triangles, numbers, 2 * end, steps) if np.isfinite(end) and end else None
-        out.append(unlimited if reach is None else float(reach))
+        found = reach(numbers, 2 * end, steps) if np.isfinite(end) and end else None
+        out.append(unlimited if found is None else float(found))
     return out[0], out[1]
 
 
-def _reach(runtime: Runtime, triangles: np.ndarray, numbers: list[int], end: float, steps: int) -> float | None:
+def bisected_reach(runtime: Runtime, numbers: list[int], end: float, steps: int) -> float | None:
     """The largest fold-free value between 0 and ``end`` of the FAPs ``numbers`` together (None
-    when ``end`` folds nothing)."""
+    when ``end`` folds nothing): ``steps`` halvings from (0, ``end``), each trial the whole face
+    deformed and every triangle tested, then the value rounded to 0.1 if that folds nothing."""
+    triangles = np.asarray(runtime.face.triangles)
+
     def folds(value: float) -> bool:
         values = np.zeros(N_FAPS)
         values[np.asarray(numbers) - 1] = value

@@ -56,6 +56,7 @@ the jaw's (or lid's) frame, so a take driven by other means can be written as st
 
 from __future__ import annotations
 
+import copy
 import functools
 import math
 
@@ -111,9 +112,23 @@ class FapEngine:
             limits = self.skin_reach if number in GAZE_FAPS else self.reach
             limits[0, number - 1] = max(limits[0, number - 1], low)
             limits[1, number - 1] = min(limits[1, number - 1], high)
+        self._read_follow()
+
+    def _read_follow(self) -> None:
+        """The rig's follow pairs as arrays: each pair's FAPs (0-based) and its range's half-planes."""
         pairs = sorted(self.rig.fap_follow.items())
         self._follow_a, self._follow_b = (np.array([pair[k] - 1 for pair, _ in pairs], dtype=np.int64) for k in (0, 1))
         self._follow_rows = np.array([follow.rows(*ranges) for _, ranges in pairs]).reshape(len(pairs), 4, 3)
+
+    def with_follow(self, runtime) -> FapEngine:
+        """This engine for ``runtime``, this one's runtime with other follow pairs
+        (``Runtime.with_follow``): the FAPs' motions, the face's limits and the lids' closing
+        shapes stay (none depends on the follow; the motions take 0.1 s to gather on a 27k-vertex
+        face), the follow is read anew."""
+        other = copy.copy(self)
+        other.runtime, other.rig = runtime, runtime.rig
+        other._read_follow()
+        return other
 
     def _face_limits(self) -> np.ndarray:
         """(2, 68) low / high: what this face can follow at all (see the module docstring)."""

@@ -63,6 +63,7 @@ from puppet.face.rig import Rig
 from puppet.fap.table import fap
 from puppet.runtime.fapcalibration import Calibration, calibrate, common_reach, fit_faps, fold_free_reach
 from puppet.runtime.fapengine import GAZE_FAPS, lid_shares
+from puppet.runtime.foldsearch import Bisection, FoldSearch
 from puppet.runtime.runtime import Runtime
 
 FOLLOW_SHARE = 0.75  # follow keeps a pair within three quarters of its fold-free difference: at a
@@ -91,14 +92,16 @@ LIP_PAIRS = tuple((n, n + 47) for n in range(4, 14))
 ones 8.x beside them, along the same axes and in the same units."""
 
 
-def follow_ranges(runtime, pairs=LIP_PAIRS, share: float = FOLLOW_SHARE) -> dict[tuple[int, int], tuple[float, ...]]:
+def follow_ranges(search: Bisection, pairs=LIP_PAIRS,
+                  share: float = FOLLOW_SHARE) -> dict[tuple[int, int], tuple[float, ...]]:
     """Per pair (a, b), the range (low, high) of value_a - value_b that folds nothing at rest: the
     tighter of each FAP's own fold-free reach (a alone at d, or b alone at -d), and the pair's
     common reach (m_low, m_high): where both moved together fold (``puppet.runtime.follow``: the
-    range narrows to nothing there). Found with no follow."""
-    free = _with(runtime, fap_follow={}, fap_reach={})
+    range narrows to nothing there). Found with no follow, by ``search`` (``puppet.runtime.foldsearch``,
+    on a runtime without fold limits)."""
+    free = search.with_follow({})
     numbers = sorted({n for pair in pairs for n in pair})
-    alone = fold_free_reach(free, numbers=numbers)
+    alone = fold_free_reach(free.runtime, numbers=numbers, reach=free)
     unlimited = (-np.inf, np.inf)
     out = {}
     for a, b in pairs:
@@ -106,20 +109,26 @@ def follow_ranges(runtime, pairs=LIP_PAIRS, share: float = FOLLOW_SHARE) -> dict
         low, high = max(a_low, -b_high), min(a_high, -b_low)
         if np.isfinite(low) or np.isfinite(high):
             kept = share * STRETCH_SHARE if a in STRETCH else share
-            out[(a, b)] = (float(max(kept * low, -1e9)), float(min(kept * high, 1e9)), *common_reach(free, [a, b]))
+            common = common_reach(free.runtime, [a, b], reach=free)
+            out[(a, b)] = (float(max(kept * low, -1e9)), float(min(kept * high, 1e9)), *common)
     return out
 
 
-def fold_limits(runtime) -> tuple[dict[tuple[int, int], tuple[float, ...]], dict[int, tuple[float, float]]]:
+def fold_limits(runtime, search: type[Bisection] = FoldSearch
+                ) -> tuple[dict[tuple[int, int], tuple[float, ...]], dict[int, tuple[float, float]]]:
     """(fap_follow, fap_reach) for the runtime's face and rig: follow first, then each FAP's
     fold-free reach with that follow in place. A pair's range narrows toward its common reach
     only on a side where the pair together goes further than the nearer of its two FAPs does
-    alone within the rest range (``_narrowed``: the lip corner); elsewhere it stays as at rest."""
-    ranges = _symmetric(follow_ranges(runtime), _mirror_pair)
+    alone within the rest range (``_narrowed``: the lip corner); elsewhere it stays as at rest.
+    The rig's own limits do not apply (a runtime whose rig has a reach is set up again without
+    it). ``search`` finds each reach (``puppet.runtime.foldsearch``: ``Bisection`` is the plain
+    search, the reference; ``FoldSearch`` gives its values with a few trials each)."""
+    free = search(_with(runtime, fap_follow={}, fap_reach={}) if runtime.rig.fap_reach else runtime)
+    ranges = _symmetric(follow_ranges(free), _mirror_pair)
     at_rest = {pair: (low, high, -np.inf, np.inf) for pair, (low, high, _, _) in ranges.items()}
-    alone = _reach(_with(runtime, fap_follow=at_rest, fap_reach={}))
+    alone = _reach(free.with_follow(at_rest))
     follow = {pair: _narrowed(pair, r, alone) for pair, r in ranges.items()}
-    return follow, _reach(_with(runtime, fap_follow=follow, fap_reach={}))
+    return follow, _reach(free.with_follow(follow))
 
 
 def _narrowed(pair: tuple[int, int], ranges: tuple[float, ...], reach: dict[int, tuple[float, float]]) -> tuple[float, ...]:
@@ -130,9 +139,9 @@ def _narrowed(pair: tuple[int, int], ranges: tuple[float, ...], reach: dict[int,
     return (low, high, m_low if m_low < max(a[0], b[0]) else -np.inf, m_high if m_high > min(a[1], b[1]) else np.inf)
 
 
-def _reach(runtime) -> dict[int, tuple[float, float]]:
-    """Each FAP's fold-free reach on the runtime's rig, the same on both sides, a margin inside."""
-    reach = _symmetric(fold_free_reach(runtime), mirror)
+def _reach(search: Bisection) -> dict[int, tuple[float, float]]:
+    """Each FAP's fold-free reach on the search's runtime, the same on both sides, a margin inside."""
+    reach = _symmetric(fold_free_reach(search.runtime, reach=search), mirror)
     return {n: (REACH_MARGIN * low, REACH_MARGIN * high) for n, (low, high) in reach.items()}
 
 
@@ -166,21 +175,23 @@ def _symmetric(limits: dict, other_side) -> dict:
 def fold_safe(runtime) -> Rig:
     """A copy of the runtime's (calibrated) rig with its lid margin motions faded toward the eye
     corners (``lid_faded``) and its ``fap_follow`` and ``fap_reach`` found anew on that."""
-    faded = _with(runtime, fap_motions=lid_faded(runtime.rig))
+    faded = _with(runtime, fap_motions=lid_faded(runtime.rig), fap_follow={}, fap_reach={})
     rig = copy.copy(faded.rig)
     rig.fap_follow, rig.fap_reach = fold_limits(faded)
     return rig
 
 
-def fold_limited(face, rig: Rig) -> Rig:
+def fold_limited(face, rig: Rig, search: type[Bisection] = FoldSearch) -> Rig:
     """A copy of a new face's ``rig`` with its ``fap_follow`` and ``fap_reach`` found on ``face``
     (``fold_limits``): what ``puppet rig`` and ``puppet face-from-photo`` give a face, whose
     motions are the default face's carried over (their lid margins faded already). The upper lids'
     closing stays open (``GUARDED``: a blink must close, the sliver guard holds its folds); with no
     example shapes to say how far the face needs open_jaw, it stops where it folds. On the ICT
-    face the six expressions folded 2,368 triangles without these limits and 102 with them."""
+    face the six expressions folded 2,368 triangles without these limits and 102 with them.
+    ``search``: as for ``fold_limits``."""
     out = copy.copy(rig)
-    out.fap_follow, reach = fold_limits(Runtime(face, rig))
+    out.fap_follow, out.fap_reach = {}, {}
+    out.fap_follow, reach = fold_limits(Runtime(face, out), search)
     out.fap_reach = {n: (low, np.inf) if n in GUARDED else (low, high) for n, (low, high) in reach.items()}
     return out
 

@@ -72,6 +72,7 @@ With no muscle contracting (None, {} or every value 0) a frame is the FAP path, 
 
 from __future__ import annotations
 
+import copy
 import difflib
 import functools
 import warnings
@@ -220,7 +221,8 @@ class Runtime:
         blocks = []
         for region in self._regions:
             coef = self.deformers[region.name].coefficients[: len(region.vertices)]
-            folded = sp.csr_matrix(coef @ self._spread[self._region_cps[region.name]])
+            spread = sp.csr_matrix(self._spread[self._region_cps[region.name]])  # sparse: the same sums in the
+            folded = sp.csr_matrix(coef @ spread)  # same order as a dense product, without a dense block (0.7 s on ICT)
             folded.data[np.abs(folded.data) < 1e-12] = 0.0
             folded.eliminate_zeros()
             place = sp.csr_matrix((np.ones(len(region.vertices)), (region.vertices, np.arange(len(region.vertices)))),
@@ -511,6 +513,19 @@ class Runtime:
     def faps(self) -> FapEngine:
         """This face's FAP engine (``puppet.runtime.fapengine.FapEngine``), made on first use."""
         return FapEngine(self)
+
+    def with_follow(self, fap_follow: Mapping[tuple[int, int], tuple[float, ...]]) -> Runtime:
+        """This runtime on a copy of its rig with ``fap_follow`` in place of the rig's: only the FAP
+        engine reads the follow pairs (``FapEngine.with_follow``), so the deformers, B and the
+        sliver guard are shared and the copy costs no set-up (a new runtime of the ICT head, 27k
+        vertices, takes 1-2 s). The fold-limit search tries a face under several follows."""
+        other = copy.copy(self)
+        other.rig = copy.copy(self.rig)
+        other.rig.fap_follow = dict(fap_follow)
+        other.rig.validate()
+        if "faps" in self.__dict__:
+            other.faps = self.faps.with_follow(other)
+        return other
 
     def deform_pose(self, pose: Pose, *, out: np.ndarray | None = None, normals_out: np.ndarray | None = None,
                     mode: str = "control", normals: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
