@@ -15,6 +15,8 @@ indices (``{"2.1": 152, ...}``) or a JSON list of 68 vertex indices in the iBUG 
   the mouth, small ones are teeth (upper or lower of the lip line) and large ones the ``mouth``
   (socket, gums); anything else (lashes, tear lines) is ``attached``: it follows the skin
   region nearest to it. A face without eyeballs or teeth simply has none of those regions.
+  Parts the file's own pieces named (``puppet.face.meshparts``: eyeballs, teeth, tongue,
+  lashes) win over the components' guess off the skin; eyeballs are sided by x in the face frame.
 * **Contours.** The lips' meeting line, the vermilion border and the lid openings, as closed
   loops of shortest (geodesic) paths on the skin through their landmarks. Open holes and
   closed (stitched) mouths and eyes are handled alike.
@@ -48,7 +50,7 @@ from puppet.errors import PuppetError
 from puppet.face.default import default_face
 from puppet.face.muscles import place, place_coefficients
 
-__all__ = ["LandmarkError", "read_landmarks", "ibug_to_fdp", "apply_landmarks"]
+__all__ = ["LandmarkError", "apply_landmarks", "ibug_to_fdp", "read_landmarks"]
 
 GROUP_SIZES = {2: 14, 3: 14, 4: 6, 5: 4, 6: 4, 7: 1, 8: 10, 9: 15, 10: 10, 11: 6}
 GRID = 8  # the M x N blocks the face's feature-point box is cut into for the snapping search
@@ -74,6 +76,7 @@ FDP_CONTOURS = {
     "right_lid_opening": ["3.12", "3.2", "3.8", "3.4"],
 }
 FDP_NEEDED = sorted({f for loop in FDP_CONTOURS.values() for f in loop} | {"2.1", "9.3", "9.15"})
+KEPT_PARTS = {"eye_l", "eye_r", "teeth_upper", "teeth_lower", "tongue", "attached"}  # a file's named pieces
 PUPILS = ("3.5", "3.6")  # coordinates when the face has no eyeball to put them on
 EYES = {"eye_l": ("3.7", "3.11", "3.5"), "eye_r": ("3.12", "3.8", "3.6")}
 
@@ -196,7 +199,7 @@ def apply_landmarks(face, landmarks) -> object:
     placement = _placement(face.vertices, given, reference.feature_points)
     vertices = _snapped(face.vertices @ placement[:, :3].T + placement[:, 3], face.vertices, given)
     skin = _skin_graph(vertices, face.triangles, skin.mask)
-    parts = _parts(vertices, face.triangles, skin.mask, {f: vertices[i] for f, i in given.items()})
+    parts = _parts(vertices, face.triangles, skin.mask, {f: vertices[i] for f, i in given.items()}, face.parts)
     contours = {name: _geodesic_path(skin, ways, closed=True) for name, ways in waypoints.items()}
     feature_points, feature_vertices = _feature_points(vertices, parts, skin, given, reference)
     return replace(face, vertices=vertices, parts=parts, feature_points=feature_points,
@@ -277,13 +280,19 @@ def _snapped(vertices: np.ndarray, original: np.ndarray, given: dict[str, int]) 
 # -- parts -------------------------------------------------------------------------------------------
 
 def _parts(vertices: np.ndarray, triangles: np.ndarray, on_skin: np.ndarray,
-           fp: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """Split the mesh's components into skin, eyeballs, teeth, mouth and attached (module docstring)."""
+           fp: dict[str, np.ndarray], loaded: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Split the mesh's components into skin, eyeballs, teeth, mouth and attached (module docstring);
+    off the skin, the parts the file's pieces named (``loaded``) are kept, eyeballs sided anew."""
     comp = _components(len(vertices), triangles)
     label = np.full(len(vertices), "skin", dtype=object)
     for c in np.unique(comp[~on_skin]):
         members = comp == c
         label[members] = _part_of(vertices[members], fp)
+    for name in KEPT_PARTS & set(loaded):
+        kept = np.asarray(loaded[name])[~on_skin[loaded[name]]]
+        label[kept] = name
+    eyes = np.isin(label, ["eye_l", "eye_r"]) & ~on_skin
+    label[eyes] = np.where(vertices[eyes, 0] >= 0, "eye_l", "eye_r")
     return {name: np.flatnonzero(label == name).astype(np.int32) for name in sorted(set(label))}
 
 
