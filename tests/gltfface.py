@@ -1,6 +1,6 @@
 """A GLB head for tests, built from the embedded default face as an artist's file would be: each
 part a mesh of its own on a node of its own, each with its own material, the skin textured, and
-ARKit-named morph targets. Nothing outside the project is needed, but for the morph targets the
+ARKit-named morph targets; and the same head as an OBJ with an MTL (``write_obj_head``). Nothing outside the project is needed, but for the morph targets the
 MakeHuman ARKit shapes (``../shared/assets/makehuman/faceunits_arkit``), applied to the default
 face through its source vertices (``puppet.face.examples.load_examples``)."""
 
@@ -156,3 +156,25 @@ def write_glb(path: Path, doc: dict, blob: bytes) -> Path:
 def write_head(path: Path, morphs: dict[str, np.ndarray] | None = None, **options) -> Path:
     """The test head (``head_document``) written as a GLB at ``path``."""
     return write_glb(path, *head_document(morphs, **options))
+
+
+def write_obj_head(folder: Path) -> Path:
+    """The default face as ``head.obj`` in ``folder``, vertex for vertex: one ``usemtl`` group per
+    part (the GLB's mesh names), ``head.mtl`` giving each its Kd (the GLB's factors as written, the
+    eyes' too) and the skin ``map_Kd skin.png`` (``skin_texture``), a ``vt`` per vertex."""
+    face = default_face()
+    Image.fromarray(skin_texture()).save(folder / "skin.png")
+    mtl = [f"newmtl M_{MESH_NAMES[p]}\nKd {' '.join(map(str, EYE_FACTOR if p.startswith('eye') else COLORS[p]))}"
+           + ("\nmap_Kd skin.png" if p == "skin" else "") for p in PART_ORDER]
+    (folder / "head.mtl").write_text("\n".join(mtl) + "\n")
+    uv = np.zeros((len(face.vertices), 2))
+    uv[face.parts["skin"]] = skin_uv(face) * [1, -1] + [0, 1]  # OBJ's v runs up the image
+    lines = ["mtllib head.mtl"] + [f"v {x!r} {y!r} {z!r}" for x, y, z in face.vertices.tolist()]
+    lines += [f"vt {u!r} {v!r}" for u, v in uv.tolist()]
+    for part in PART_ORDER:
+        lines.append(f"usemtl M_{MESH_NAMES[part]}")
+        tris = face.triangles[np.isin(face.triangles[:, 0], face.parts[part])] + 1
+        lines += [f"f {a}/{a} {b}/{b} {c}/{c}" for a, b, c in tris.tolist()]
+    path = folder / "head.obj"
+    path.write_text("\n".join(lines) + "\n")
+    return path

@@ -59,6 +59,7 @@ def load_mesh(path: str | os.PathLike) -> Face:
 
 
 def _obj_face(path: Path) -> Face:
+    """An OBJ file as a face: parts from its groups and materials, colours and texture from its MTL."""
     mesh = read_obj(path)
     positions, triangles, tri_uv = mesh.triangulated()
     polygon_of = np.repeat(np.arange(len(mesh.polygons)), [len(p) - 2 for p in mesh.polygons])
@@ -95,6 +96,7 @@ def _drawn(triangles: np.ndarray, pieces: list[Piece], parts: dict[str, np.ndarr
 
 
 def _indices_by_key(keys: list[str]) -> dict[str, np.ndarray]:
+    """{key: the positions it holds in ``keys``}, keys in first-seen order."""
     out: dict[str, list[int]] = {}
     for i, key in enumerate(keys):
         out.setdefault(key, []).append(i)

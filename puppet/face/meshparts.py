@@ -6,13 +6,13 @@ a tongue, lashes and brows. The rig needs the default face's parts (``eye_l``, `
 teeth stay rigid; :func:`name_parts` finds them.
 
 * **By name**: the piece's mesh, node, material and group names, lower-cased, read together.
-  ``lash``, ``brow``, ``occlusion``, ``blend``, ``lacrimal``, ``tear``, ``shadow``, ``eyeline``,
-  ``eyeextra`` name things that ride the skin: part ``attached`` (``puppet.face.autorig`` moves it
-  with the skin under it). Then ``eye``, ``sclera``, ``iris``, ``cornea``, ``pupil`` an eyeball;
-  ``teeth``, ``tooth`` teeth (``upper``/``top`` or ``lower``/``bottom`` say which row, else the
-  piece is split at the middle of its height, whole connected pieces at a time, so no tooth is
-  cut); ``tongue`` the tongue (but not ``gum``: gums and tongue in one piece are left to the
-  landmarks' mouth finder, ``puppet.face.landmarks``).
+  ``ATTACHED_WORDS`` (``lash``, ``brow``, ``occlusion``, ``lacrimal``, ``tear``, ...) name things
+  that ride the skin: part ``attached`` (``puppet.face.autorig`` moves it with the skin under it).
+  Then ``tongue`` the tongue (but not with ``gum``: gums and tongue in one piece are left to the
+  landmarks' mouth finder, ``puppet.face.landmarks``); ``teeth``, ``tooth`` teeth (``upper`` /
+  ``top`` or ``lower`` / ``bottom`` say which row, else its connected pieces are sorted into rows,
+  so no tooth is cut: ``_split_teeth``); ``eye``, ``sclera``, ``iris``, ``cornea``, ``pupil`` an
+  eyeball (but not with ``lid`` or ``socket``: skin).
 * **By shape**, when no piece is named an eye: two roughly spherical connected pieces outside
   the largest piece, level with each other either side of its mid-line, in its upper half.
 * **Sides**: an eyeball vertex right of the largest piece's mid-line (+x, the face's own left in
@@ -40,6 +40,7 @@ from scipy.sparse.csgraph import connected_components
 OVERLAY_WORDS = ("occlusion", "eyeblend", "eye_blend", "shadow")
 ATTACHED_WORDS = ("lash", "brow", "occlusion", "eyeblend", "eye_blend", "lacrimal", "tear", "shadow", "eyeline",
                   "eye_line", "eyeextra", "eye_extra")
+SKIN_WORDS = ("lid", "socket")  # an eyelid or eye socket piece is skin, for all it says "eye"
 WHITE_WORDS = ("sclera", "eyewhite", "eye_white")
 EYE_WORDS = ("eye", "sclera", "iris", "cornea", "pupil")
 TEETH_WORDS = ("teeth", "tooth")
@@ -114,6 +115,8 @@ def _unit(v: np.ndarray) -> np.ndarray:
 
 
 def _kind(names: str) -> str:
+    """What a piece's names (lower case) say it is: a part name, ``eye`` or ``teeth`` (sided or
+    split later), or "" (skin)."""
     if any(w in names for w in ATTACHED_WORDS):
         return "attached"
     if "tongue" in names and "gum" not in names:
@@ -122,7 +125,9 @@ def _kind(names: str) -> str:
         if any(w in names for w in UPPER_WORDS):
             return "teeth_upper"
         return "teeth_lower" if any(w in names for w in LOWER_WORDS) else "teeth"
-    return "eye" if any(w in names for w in EYE_WORDS) else ""
+    if any(w in names for w in EYE_WORDS) and not any(w in names for w in SKIN_WORDS):
+        return "eye"
+    return ""
 
 
 def _mid_x(vertices: np.ndarray, pieces: list[Piece]) -> float:
@@ -168,15 +173,19 @@ def _eyes_by_shape(vertices: np.ndarray, triangles: np.ndarray, largest: np.ndar
 
 
 def _split_teeth(vertices: np.ndarray, triangles: np.ndarray, label: np.ndarray) -> None:
-    """Unqualified ``teeth`` vertices to upper and lower rows, a whole component at a time."""
+    """Unqualified ``teeth`` vertices to upper and lower rows, a whole component at a time: above or
+    below the line that best fits the components' mean heights against their depth (both rows rise
+    toward the back of the mouth, so height alone mixes them)."""
     teeth = np.flatnonzero(label == "teeth")
     if not len(teeth):
         return
-    comp = _components(len(vertices), triangles)[teeth]
-    y = vertices[teeth, 1]
-    middle = (y.min() + y.max()) / 2
-    heights = np.bincount(comp, weights=y) / np.maximum(np.bincount(comp), 1)
-    upper = heights[comp] >= middle
-    if upper.all() or not upper.any():  # one piece holding both rows: split it at the middle
-        upper = y >= middle
+    comp = np.unique(_components(len(vertices), triangles)[teeth], return_inverse=True)[1]
+    count = np.bincount(comp)
+    y, z = (np.bincount(comp, weights=vertices[teeth, k]) / count for k in (1, 2))
+    if len(count) > 2:
+        slope, offset = np.polyfit(z, y, 1, w=np.sqrt(count))
+        upper = (y - (slope * z + offset))[comp] > 0
+    else:  # one piece holding both rows, or one piece a row: split at the middle of the height
+        height = vertices[teeth, 1]
+        upper = (y[comp] if len(count) == 2 else height) >= (height.min() + height.max()) / 2
     label[teeth] = np.where(upper, "teeth_upper", "teeth_lower")
