@@ -1,8 +1,9 @@
 """A GLB head for tests, built from the embedded default face as an artist's file would be: each
 part a mesh of its own on a node of its own, each with its own material, the skin textured, and
-ARKit-named morph targets; and the same head as an OBJ with an MTL (``write_obj_head``). Nothing outside the project is needed, but for the morph targets the
-MakeHuman ARKit shapes (``../shared/assets/makehuman/faceunits_arkit``), applied to the default
-face through its source vertices (``puppet.face.examples.load_examples``)."""
+ARKit-named morph targets; and the same head as an OBJ with an MTL (``write_obj_head``). Nothing
+outside the project is needed, but for real morph targets (``shapes``): the MakeHuman ARKit shapes
+(``../shared/assets/makehuman/faceunits_arkit``), applied to the default face through its source
+vertices (``puppet.face.examples.load_examples``)."""
 
 from __future__ import annotations
 
@@ -77,11 +78,14 @@ def shapes(names: tuple[str, ...]) -> dict[str, np.ndarray]:
 
 
 def head_document(morphs: dict[str, np.ndarray] | None = None, *, vrm: int | None = None,
-                  unknown_extension: bool = False, names: dict[str, str] | None = None) -> tuple[dict, bytes]:
+                  unknown_extension: bool = False, names: dict[str, str] | None = None,
+                  split_skin: bool = False) -> tuple[dict, bytes]:
     """(glTF JSON, binary chunk) of the default face as six meshes (module docstring); ``morphs``
     ({name: (N, 3) displacement of the default face}) become every mesh's morph targets, ``vrm``
     0 or 1 adds that VRM version's expressions (capitalised names binding the targets),
-    ``unknown_extension`` an extension no reader knows, ``names`` other mesh names by part."""
+    ``unknown_extension`` an extension no reader knows, ``names`` other mesh names by part;
+    ``split_skin`` writes the skin as two primitives, its left and right halves, each with its own
+    copy of the mid-line's vertices (as an exporter splits a mesh along a uv seam)."""
     face = default_face()
     names = {**MESH_NAMES, **(names or {})}
     morphs = morphs or {}
@@ -93,21 +97,13 @@ def head_document(morphs: dict[str, np.ndarray] | None = None, *, vrm: int | Non
                  "images": [{"bufferView": blob.view(image.getvalue()), "mimeType": "image/png"}],
                  "textures": [{"source": 0}]}
     for k, part in enumerate(PART_ORDER):
-        ids = face.parts[part]
-        local = np.full(len(face.vertices), -1)
-        local[ids] = np.arange(len(ids))
-        tris = local[face.triangles[np.isin(face.triangles[:, 0], ids)]]
-        attributes = {"POSITION": blob.add(face.vertices[ids], "VEC3")}
         pbr: dict = {"baseColorFactor": [*(EYE_FACTOR if part.startswith("eye") else COLORS[part]), 1.0]}
         if part == "skin":
-            attributes["TEXCOORD_0"] = blob.add(skin_uv(face), "VEC2")
             pbr["baseColorTexture"] = {"index": 0}
-        primitive = {"attributes": attributes, "indices": blob.add(tris.astype(np.uint32).ravel(), "SCALAR", 5125),
-                     "material": k}
-        if morphs:
-            primitive["targets"] = [{"POSITION": blob.add(d[ids], "VEC3")} for d in morphs.values()]
+        primitives = [_primitive(blob, face, ids, tris, k, morphs, part == "skin")
+                      for ids, tris in _halves(face, part, split_skin)]
         doc["materials"].append({"name": f"M_{names[part]}", "pbrMetallicRoughness": pbr})
-        doc["meshes"].append({"name": names[part], "primitives": [primitive],
+        doc["meshes"].append({"name": names[part], "primitives": primitives,
                               **({"extras": {"targetNames": list(morphs)}} if morphs else {})})
         node = {"name": names[part], "mesh": k}
         if unknown_extension:
@@ -122,6 +118,40 @@ def head_document(morphs: dict[str, np.ndarray] | None = None, *, vrm: int | Non
     blob.data += b"\0" * (-len(blob.data) % 4)
     doc |= {"bufferViews": blob.views, "accessors": blob.accessors, "buffers": [{"byteLength": len(blob.data)}]}
     return doc, bytes(blob.data)
+
+
+def _halves(face, part: str, split: bool) -> list[tuple[np.ndarray, np.ndarray]]:
+    """[(default-face vertices, their triangles)] of a part: whole, or the skin's two halves."""
+    tris = face.triangles[np.isin(face.triangles[:, 0], face.parts[part])]
+    if not (split and part == "skin"):
+        return [(face.parts[part], tris)]
+    left = face.vertices[tris].mean(axis=1)[:, 0] >= 0
+    return [(np.unique(t), t) for t in (tris[left], tris[~left])]
+
+
+def glb_vertex(split_skin: bool = False) -> np.ndarray:
+    """Per default-face vertex, its (first) vertex in the test GLB."""
+    face = default_face()
+    order = np.concatenate([ids for part in PART_ORDER for ids, _ in _halves(face, part, split_skin)])
+    where = np.full(len(face.vertices), -1)
+    where[order[::-1]] = np.arange(len(order))[::-1]
+    return where
+
+
+def _primitive(blob: _Blob, face, ids: np.ndarray, tris: np.ndarray, material: int,
+               morphs: dict[str, np.ndarray], textured: bool) -> dict:
+    local = np.full(len(face.vertices), -1)
+    local[ids] = np.arange(len(ids))
+    attributes = {"POSITION": blob.add(face.vertices[ids], "VEC3")}
+    if textured:
+        uv = np.zeros((len(face.vertices), 2))
+        uv[face.parts["skin"]] = skin_uv(face)
+        attributes["TEXCOORD_0"] = blob.add(uv[ids], "VEC2")
+    primitive = {"attributes": attributes, "indices": blob.add(local[tris].astype(np.uint32).ravel(), "SCALAR", 5125),
+                 "material": material}
+    if morphs:
+        primitive["targets"] = [{"POSITION": blob.add(d[ids], "VEC3")} for d in morphs.values()]
+    return primitive
 
 
 def _add_vrm(doc: dict, targets: list[str], version: int) -> None:

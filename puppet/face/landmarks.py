@@ -17,6 +17,8 @@ indices (``{"2.1": 152, ...}``) or a JSON list of 68 vertex indices in the iBUG 
   region nearest to it. A face without eyeballs or teeth simply has none of those regions.
   Parts the file's own pieces named (``puppet.face.meshparts``: eyeballs, teeth, tongue,
   lashes) win over the components' guess off the skin; eyeballs are sided by x in the face frame.
+  Vertices at the very same place in the same part are joined (``_seams``): a glTF exporter
+  splits vertices along uv seams, and the skin would else come in islands.
 * **Contours.** The lips' meeting line, the vermilion border and the lid openings, as closed
   loops of shortest (geodesic) paths on the skin through their landmarks. Open holes and
   closed (stitched) mouths and eyes are handled alike.
@@ -186,7 +188,8 @@ def apply_landmarks(face, landmarks) -> object:
     """A copy of ``face`` in the face frame with parts, contours, pivots and all feature points
     (module docstring), ready for ``autorig.build_rig``."""
     landmarks = read_landmarks(landmarks, len(face.vertices))
-    skin = _skin_graph(face.vertices, face.triangles, _landmark_component(face, landmarks))
+    seams = _seams(face.vertices, _pieces(face))
+    skin = _skin_graph(face.vertices, face.triangles, _landmark_component(face, landmarks, seams), seams)
     if isinstance(landmarks, list):
         given, waypoints = ibug_to_fdp(landmarks, skin)
     else:
@@ -198,8 +201,9 @@ def apply_landmarks(face, landmarks) -> object:
     reference = default_face()
     placement = _placement(face.vertices, given, reference.feature_points)
     vertices = _snapped(face.vertices @ placement[:, :3].T + placement[:, 3], face.vertices, given)
-    skin = _skin_graph(vertices, face.triangles, skin.mask)
-    parts = _parts(vertices, face.triangles, skin.mask, {f: vertices[i] for f, i in given.items()}, face.parts)
+    skin = _skin_graph(vertices, face.triangles, skin.mask, seams)
+    parts = _parts(vertices, face.triangles, skin.mask, {f: vertices[i] for f, i in given.items()}, face.parts,
+                   seams)
     contours = {name: _geodesic_path(skin, ways, closed=True) for name, ways in waypoints.items()}
     feature_points, feature_vertices = _feature_points(vertices, parts, skin, given, reference)
     return replace(face, vertices=vertices, parts=parts, feature_points=feature_points,
@@ -207,17 +211,35 @@ def apply_landmarks(face, landmarks) -> object:
                    pivots=_pivots(vertices, parts, feature_points, reference))
 
 
-def _landmark_component(face, landmarks) -> np.ndarray:
+def _landmark_component(face, landmarks, seams: np.ndarray) -> np.ndarray:
     """Per vertex, whether it lies in the connected component holding most landmarks (the skin)."""
-    comp = _components(len(face.vertices), face.triangles)
+    comp = _components(len(face.vertices), face.triangles, seams)
     marks = list(landmarks.values()) if isinstance(landmarks, dict) else landmarks
     return comp == np.bincount(comp[marks]).argmax()
 
 
-def _components(n: int, triangles: np.ndarray) -> np.ndarray:
-    e = _edges(triangles)
+def _components(n: int, triangles: np.ndarray, seams: np.ndarray | None = None) -> np.ndarray:
+    """Connected components, the ``seams`` pairs (``_seams``) joined too."""
+    e = _edges(triangles) if seams is None else np.vstack([_edges(triangles), seams])
     return connected_components(sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n)),
                                 directed=False)[1]
+
+
+def _seams(vertices: np.ndarray, piece: np.ndarray) -> np.ndarray:
+    """(k, 2) pairs (vertex, the first vertex at the same place in the same piece of the file)."""
+    keyed = np.c_[np.asarray(vertices, dtype=float), piece]
+    _, first, inverse = np.unique(keyed, axis=0, return_index=True, return_inverse=True)
+    twin = first[inverse.ravel()]
+    split = np.flatnonzero(twin != np.arange(len(vertices)))
+    return np.c_[split, twin[split]]
+
+
+def _pieces(face) -> np.ndarray:
+    """Per vertex, the number of the part the file's pieces put it in (seams join within one)."""
+    out = np.zeros(len(face.vertices))
+    for k, members in enumerate(face.parts.values()):
+        out[members] = k
+    return out
 
 
 def _edges(triangles: np.ndarray) -> np.ndarray:
@@ -225,9 +247,9 @@ def _edges(triangles: np.ndarray) -> np.ndarray:
     return np.unique(np.sort(np.vstack([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]]), axis=1), axis=0)
 
 
-def _skin_graph(vertices: np.ndarray, triangles: np.ndarray, on_skin: np.ndarray) -> Skin:
-    """The skin's edge graph, weighted by edge length."""
-    e = _edges(triangles)
+def _skin_graph(vertices: np.ndarray, triangles: np.ndarray, on_skin: np.ndarray, seams: np.ndarray) -> Skin:
+    """The skin's edge graph, weighted by edge length, its ``seams`` joined."""
+    e = np.vstack([_edges(triangles), seams])
     e = e[on_skin[e].all(axis=1)]
     n = len(vertices)
     length = np.linalg.norm(vertices[e[:, 0]] - vertices[e[:, 1]], axis=1) + 1e-300
@@ -280,10 +302,10 @@ def _snapped(vertices: np.ndarray, original: np.ndarray, given: dict[str, int]) 
 # -- parts -------------------------------------------------------------------------------------------
 
 def _parts(vertices: np.ndarray, triangles: np.ndarray, on_skin: np.ndarray,
-           fp: dict[str, np.ndarray], loaded: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+           fp: dict[str, np.ndarray], loaded: dict[str, np.ndarray], seams: np.ndarray) -> dict[str, np.ndarray]:
     """Split the mesh's components into skin, eyeballs, teeth, mouth and attached (module docstring);
     off the skin, the parts the file's pieces named (``loaded``) are kept, eyeballs sided anew."""
-    comp = _components(len(vertices), triangles)
+    comp = _components(len(vertices), triangles, seams)
     label = np.full(len(vertices), "skin", dtype=object)
     for c in np.unique(comp[~on_skin]):
         members = comp == c
