@@ -259,7 +259,8 @@ def _calibrate_arguments(calibrate: argparse.ArgumentParser) -> None:
 def _calibrate_face_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--examples", required=True,
                         help="a folder of example shapes of the face: .obj meshes of its own vertices in new shapes, "
-                             "or MakeHuman .target files for a face cut from MakeHuman's mesh (the embedded one)")
+                             "or MakeHuman .target files for a face cut from MakeHuman's mesh (the embedded one); "
+                             "or the .glb / .gltf / .vrm the face was rigged from: its morph targets and expressions")
     parser.add_argument("--face", default=None, help=FACE_HELP)
     parser.add_argument("-o", "--output", required=True,
                         help="the face folder to write (the face with its calibrated rig; it may be --face's own), "
@@ -292,7 +293,7 @@ def _bench(args: argparse.Namespace) -> int:
 
 
 def _rig_arguments(rig: argparse.ArgumentParser) -> None:
-    rig.add_argument("mesh", help="the face mesh (.obj or any format trimesh reads)")
+    rig.add_argument("mesh", help="the face mesh (.obj with its .mtl, .glb, .gltf, .vrm, or any format trimesh reads)")
     rig.add_argument("--landmarks", default=None,
                      help="JSON: {FDP id: vertex index} or a list of the 68 iBUG landmark vertex indices; default: "
                           "found on renders of the mesh (MediaPipe, the photo set-up) and written to landmarks.json")

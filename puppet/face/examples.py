@@ -13,6 +13,14 @@ the face's order and units, in a new shape (a blendshape exported from the mesh 
 rigged from); its displacement is its vertices less the face's rest ones. A folder may hold both
 kinds; each name (the file's stem) once.
 
+A glTF / GLB / VRM file of the face (the one it was rigged from) holds its shapes as morph
+targets: ``load_examples(face, "head.glb")`` reads each as a named shape (``mesh.extras.targetNames``,
+the vertices of all its meshes in the face's order), and a VRM's expressions as the weighted sums of
+the targets they bind. A name that is one of ARKit's 52 blendshapes in any case or after a prefix
+(``BrowDownLeft``, ``blendShape1.browDownLeft``: VTuber "perfect sync" models) is spelt as ARKit
+spells it (``ARKIT_NAMES``), so such a file's shapes are ARKit shapes like MakeHuman's. A face
+turned into the face frame by its landmarks (``Face.placement``) has the shapes turned with it.
+
 ``../shared/assets/makehuman/faceunits_arkit/`` holds 52 such targets named after ARKit's
 blendshapes; ``puppet.runtime.fapcalibration`` calibrates the rig's FAPs from them and measures the
 fit, and ``puppet calibrate-face`` does it for any face folder.
@@ -26,7 +34,21 @@ from pathlib import Path
 import numpy as np
 
 from puppet.errors import PuppetError
-from puppet.face.meshfile import read_obj
+from puppet.face.gltfread import read_gltf
+from puppet.face.meshfile import GLTF_SUFFIXES, read_obj
+
+ARKIT_NAMES = (
+    "browDownLeft", "browDownRight", "browInnerUp", "browOuterUpLeft", "browOuterUpRight", "cheekPuff",
+    "cheekSquintLeft", "cheekSquintRight", "eyeBlinkLeft", "eyeBlinkRight", "eyeLookDownLeft", "eyeLookDownRight",
+    "eyeLookInLeft", "eyeLookInRight", "eyeLookOutLeft", "eyeLookOutRight", "eyeLookUpLeft", "eyeLookUpRight",
+    "eyeSquintLeft", "eyeSquintRight", "eyeWideLeft", "eyeWideRight", "jawForward", "jawLeft", "jawOpen", "jawRight",
+    "mouthClose", "mouthDimpleLeft", "mouthDimpleRight", "mouthFrownLeft", "mouthFrownRight", "mouthFunnel",
+    "mouthLeft", "mouthLowerDownLeft", "mouthLowerDownRight", "mouthPressLeft", "mouthPressRight", "mouthPucker",
+    "mouthRight", "mouthRollLower", "mouthRollUpper", "mouthShrugLower", "mouthShrugUpper", "mouthSmileLeft",
+    "mouthSmileRight", "mouthStretchLeft", "mouthStretchRight", "mouthUpperUpLeft", "mouthUpperUpRight",
+    "noseSneerLeft", "noseSneerRight", "tongueOut",
+)
+_ARKIT_BY_LOWER = {name.lower(): name for name in ARKIT_NAMES}
 
 
 class ExampleError(PuppetError, ValueError):
@@ -35,8 +57,11 @@ class ExampleError(PuppetError, ValueError):
 
 def load_examples(face, folder: str | os.PathLike) -> dict[str, np.ndarray]:
     """{name: (N, 3) displacement of the face's vertices} for every ``*.target`` and ``*.obj`` in
-    ``folder``, sorted by name (module docstring)."""
+    ``folder``, or every morph target and expression of a glTF / GLB / VRM file, sorted by name
+    (module docstring)."""
     folder = Path(folder)
+    if folder.is_file() and folder.suffix.lower() in GLTF_SUFFIXES:
+        return dict(sorted(gltf_examples(face, folder).items()))
     if not folder.is_dir():
         raise ExampleError(f"{folder}: not a folder of example shapes")
     files = sorted(folder.glob("*.target")) + sorted(folder.glob("*.obj"))
@@ -51,6 +76,44 @@ def load_examples(face, folder: str | os.PathLike) -> dict[str, np.ndarray]:
         lookup = _source_lookup(face, targets[0])
         shapes |= {path.stem: _displacement(path, lookup, len(face.vertices)) for path in targets}
     return dict(sorted(shapes.items()))
+
+
+def gltf_examples(face, path: str | os.PathLike) -> dict[str, np.ndarray]:
+    """{name: (N, 3) displacement} of a glTF file's morph targets, then its VRM expressions under
+    names not taken; ARKit names spelt as ARKit does (module docstring)."""
+    path = Path(path)
+    scene = read_gltf(path)
+    n = sum(len(p.positions) for p in scene.pieces)
+    if n != len(face.vertices):
+        raise ExampleError(f"{path}: {n} vertices, but face {face.name!r} has {len(face.vertices)}: its morph "
+                           "targets are shapes of the face it was rigged from, vertex for vertex")
+    starts = np.cumsum([0] + [len(p.positions) for p in scene.pieces])
+    shapes: dict[str, np.ndarray] = {}
+    for piece, start in zip(scene.pieces, starts):
+        for name, delta in piece.targets.items():
+            shapes.setdefault(_spelt(name), np.zeros((n, 3)))[start:start + len(delta)] += delta
+    for name, binds in scene.expressions.items():
+        if _spelt(name).lower() in {k.lower() for k in shapes} or not binds:
+            continue
+        total = np.zeros((n, 3))
+        for mesh, index, weight in binds:
+            for piece, start in zip(scene.pieces, starts):
+                names = scene.target_names.get(mesh, [])
+                target = names[index] if index < len(names) else f"target_{index}"
+                if piece.mesh == mesh and target in piece.targets:
+                    total[start:start + len(piece.positions)] += weight * piece.targets[target]
+        shapes[_spelt(name)] = total
+    if not shapes:
+        raise ExampleError(f"{path}: no morph targets (blendshapes) to learn from")
+    if face.placement is not None:  # the face was turned into the face frame: turn its shapes alike
+        rotation = np.asarray(face.placement, dtype=float)[:, :3]
+        shapes = {k: v @ rotation.T for k, v in shapes.items()}
+    return shapes
+
+
+def _spelt(name: str) -> str:
+    """ARKit's spelling of an ARKit blendshape name in any case or after a prefix; others as given."""
+    return _ARKIT_BY_LOWER.get(name.rsplit(".", 1)[-1].lower(), name)
 
 
 def _source_lookup(face, first: Path) -> np.ndarray:

@@ -1,18 +1,21 @@
 """A face folder: a face ready for ``--face``, written so that any OBJ viewer shows it and
 facepuppet loads and animates it like the default face. Two commands write one: ``puppet
 face-from-photo`` (a face built from a photo, ``puppet.photo.build``: textured) and ``puppet rig
-MESH --landmarks ... -o FOLDER/`` (any mesh, rigged from its landmarks: untextured).
+MESH --landmarks ... -o FOLDER/`` (any mesh, rigged from its landmarks: with the colours and
+texture its file gave it, its parts as the file's pieces named them).
 
 Files:
 
 * ``face.obj``: ``v x y z r g b`` (vertex colours: the fall-back colours; plain ``v x y z`` when
   the mesh has none) and triangles in the face's vertex order; a textured face adds ``vt`` one per
   vertex (``f a/a b/b c/c``) and ``face.mtl``, which names the texture;
-* ``texture.png`` (textured faces only): the photo cut to the head;
+* ``texture.png`` (textured faces only): the photo cut to the head, or the base-colour textures of
+  a mesh file's pieces in one atlas (``puppet.face.atlas``);
 * ``face.json``: what an OBJ cannot say: parts, feature points (FDP id -> xyz and vertex),
-  pivots, contours, where the face came from, and for a textured face the per-vertex texture
-  weight (how much of the photo shows over the vertex colour; see ``puppet.view.renderer``) and the
-  fit's report;
+  pivots, contours, the placement that turned a mesh file into the face frame (so its morph
+  targets turn alike, ``puppet.face.examples``), where the face came from, and for a textured
+  face the per-vertex texture weight (how much of the texture shows over the vertex colour; see
+  ``puppet.view.renderer``) and the fit's report;
 * ``face.rig``: the auto-rig's rig of the face (``puppet.face.rig.save_rig``).
 """
 
@@ -21,14 +24,13 @@ from __future__ import annotations
 import io
 import json
 import os
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 from PIL import Image
 
 from puppet.face.meshfile import read_obj
-from puppet.face.model import Face, FaceFileError
+from puppet.face.model import Face, FaceFileError, TexturedFace
 from puppet.face.rig import load_rig, save_rig
 
 FACE_OBJ = "face.obj"
@@ -39,16 +41,6 @@ FACE_RIG = "face.rig"
 FORMAT = "facepuppet-face-folder"
 
 
-@dataclass
-class TexturedFace(Face):
-    """A face with a texture: ``uv`` is per vertex (N, 2) (``triangle_uv`` equals the
-    triangles), ``texture`` (H, W, 3) uint8 sRGB top row first, ``texture_weight`` (N,) 0-1."""
-
-    texture: np.ndarray | None = None
-    texture_weight: np.ndarray | None = None
-    rig_file: Path | None = None  # the folder's face.rig, which ``rig_for_face`` takes
-
-
 def write_face_folder(face: TexturedFace, out: str | os.PathLike, *, source_photo: str,
                       report: dict) -> Path:
     """Write the textured ``face`` into the folder ``out`` (created) as face.obj, face.mtl,
@@ -57,8 +49,7 @@ def write_face_folder(face: TexturedFace, out: str | os.PathLike, *, source_phot
     folder.mkdir(parents=True, exist_ok=True)
     (folder / FACE_OBJ).write_text(_obj_text(face, f"a face from a photo ({face.name}): the MakeHuman hm08 "
                                                    "default face (CC0) warped"), encoding="utf-8")
-    (folder / FACE_MTL).write_text(f"newmtl face\nKd 1 1 1\nmap_Kd {FACE_TEXTURE}\n", encoding="utf-8")
-    Image.fromarray(np.asarray(face.texture, dtype=np.uint8)).save(folder / FACE_TEXTURE, format="PNG")
+    _write_texture(folder, face)
     meta = _meta(face, source_photo=source_photo, texture_weight=np.round(face.texture_weight, 4).tolist(),
                  fit=report)
     (folder / FACE_JSON).write_text(json.dumps(meta), encoding="utf-8")
@@ -66,19 +57,34 @@ def write_face_folder(face: TexturedFace, out: str | os.PathLike, *, source_phot
 
 
 def write_rigged_folder(face: Face, rig, out: str | os.PathLike, *, source_mesh: str) -> Path:
-    """Write a rigged, untextured ``face`` (a mesh given its landmarks) and its ``rig`` into the
-    folder ``out`` (created) as face.obj, face.json and face.rig; return the folder."""
+    """Write a rigged ``face`` (a mesh given its landmarks) and its ``rig`` into the folder ``out``
+    (created) as face.obj, face.json and face.rig, and when the face is textured (a GLB's base
+    colour textures, an OBJ's map_Kd) face.mtl and texture.png too; return the folder."""
     folder = Path(out)
     folder.mkdir(parents=True, exist_ok=True)
     (folder / FACE_OBJ).write_text(_obj_text(face, f"{face.name}, rigged from {Path(source_mesh).name}"),
                                    encoding="utf-8")
-    (folder / FACE_JSON).write_text(json.dumps(_meta(face, source_mesh=source_mesh)), encoding="utf-8")
+    extra = {}
+    if getattr(face, "texture", None) is not None:
+        _write_texture(folder, face)
+        extra["texture_weight"] = np.round(np.asarray(face.texture_weight, dtype=float), 4).tolist()
+    else:  # a texture left from an earlier face in this folder is not this face's
+        for stale in (FACE_MTL, FACE_TEXTURE):
+            (folder / stale).unlink(missing_ok=True)
+    (folder / FACE_JSON).write_text(json.dumps(_meta(face, source_mesh=source_mesh, **extra)), encoding="utf-8")
     save_rig(rig, folder / FACE_RIG)
     return folder
 
 
+def _write_texture(folder: Path, face: TexturedFace) -> None:
+    """face.mtl naming texture.png, and texture.png."""
+    (folder / FACE_MTL).write_text(f"newmtl face\nKd 1 1 1\nmap_Kd {FACE_TEXTURE}\n", encoding="utf-8")
+    Image.fromarray(np.asarray(face.texture, dtype=np.uint8)).save(folder / FACE_TEXTURE, format="PNG")
+
+
 def _meta(face: Face, **extra) -> dict:
-    """face.json: the face's parts, feature points, pivots and contours, and ``extra``."""
+    """face.json: the face's parts, feature points, pivots, contours and placement, and ``extra``."""
+    placement = {} if face.placement is None else {"placement": np.asarray(face.placement, float).tolist()}
     return {
         "format": FORMAT, "version": 1, "name": face.name,
         "parts": {k: v.tolist() for k, v in face.parts.items()},
@@ -86,6 +92,7 @@ def _meta(face: Face, **extra) -> dict:
                            for k, p in face.feature_points.items()},
         "pivots": {k: [float(c) for c in p] for k, p in face.pivots.items()},
         "contours": {k: v.tolist() for k, v in face.contours.items()},
+        **placement,
         **extra,
     }
 
@@ -141,6 +148,7 @@ def load_face_folder(path: str | os.PathLike) -> TexturedFace:
         pivots={k: np.array(v, dtype=np.float64) for k, v in meta["pivots"].items()},
         contours={k: np.array(v, dtype=np.int32) for k, v in meta["contours"].items()},
         colors=mesh.colors,
+        placement=np.array(meta["placement"], dtype=np.float64) if "placement" in meta else None,
         **_texture(folder, meta, mesh, positions, triangles, triangle_uv),
         rig_file=folder / FACE_RIG if (folder / FACE_RIG).is_file() else None,
     )

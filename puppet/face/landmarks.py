@@ -15,6 +15,10 @@ indices (``{"2.1": 152, ...}``) or a JSON list of 68 vertex indices in the iBUG 
   the mouth, small ones are teeth (upper or lower of the lip line) and large ones the ``mouth``
   (socket, gums); anything else (lashes, tear lines) is ``attached``: it follows the skin
   region nearest to it. A face without eyeballs or teeth simply has none of those regions.
+  Parts the file's own pieces named (``puppet.face.meshparts``: eyeballs, teeth, tongue,
+  lashes) win over the components' guess off the skin; eyeballs are sided by x in the face frame.
+  Vertices at the very same place in the same part are joined (``_seams``): a glTF exporter
+  splits vertices along uv seams, and the skin would else come in islands.
 * **Contours.** The lips' meeting line, the vermilion border and the lid openings, as closed
   loops of shortest (geodesic) paths on the skin through their landmarks. Open holes and
   closed (stitched) mouths and eyes are handled alike.
@@ -48,7 +52,7 @@ from puppet.errors import PuppetError
 from puppet.face.default import default_face
 from puppet.face.muscles import place, place_coefficients
 
-__all__ = ["LandmarkError", "read_landmarks", "ibug_to_fdp", "apply_landmarks"]
+__all__ = ["LandmarkError", "apply_landmarks", "ibug_to_fdp", "read_landmarks"]
 
 GROUP_SIZES = {2: 14, 3: 14, 4: 6, 5: 4, 6: 4, 7: 1, 8: 10, 9: 15, 10: 10, 11: 6}
 GRID = 8  # the M x N blocks the face's feature-point box is cut into for the snapping search
@@ -74,6 +78,7 @@ FDP_CONTOURS = {
     "right_lid_opening": ["3.12", "3.2", "3.8", "3.4"],
 }
 FDP_NEEDED = sorted({f for loop in FDP_CONTOURS.values() for f in loop} | {"2.1", "9.3", "9.15"})
+KEPT_PARTS = {"eye_l", "eye_r", "teeth_upper", "teeth_lower", "tongue", "attached"}  # a file's named pieces
 PUPILS = ("3.5", "3.6")  # coordinates when the face has no eyeball to put them on
 EYES = {"eye_l": ("3.7", "3.11", "3.5"), "eye_r": ("3.12", "3.8", "3.6")}
 
@@ -183,7 +188,8 @@ def apply_landmarks(face, landmarks) -> object:
     """A copy of ``face`` in the face frame with parts, contours, pivots and all feature points
     (module docstring), ready for ``autorig.build_rig``."""
     landmarks = read_landmarks(landmarks, len(face.vertices))
-    skin = _skin_graph(face.vertices, face.triangles, _landmark_component(face, landmarks))
+    seams = _seams(face.vertices, _pieces(face))
+    skin = _skin_graph(face.vertices, face.triangles, _landmark_component(face, landmarks, seams), seams)
     if isinstance(landmarks, list):
         given, waypoints = ibug_to_fdp(landmarks, skin)
     else:
@@ -195,8 +201,9 @@ def apply_landmarks(face, landmarks) -> object:
     reference = default_face()
     placement = _placement(face.vertices, given, reference.feature_points)
     vertices = _snapped(face.vertices @ placement[:, :3].T + placement[:, 3], face.vertices, given)
-    skin = _skin_graph(vertices, face.triangles, skin.mask)
-    parts = _parts(vertices, face.triangles, skin.mask, {f: vertices[i] for f, i in given.items()})
+    skin = _skin_graph(vertices, face.triangles, skin.mask, seams)
+    parts = _parts(vertices, face.triangles, skin.mask, {f: vertices[i] for f, i in given.items()}, face.parts,
+                   seams)
     contours = {name: _geodesic_path(skin, ways, closed=True) for name, ways in waypoints.items()}
     feature_points, feature_vertices = _feature_points(vertices, parts, skin, given, reference)
     return replace(face, vertices=vertices, parts=parts, feature_points=feature_points,
@@ -204,17 +211,35 @@ def apply_landmarks(face, landmarks) -> object:
                    pivots=_pivots(vertices, parts, feature_points, reference))
 
 
-def _landmark_component(face, landmarks) -> np.ndarray:
+def _landmark_component(face, landmarks, seams: np.ndarray) -> np.ndarray:
     """Per vertex, whether it lies in the connected component holding most landmarks (the skin)."""
-    comp = _components(len(face.vertices), face.triangles)
+    comp = _components(len(face.vertices), face.triangles, seams)
     marks = list(landmarks.values()) if isinstance(landmarks, dict) else landmarks
     return comp == np.bincount(comp[marks]).argmax()
 
 
-def _components(n: int, triangles: np.ndarray) -> np.ndarray:
-    e = _edges(triangles)
+def _components(n: int, triangles: np.ndarray, seams: np.ndarray | None = None) -> np.ndarray:
+    """Connected components, the ``seams`` pairs (``_seams``) joined too."""
+    e = _edges(triangles) if seams is None else np.vstack([_edges(triangles), seams])
     return connected_components(sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n)),
                                 directed=False)[1]
+
+
+def _seams(vertices: np.ndarray, piece: np.ndarray) -> np.ndarray:
+    """(k, 2) pairs (vertex, the first vertex at the same place in the same piece of the file)."""
+    keyed = np.c_[np.asarray(vertices, dtype=float), piece]
+    _, first, inverse = np.unique(keyed, axis=0, return_index=True, return_inverse=True)
+    twin = first[inverse.ravel()]
+    split = np.flatnonzero(twin != np.arange(len(vertices)))
+    return np.c_[split, twin[split]]
+
+
+def _pieces(face) -> np.ndarray:
+    """Per vertex, the number of the part the file's pieces put it in (seams join within one)."""
+    out = np.zeros(len(face.vertices))
+    for k, members in enumerate(face.parts.values()):
+        out[members] = k
+    return out
 
 
 def _edges(triangles: np.ndarray) -> np.ndarray:
@@ -222,9 +247,9 @@ def _edges(triangles: np.ndarray) -> np.ndarray:
     return np.unique(np.sort(np.vstack([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]]), axis=1), axis=0)
 
 
-def _skin_graph(vertices: np.ndarray, triangles: np.ndarray, on_skin: np.ndarray) -> Skin:
-    """The skin's edge graph, weighted by edge length."""
-    e = _edges(triangles)
+def _skin_graph(vertices: np.ndarray, triangles: np.ndarray, on_skin: np.ndarray, seams: np.ndarray) -> Skin:
+    """The skin's edge graph, weighted by edge length, its ``seams`` joined."""
+    e = np.vstack([_edges(triangles), seams])
     e = e[on_skin[e].all(axis=1)]
     n = len(vertices)
     length = np.linalg.norm(vertices[e[:, 0]] - vertices[e[:, 1]], axis=1) + 1e-300
@@ -277,13 +302,19 @@ def _snapped(vertices: np.ndarray, original: np.ndarray, given: dict[str, int]) 
 # -- parts -------------------------------------------------------------------------------------------
 
 def _parts(vertices: np.ndarray, triangles: np.ndarray, on_skin: np.ndarray,
-           fp: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """Split the mesh's components into skin, eyeballs, teeth, mouth and attached (module docstring)."""
-    comp = _components(len(vertices), triangles)
+           fp: dict[str, np.ndarray], loaded: dict[str, np.ndarray], seams: np.ndarray) -> dict[str, np.ndarray]:
+    """Split the mesh's components into skin, eyeballs, teeth, mouth and attached (module docstring);
+    off the skin, the parts the file's pieces named (``loaded``) are kept, eyeballs sided anew."""
+    comp = _components(len(vertices), triangles, seams)
     label = np.full(len(vertices), "skin", dtype=object)
     for c in np.unique(comp[~on_skin]):
         members = comp == c
         label[members] = _part_of(vertices[members], fp)
+    for name in KEPT_PARTS & set(loaded):
+        kept = np.asarray(loaded[name])[~on_skin[loaded[name]]]
+        label[kept] = name
+    eyes = np.isin(label, ["eye_l", "eye_r"]) & ~on_skin
+    label[eyes] = np.where(vertices[eyes, 0] >= 0, "eye_l", "eye_r")
     return {name: np.flatnonzero(label == name).astype(np.int32) for name in sorted(set(label))}
 
 

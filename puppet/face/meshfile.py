@@ -1,49 +1,206 @@
-"""Face meshes from files, in file vertex order.
+"""Face meshes from files, in file vertex order, with their parts and colours.
 
 OBJ files are parsed here, in file order (a loader that splits vertices at UV seams would
 renumber them, and landmark tables index the file's vertices); polygons are fan-triangulated.
-Other formats go through trimesh with ``process=False``; the geometries of a scene are merged in
-order. Such a face has one part, ``skin``, and no feature points: ``puppet.face.landmarks`` gives
-it them.
+Their ``mtllib`` materials colour them: each polygon's ``usemtl`` material gives its vertices its
+``Kd`` (as written, read as sRGB) unless the ``v`` lines carry colours, and a ``map_Kd`` image
+textures them (per vertex uv: at a uv seam a vertex keeps one of its corners' uv). A missing
+.mtl or image leaves the colours out, as most viewers do.
+
+glTF, GLB and VRM files are read by ``puppet.face.gltfread``: every primitive in scene order,
+vertex for vertex, coloured by its material, textured by its base-colour texture.
+
+Several textures become one atlas (``puppet.face.atlas``), so the renderer keeps one texture.
+The pieces a file is made of (glTF primitives, OBJ groups and materials) name the face's parts
+(``puppet.face.meshparts``: eyeballs, teeth, tongue, lashes; the rest skin); an OBJ with neither
+groups nor materials is one part, ``skin``. Other formats go through trimesh with
+``process=False``, the geometries of a scene merged in order into one part. No loaded face has
+feature points: ``puppet.face.landmarks`` gives it them.
 """
 
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from PIL import Image, UnidentifiedImageError
 
-from puppet.face.model import Face, FaceFileError
+from puppet.face.atlas import pack, place_uv
+from puppet.face.gltfread import read_gltf
+from puppet.face.meshparts import Piece, cornea_vertices, name_parts, overlay_vertices
+from puppet.face.model import Face, FaceFileError, TexturedFace
+
+GLTF_SUFFIXES = (".glb", ".gltf", ".vrm")
 
 
 def load_mesh(path: str | os.PathLike) -> Face:
-    """The mesh at ``path`` as a one-part face (``skin``) without feature points."""
+    """The mesh at ``path`` as a face without feature points, its parts named from its pieces and
+    coloured as its materials say (module docstring); a :class:`TexturedFace` when textured."""
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"face mesh {str(path)!r} does not exist")
     if not path.is_file():
         raise FaceFileError(f"face mesh {str(path)!r} is not a file")
-    if path.suffix.lower() == ".obj":
-        mesh = read_obj(path)
-        positions, triangles, tri_uv = mesh.triangulated()
-        uv = mesh.uvs.astype(np.float32) if tri_uv is not None else None
-        colors = mesh.colors
+    suffix = path.suffix.lower()
+    if suffix == ".obj":
+        face = _obj_face(path)
+    elif suffix in GLTF_SUFFIXES:
+        face = _gltf_face(path)
     else:
         positions, triangles, uv, tri_uv, colors = _read_with_trimesh(path)
-    if len(triangles) == 0:
+        face = Face(name=path.stem, vertices=positions, triangles=triangles,
+                    parts={"skin": np.arange(len(positions), dtype=np.int32)}, colors=colors, uv=uv,
+                    triangle_uv=tri_uv)
+    if len(face.triangles) == 0:
         raise FaceFileError(f"face mesh {str(path)!r} has no faces")
-    return Face(
-        name=path.stem,
-        vertices=positions,
-        triangles=triangles,
-        parts={"skin": np.arange(len(positions), dtype=np.int32)},
-        colors=colors,
-        uv=uv,
-        triangle_uv=tri_uv,
-    )
+    return face
 
+
+def _obj_face(path: Path) -> Face:
+    """An OBJ file as a face: parts from its groups and materials, colours and texture from its MTL."""
+    mesh = read_obj(path)
+    positions, triangles, tri_uv = mesh.triangulated()
+    polygon_of = np.repeat(np.arange(len(mesh.polygons)), [len(p) - 2 for p in mesh.polygons])
+    keys = [f"{g or ''} {m or ''}".strip() for g, m in zip(mesh.groups, mesh.materials)]
+    parts = {"skin": np.arange(len(positions), dtype=np.int32)}
+    if any(keys):
+        pieces = [Piece(key, np.unique(triangles[np.isin(polygon_of, idx)]))
+                  for key, idx in _indices_by_key(keys).items()]
+        pieces = [p for p in pieces if len(p.vertices)]
+        parts = name_parts(positions, triangles, pieces)
+        keep = _drawn(triangles, pieces, parts, positions)
+        triangles, polygon_of = triangles[keep], polygon_of[keep]
+        tri_uv = tri_uv[keep] if tri_uv is not None else None
+    materials = _obj_materials(path, mesh)
+    colors = mesh.colors
+    if colors is None and materials:
+        colors = _obj_colors(len(positions), triangles, polygon_of, mesh.materials, materials)
+    textured = _obj_texture(len(positions), triangles, tri_uv, mesh, polygon_of, materials)
+    face_uv = mesh.uvs.astype(np.float32) if tri_uv is not None else None
+    if textured is None:
+        return Face(name=path.stem, vertices=positions, triangles=triangles, parts=parts, colors=colors,
+                    uv=face_uv, triangle_uv=tri_uv)
+    return TexturedFace(name=path.stem, vertices=positions, triangles=triangles, parts=parts, colors=colors,
+                        triangle_uv=triangles.copy(), **textured)
+
+
+def _drawn(triangles: np.ndarray, pieces: list[Piece], parts: dict[str, np.ndarray],
+           vertices: np.ndarray) -> np.ndarray:
+    """Per triangle, whether it is kept: those of see-through overlays and cornea caps are not
+    (``meshparts.overlay_vertices``, ``cornea_vertices``); their vertices stay, so vertex indices hold."""
+    overlay = overlay_vertices(len(vertices), pieces) | cornea_vertices(vertices, pieces)
+    overlay[parts.get("skin", [])] = False
+    return ~overlay[triangles].all(axis=1)
+
+
+def _indices_by_key(keys: list[str]) -> dict[str, np.ndarray]:
+    """{key: the positions it holds in ``keys``}, keys in first-seen order."""
+    out: dict[str, list[int]] = {}
+    for i, key in enumerate(keys):
+        out.setdefault(key, []).append(i)
+    return {k: np.array(v) for k, v in out.items()}
+
+
+def _obj_materials(path: Path, mesh: ObjMesh) -> dict[str, dict]:
+    """{material: {"Kd": rgb, "map_Kd": image or None}} from the OBJ's mtllib files that exist."""
+    out: dict[str, dict] = {}
+    for name in mesh.mtllibs:
+        mtl = path.parent / name
+        if mtl.is_file():
+            out |= read_mtl(mtl)
+    return out
+
+
+def read_mtl(path: str | os.PathLike) -> dict[str, dict]:
+    """An MTL file's materials: {name: {"Kd": (3,) float32 or None, "map_Kd": (H, W, 3) uint8 or
+    None}}; a ``map_Kd`` image that is missing or unreadable is left out."""
+    path = Path(path)
+    out: dict[str, dict] = {}
+    current = None
+    for lineno, line in enumerate(path.read_text("utf-8", errors="replace").splitlines(), start=1):
+        fields = line.split()
+        if not fields or fields[0].startswith("#"):
+            continue
+        if fields[0] == "newmtl":
+            current = out.setdefault(" ".join(fields[1:]), {"Kd": None, "map_Kd": None})
+        elif current is not None and fields[0] == "Kd" and len(fields) >= 4:
+            try:
+                current["Kd"] = np.clip(np.array(fields[1:4], dtype=np.float32), 0.0, 1.0)
+            except ValueError:
+                raise FaceFileError(f"{path}:{lineno}: Kd needs three numbers: {line.strip()[:60]!r}") from None
+        elif current is not None and fields[0] == "map_Kd" and len(fields) >= 2:
+            current["map_Kd"] = _image_or_none(path.parent / fields[-1])
+    return out
+
+
+def _image_or_none(path: Path) -> np.ndarray | None:
+    try:
+        with Image.open(path) as image:
+            return np.asarray(image.convert("RGB"), dtype=np.uint8)
+    except (OSError, UnidentifiedImageError, ValueError):
+        return None
+
+
+def _obj_colors(n: int, triangles: np.ndarray, polygon_of: np.ndarray, names: list[str | None],
+                materials: dict[str, dict]) -> np.ndarray | None:
+    """Per vertex the Kd of the material of a polygon that uses it (white where none says)."""
+    kd = {name: m["Kd"] for name, m in materials.items() if m["Kd"] is not None}
+    if not kd:
+        return None
+    table = np.array([kd.get(name, (1.0, 1.0, 1.0)) for name in names], dtype=np.float32).reshape(-1, 3)
+    colors = np.ones((n, 3), dtype=np.float32)
+    colors[triangles.ravel()] = np.repeat(table[polygon_of], 3, axis=0)
+    return colors
+
+
+def _obj_texture(n: int, triangles: np.ndarray, tri_uv: np.ndarray | None, mesh: ObjMesh, polygon_of: np.ndarray,
+                 materials: dict[str, dict]) -> dict | None:
+    """uv, texture and texture_weight of an OBJ whose materials have map_Kd images, else None."""
+    images = {name: m["map_Kd"] for name, m in materials.items() if m["map_Kd"] is not None}
+    if not images or tri_uv is None:
+        return None
+    names = sorted(images)
+    atlas, places = pack([images[k] for k in names])
+    uv, weight = np.zeros((n, 2), dtype=np.float32), np.zeros(n, dtype=np.float32)
+    polygon_material = np.array([m or "" for m in mesh.materials], dtype=object)[polygon_of]
+    for name, place in zip(names, places):
+        rows = polygon_material == name
+        corner_uv = mesh.uvs[tri_uv[rows].ravel()] * [1.0, -1.0] + [0.0, 1.0]  # to glTF's v down
+        uv[triangles[rows].ravel()] = place_uv(corner_uv, place)
+        weight[triangles[rows].ravel()] = 1.0
+    return {"uv": uv, "texture": atlas, "texture_weight": weight}
+
+
+def _gltf_face(path: Path) -> Face:
+    """A glTF / GLB / VRM file's primitives as one face, vertex for vertex in scene order."""
+    scene = read_gltf(path)
+    if not scene.pieces:
+        raise FaceFileError(f"face mesh {str(path)!r} holds no triangle mesh")
+    sizes = [len(p.positions) for p in scene.pieces]
+    starts = np.cumsum([0] + sizes)
+    vertices = np.vstack([p.positions for p in scene.pieces])
+    triangles = np.vstack([p.triangles + s for p, s in zip(scene.pieces, starts)]).astype(np.int32)
+    pieces = [Piece(" ".join(p.names), np.arange(s, s + k)) for p, s, k in zip(scene.pieces, starts, sizes)]
+    parts = name_parts(vertices, triangles, pieces)
+    triangles = triangles[_drawn(triangles, pieces, parts, vertices)]
+    colors = None
+    if any(p.colors is not None or p.texture is not None for p in scene.pieces):
+        colors = np.vstack([p.colors if p.colors is not None else np.ones((len(p.positions), 3), np.float32)
+                            for p in scene.pieces]).astype(np.float32)
+    textured = [(p, s) for p, s in zip(scene.pieces, starts) if p.texture is not None and p.uv is not None]
+    if not textured:
+        return Face(name=path.stem, vertices=vertices, triangles=triangles, parts=parts, colors=colors)
+    images = list({id(p.texture): p.texture for p, _ in textured}.values())
+    atlas, places = pack(images)
+    place_of = {id(im): place for im, place in zip(images, places)}
+    uv, weight = np.zeros((len(vertices), 2), dtype=np.float32), np.zeros(len(vertices), dtype=np.float32)
+    for p, s in textured:
+        uv[s:s + len(p.uv)] = place_uv(p.uv, place_of[id(p.texture)])
+        weight[s:s + len(p.uv)] = 1.0
+    return TexturedFace(name=path.stem, vertices=vertices, triangles=triangles, parts=parts, colors=colors,
+                        uv=uv, triangle_uv=triangles.copy(), texture=atlas, texture_weight=weight)
 
 
 @dataclass
@@ -56,6 +213,8 @@ class ObjMesh:
     polygon_uvs: list[list[int] | None]  # uv indices per polygon corner, None where it has none
     groups: list[str | None]  # the 'g' group each polygon was in
     colors: np.ndarray | None = None  # (N, 3) float32 when every 'v' line carries r g b
+    materials: list[str | None] = field(default_factory=list)  # the 'usemtl' material of each polygon
+    mtllibs: list[str] = field(default_factory=list)  # the 'mtllib' files named, in order
 
     def triangulated(self) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         """(positions, triangles (F, 3) int32, triangle_uv (F, 3) int32 or None): polygons
@@ -73,7 +232,7 @@ class ObjMesh:
 
 
 def read_obj(path: str | os.PathLike) -> ObjMesh:
-    """Parse an OBJ file's v, vt, f (and g) lines in file order; normals and materials are
+    """Parse an OBJ file's v, vt, f (and g, usemtl, mtllib) lines in file order; normals are
     ignored. Indices may be negative (relative). Errors name the file and line."""
     path = Path(path)
     try:
@@ -86,7 +245,9 @@ def read_obj(path: str | os.PathLike) -> ObjMesh:
     polygons: list[list[int]] = []
     polygon_uvs: list[list[int] | None] = []
     groups: list[str | None] = []
-    group = None
+    materials: list[str | None] = []
+    mtllibs: list[str] = []
+    group = material = None
     for lineno, line in enumerate(text.splitlines(), start=1):
         parts = line.split()
         if not parts or parts[0].startswith("#"):
@@ -118,8 +279,13 @@ def read_obj(path: str | os.PathLike) -> ObjMesh:
                 polygons.append(vi)
                 polygon_uvs.append(ti if len(ti) == len(vi) else None)
                 groups.append(group)
+                materials.append(material)
             elif tag == "g":
                 group = " ".join(parts[1:]) or None
+            elif tag == "usemtl":
+                material = " ".join(parts[1:]) or None
+            elif tag == "mtllib":
+                mtllibs.append(" ".join(parts[1:]))
         except ValueError as exc:
             raise FaceFileError(f"{path}:{lineno}: {exc}: {line.strip()[:80]!r}") from None
     if not positions:
@@ -135,6 +301,8 @@ def read_obj(path: str | os.PathLike) -> ObjMesh:
         polygon_uvs=polygon_uvs,
         groups=groups,
         colors=color_array,
+        materials=materials,
+        mtllibs=mtllibs,
     )
 
 

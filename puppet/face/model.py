@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import hashlib
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -76,6 +77,17 @@ class Face:
         h.update(np.ascontiguousarray(self.vertices, dtype="<f8").tobytes())
         h.update(np.ascontiguousarray(self.triangles, dtype="<i4").tobytes())
         return h.hexdigest()
+
+
+@dataclass
+class TexturedFace(Face):
+    """A face with a texture: ``uv`` is per vertex (N, 2) (``triangle_uv`` equals the
+    triangles), ``texture`` (H, W, 3) uint8 sRGB top row first, ``texture_weight`` (N,) 0-1: how
+    much of the texture shows over the vertex colour (``puppet.view.renderer``)."""
+
+    texture: np.ndarray | None = None
+    texture_weight: np.ndarray | None = None
+    rig_file: Path | None = None  # a face folder's face.rig, which ``rig_for_face`` takes
 
 
 def _fdp_sort_key(fid: str) -> tuple[int, int]:
