@@ -26,9 +26,7 @@ def transfer_motions(source: Rig, source_points: dict[str, np.ndarray], target: 
     feature points {FDP id: xyz}."""
     if not source.fap_motions:
         return {}
-    shared = sorted(set(source_points) & set(target_points))
-    warp = RBFInterpolator(np.array([target_points[k] for k in shared]),
-                           np.array([source_points[k] for k in shared]), kernel="thin_plate_spline")
+    warp = feature_warp(source_points, target_points)
     moved = sorted({name for motions in source.fap_motions.values() for name in motions})
     out: dict[int, dict[str, np.ndarray]] = {}
     source_point = {p.name: p for p in source.control_points}  # Rig.point builds this dict every call
@@ -54,6 +52,14 @@ def transfer_motions(source: Rig, source_points: dict[str, np.ndarray], target: 
                 out.setdefault(number, {}).update(
                     {names[i]: blended[i] for i in np.flatnonzero(keep)})
     return out
+
+
+def feature_warp(source_points: dict[str, np.ndarray], target_points: dict[str, np.ndarray]) -> RBFInterpolator:
+    """The thin-plate spline that takes points of the target face to where they sit on the source
+    face, through the feature points {FDP id: xyz} both faces have."""
+    shared = sorted(set(source_points) & set(target_points))
+    return RBFInterpolator(np.array([target_points[k] for k in shared]),
+                           np.array([source_points[k] for k in shared]), kernel="thin_plate_spline")
 
 
 def _region_members(rig: Rig, region: str) -> list[str]:
