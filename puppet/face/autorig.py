@@ -144,7 +144,7 @@ def _default_motions(face, rig: Rig) -> dict[int, dict[str, np.ndarray]]:
     default = load_default_rig()
     if default is None or not default.fap_motions:
         return {}
-    return transfer_motions(default, default_face().feature_points, rig, face.feature_points)
+    return transfer_motions(default, default_face(), rig, face)
 
 
 class _Builder:
