@@ -54,7 +54,6 @@ from puppet.photo.shapemodel import load_shape_model
 from puppet.runtime.fapcalibration import fit_faps, relative_residual
 from puppet.runtime.posecheck import pose_flaws
 from puppet.runtime.runtime import Runtime
-from tools.rig_faces import ict_inputs
 
 ROOT = Path(__file__).resolve().parents[1]
 WAYS = {"after": None, "local": {"local": True}, "smoothed": {"smoothing": 2}}
@@ -181,6 +180,7 @@ def main() -> None:
             es = default.fapu["ES0"] * 1024
             print(f"shaped face {seed}: skin moved {np.median(moved) / es:.3f} ES (median), up to {moved.max() / es:.3f}")
             measure_ways(face, mesh, landmarks, before, reference, in_face_frame(face, shapes))
+        from tools.rig_faces import ict_inputs  # rig_faces draws a shaped face from here: imported late
         inputs = ict_inputs(shared_assets()) if args.ict else None
         if args.ict and inputs is None:
             print("ICT-FaceKit: not found, skipped")
