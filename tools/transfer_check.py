@@ -148,37 +148,49 @@ def measure_ways(face, mesh: Path, landmarks, before: Before, reference: Runtime
               f"(rig {rigged:.1f} s, all {time.perf_counter() - start:.0f} s)")
 
 
-def main() -> None:
+def arguments() -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--faces", type=int, default=3, help="shaped faces (seeds 1..N)")
     parser.add_argument("--spread", type=float, default=2.0, help="shape weights' standard deviation")
     parser.add_argument("--every", type=int, default=1, help="fit every K-th ARKit shape only")
     parser.add_argument("--ict", action="store_true", help="add ICT-FaceKit's head (folds and creases)")
-    parser.add_argument("--before", default=None, help="the revision measured as before (default: merge-base with main)")
-    args = parser.parse_args()
-    revision = args.before or subprocess.run(["git", "-C", str(ROOT), "merge-base", "HEAD", "main"], check=True,
-                                             capture_output=True, text=True).stdout.strip()
-    default = default_face()
-    examples = load_examples(default, shared_assets() / "makehuman" / "faceunits_arkit")
-    shapes = {k: D for k, D in examples.items() if np.any(D)}
-    shapes = dict(list(shapes.items())[::args.every])
+    parser.add_argument("--before", default=None,
+                        help="the revision measured as before (default: merge-base with main)")
+    return parser.parse_args()
+
+
+def default_figures(default, shapes: dict[str, np.ndarray]) -> Runtime:
+    """Print the default face's own residuals and flaws; its shipped runtime (the reference)."""
     shipped = rig_for_face(default)
     reference = Runtime(default, shipped, cache=False)
     unlimited = copy.copy(shipped)
     unlimited.fap_reach, unlimited.fap_follow = {}, {}
-    print(f"{len(shapes)} ARKit shapes; median residual of the FAPs fitted over the skin; before: {revision[:12]}")
     start = time.perf_counter()
-    print(f"default face, shipped rig:            {median_residual(reference, shapes):.3f}  {flaws(reference, reference)}")
-    print(f"default face, shipped rig, no limits: "
-          f"{median_residual(Runtime(default, unlimited, cache=False), shapes):.3f}  ({time.perf_counter() - start:.0f} s)")
+    print(f"default face, shipped rig:            {median_residual(reference, shapes):.3f}  "
+          f"{flaws(reference, reference)}")
+    free = median_residual(Runtime(default, unlimited, cache=False), shapes)
+    print(f"default face, shipped rig, no limits: {free:.3f}  ({time.perf_counter() - start:.0f} s)")
+    return reference
+
+
+def main() -> None:
+    args = arguments()
+    revision = args.before or subprocess.run(["git", "-C", str(ROOT), "merge-base", "HEAD", "main"], check=True,
+                                             capture_output=True, text=True).stdout.strip()
+    default = default_face()
+    examples = load_examples(default, shared_assets() / "makehuman" / "faceunits_arkit")
+    shapes = dict(list({k: D for k, D in examples.items() if np.any(D)}.items())[::args.every])
+    print(f"{len(shapes)} ARKit shapes; median residual of the FAPs fitted over the skin; before: {revision[:12]}")
+    reference = default_figures(default, shapes)
+    es = default.fapu["ES0"] * 1024
     with tempfile.TemporaryDirectory() as folder:
         before = Before(revision, Path(folder))
         for seed in range(1, args.faces + 1):
             mesh, landmarks = shaped_face(Path(folder), seed, args.spread)
             face = load_face(mesh, landmarks=landmarks)
             moved = np.linalg.norm(np.asarray(face.vertices) - np.asarray(default.vertices), axis=1)
-            es = default.fapu["ES0"] * 1024
-            print(f"shaped face {seed}: skin moved {np.median(moved) / es:.3f} ES (median), up to {moved.max() / es:.3f}")
+            print(f"shaped face {seed}: skin moved {np.median(moved) / es:.3f} ES (median), "
+                  f"up to {moved.max() / es:.3f}")
             measure_ways(face, mesh, landmarks, before, reference, in_face_frame(face, shapes))
         from tools.rig_faces import ict_inputs  # rig_faces draws a shaped face from here: imported late
         inputs = ict_inputs(shared_assets()) if args.ict else None
