@@ -63,9 +63,11 @@ def test_shared_faces_rig_and_regions_cover_them(which):
 
 
 def test_a_scaled_rotated_copy_moves_the_same_scaled_and_rotated(default, tmp_path):
-    """Up to a few millionths of the largest motion: the sliver guard's corrective shapes are its
+    """Up to a ten-thousandth of the largest motion: the sliver guard's corrective shapes are its
     fixes sampled at build time, whose sweeps and fallback branch on roundoff (here a 0.2% frown
-    the joy expression reads as blends in a shape that differs between the copies by 0.07%)."""
+    the joy expression reads as blends in a shape that differs between the copies by 0.07%; with
+    the calibration's feature-point motions carried over, two lip vertices differ by 5.6e-5 of the
+    largest motion, the rest by 1.6e-7 as without the guard)."""
     R = _rotation((0.3, 1.0, -0.4), 0.7)
     shift = np.array([2.0, -1.0, 0.5])
     landmarks = dict(default.feature_vertices)
@@ -81,7 +83,7 @@ def test_a_scaled_rotated_copy_moves_the_same_scaled_and_rotated(default, tmp_pa
         d = runtime.deform_faps(fap, expression=(1, 40, 0, 0)) - face.vertices
         moves.append(d @ face.placement[:, :3])  # back into the file's own axes
     assert np.abs(moves[0]).max() > 0.01
-    np.testing.assert_allclose(moves[1], 1.7 * moves[0] @ R.T, atol=1e-5 * np.abs(moves[0]).max())
+    np.testing.assert_allclose(moves[1], 1.7 * moves[0] @ R.T, atol=1e-4 * np.abs(moves[0]).max())
 
 
 @pytest.mark.parametrize("landmarks, message", [

@@ -2,12 +2,17 @@
 
     PYTHONPATH=. .venv/bin/python tools/rig_faces.py [--out docs/rig_contact_sheet.png] [--size 240]
 
+Each face is rigged as a user rigs it: ``puppet rig MESH --landmarks L.json -o FOLDER`` (a
+subprocess; its summary, times included, is printed), then read back with ``load_face(FOLDER)``.
+
 * ICT-FaceKit (26,719 vertices): its 68 iBUG landmark vertices (``idx_to_landmark_verts`` in
-  ``vertex_indices.json``); the time to rig it (reading the mesh, landmarks to feature points,
-  the rig, muscles included) is the median of 3 runs.
+  ``vertex_indices.json``).
 * MediaPipe canonical face: its FDP candidates table (entries outside the 468-vertex mesh, the
   iris points, are left out: the face has no eyeballs).
-* The default face, for comparison, rigged from its own feature points.
+* A face of another shape: the default face shaped by the shipped shape model (seed 1, two
+  standard deviations; ``tools/transfer_check.py``), written as a bare OBJ, landmarks its
+  feature-point vertices.
+* The default face, for comparison, with its shipped rig (first row).
 
 Both assets are read from ``../shared/assets`` (``$FACEPUPPET_SHARED``); a missing one is skipped
 with a note. The contact sheet has one row per face: neutral, then FAP 2 expressions 1..6 (joy,
@@ -18,8 +23,9 @@ from __future__ import annotations
 
 import argparse
 import json
-import statistics
-import time
+import subprocess
+import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -27,12 +33,12 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from puppet.bench.assets import shared_assets
-from puppet.face.autorig import build_rig, rig_for_face
+from puppet.face.autorig import rig_for_face
 from puppet.face.load import load_face
 from puppet.face.model import Face
-from puppet.runtime.foldlimits import fold_limited
 from puppet.runtime.runtime import Runtime
 from puppet.view.renderer import SKIN_SRGB, Renderer, save_png, texture_kwargs
+from tools.transfer_check import shaped_face
 
 EXPRESSIONS = ("joy", "sadness", "anger", "fear", "disgust", "surprise")
 
@@ -57,14 +63,15 @@ def mediapipe_inputs(assets: Path) -> tuple[Path, dict[str, int]] | None:
     return mesh, {fid: p["index"] for fid, p in points.items() if p["index"] < n}
 
 
-def rig_time(mesh: Path, landmarks, runs: int = 3) -> float:
-    """Median seconds to read, landmark and rig a face."""
-    times = []
-    for _ in range(runs):
-        start = time.perf_counter()
-        build_rig(load_face(mesh, landmarks=landmarks))
-        times.append(time.perf_counter() - start)
-    return statistics.median(times)
+def rigged_by_cli(mesh: Path, landmarks, folder: Path) -> Face:
+    """The face folder ``puppet rig`` writes for ``mesh`` and ``landmarks``, read back; its
+    summary is printed."""
+    table = folder / "landmarks.json"
+    table.write_text(json.dumps(landmarks))
+    done = subprocess.run([sys.executable, "-m", "puppet.cli", "rig", str(mesh), "--landmarks", str(table),
+                           "-o", str(folder / "face")], check=True, capture_output=True, text=True)
+    print(done.stdout.rstrip())
+    return load_face(folder / "face")
 
 
 def drawn_triangles(face: Face) -> np.ndarray:
@@ -145,17 +152,17 @@ def main() -> None:
     assets = shared_assets()
     default = load_face()
     rows = [("default", default, rig_for_face(default))]
-    for name, inputs in (("ict", ict_inputs(assets)), ("mediapipe", mediapipe_inputs(assets))):
-        if inputs is None:
-            print(f"{name}: assets not found under {assets}, skipped")
-            continue
-        mesh, landmarks = inputs
-        face = load_face(mesh, landmarks=landmarks)
-        rig = build_rig(face)
-        print(f"{name}: {len(face.vertices)} vertices, {len(rig.regions)} regions, "
-              f"{len(rig.control_points)} control points, {len(getattr(rig, 'muscles', []))} muscles; "
-              f"rig time (read + landmarks + rig, median of 3) {rig_time(mesh, landmarks):.2f} s")
-        rows.append((name, face, fold_limited(face, rig)))  # as `puppet rig` gives it
+    with tempfile.TemporaryDirectory() as scratch:
+        scratch = Path(scratch)
+        inputs = {"ict": ict_inputs(assets), "mediapipe": mediapipe_inputs(assets),
+                  "shaped": shaped_face(scratch, seed=1, spread=2.0)}
+        for name, given in inputs.items():
+            if given is None:
+                print(f"{name}: assets not found under {assets}, skipped")
+                continue
+            (scratch / name).mkdir()
+            face = rigged_by_cli(*given, scratch / name)
+            rows.append((name, face, rig_for_face(face)))
     sheet = np.vstack([expression_row(face, rig, args.size) for _, face, rig in rows])
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     save_png(sheet, args.out)

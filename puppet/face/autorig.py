@@ -65,6 +65,7 @@ from puppet.face.rig import ControlPoint, LipLine, Region, Rig, RigError, RigidP
 
 INDIRECT_WEIGHT = 0.5
 CORNER_JAW_SHARE = 0.5  # how far the lip corners go with the jaw
+CHIN_FADE = 0.3  # the grid's jaw share is whole at least this far (of corner to chin height) below the corners
 BORDER_SPACING = 0.12  # border point spacing, as a fraction of the eye separation
 DRIVERS = {"cheek_l": ("upper_mouth", "lower_mouth"), "cheek_r": ("upper_mouth", "lower_mouth"),
            "nose": ("upper_mouth",)}
@@ -143,7 +144,7 @@ def _default_motions(face, rig: Rig) -> dict[int, dict[str, np.ndarray]]:
     default = load_default_rig()
     if default is None or not default.fap_motions:
         return {}
-    return transfer_motions(default, default_face().feature_points, rig, face.feature_points)
+    return transfer_motions(default, default_face(), rig, face)
 
 
 class _Builder:
@@ -403,13 +404,18 @@ class _Builder:
         beside the corners the lower mouth's ease into the cheeks' share (``CORNER_EASE``): at the
         corners' height, taken fully, they dropped past the cheek skin below them and folded it;
         below and behind the jaw line they take the jaw band's share (``_jaw_band_share``), fading
-        down the throat into the still neck."""
+        down the throat into the still neck. The share is whole from midway between the jaw angles'
+        and the chin's heights down, or from ``CHIN_FADE`` of the way from the corners to the chin
+        where that is lower: jaw angles placed high (ICT's sit level with the ear lobes, above the
+        mouth) put the midway above the corners, and the fade turned over, carried the whole face
+        above them on the jaw: an opened jaw dragged the forehead (ridges in surprise)."""
         skin = np.zeros(len(self.v), dtype=bool)
         skin[self.face.parts["skin"]] = True
         skin[self.face.parts["skin"][self._mouth_bag(self.face.parts["skin"])]] = False
         positions = {p.name: p.position for p in self.points}
         corner_y = self.fp["8.3"][1]
-        jaw_y = (self.fp["2.13"][1] + self.fp["2.1"][1]) / 2
+        chin_y = self.fp["2.1"][1]
+        jaw_y = min((self.fp["2.13"][1] + chin_y) / 2, corner_y - CHIN_FADE * (corner_y - chin_y))
         up_cheek = np.clip((corner_y - self.v[:, 1]) / (corner_y - jaw_y), 0, 1)
         beside = np.clip((np.abs(self.v[:, 0]) / self.fp["8.3"][0] - 1) / CORNER_EASE, 0, 1)
         for region, spacing in GRID_SPACING.items():

@@ -1,0 +1,72 @@
+"""The crease measure (``puppet.runtime.creases``): a sheet bent by a known angle reports that angle
+on its hinge line and nothing elsewhere; rest and rigid motions bend nothing; a bound from a
+reference pose lets that pose through and catches a sharper one."""
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from puppet.runtime.creases import MARGIN, CreaseBound, Hinges, creases
+
+
+def sheet(n: int = 6) -> tuple[np.ndarray, np.ndarray]:
+    """A flat square sheet in the xy plane, x and y in [-1, 1], facing +z, split into triangles."""
+    xs = np.linspace(-1, 1, n + 1)
+    x, y = np.meshgrid(xs, xs, indexing="ij")
+    vertices = np.c_[x.ravel(), y.ravel(), np.zeros(x.size)]
+    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    a = (i * (n + 1) + j).ravel()
+    b, c, d = a + n + 1, a + 1, a + n + 2
+    return vertices, np.r_[np.c_[a, b, d], np.c_[a, d, c]]
+
+
+def bent(vertices: np.ndarray, angle: float) -> np.ndarray:
+    """The sheet with its x > 0 half turned about the y axis by ``angle``."""
+    out = vertices.copy()
+    right = vertices[:, 0] > 0
+    out[right] = Rotation.from_rotvec([0, angle, 0]).apply(vertices[right])
+    return out
+
+
+def test_interior_edges_only():
+    _, triangles = sheet(6)
+    hinges = Hinges.of(triangles)
+    all_edges = {tuple(sorted(e)) for t in triangles for e in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0]))}
+    border = 4 * 6
+    assert len(hinges.edges) == len(all_edges) - border
+    assert (hinges.left != hinges.right).all()
+
+
+@pytest.mark.parametrize("angle", [0.2, -0.5, 1.0])
+def test_bent_sheet_reports_its_angle_on_the_hinge_line(angle):
+    vertices, triangles = sheet(6)
+    hinges = Hinges.of(triangles)
+    bend = hinges.bend(vertices, bent(vertices, angle), triangles)
+    on_line = (np.abs(vertices[hinges.edges, 0]) < 1e-12).all(axis=1)
+    assert on_line.sum() == 6
+    assert np.allclose(np.abs(bend[on_line]), abs(angle))
+    assert np.allclose(bend[~on_line], 0, atol=1e-12)
+
+
+def test_rest_and_rigid_motion_bend_nothing():
+    vertices, triangles = sheet(5)
+    vertices = vertices + 0.1 * np.random.default_rng(3).normal(size=vertices.shape)  # not flat
+    hinges = Hinges.of(triangles)
+    assert np.allclose(hinges.bend(vertices, vertices, triangles), 0)
+    moved = Rotation.from_rotvec([0.3, -1.1, 2.0]).apply(vertices) * 2.5 + [4, -2, 1]
+    assert np.allclose(hinges.bend(vertices, moved, triangles), 0, atol=1e-9)
+
+
+def test_a_reference_pose_bounds_the_same_pose_and_catches_a_sharper_one():
+    vertices, triangles = sheet(6)
+    hinges = Hinges.of(triangles)
+    hinge = hinges.hinge_lengths(vertices, triangles)
+    bound = CreaseBound.of(hinges, vertices, bent(vertices, 0.4), triangles, eye_separation=1.0)
+    allowed = bound.at(hinges.midpoints(vertices), hinge)
+    assert not creases(hinges, vertices, bent(vertices, 0.4), triangles, allowed).any()
+    sharper = creases(hinges, vertices, bent(vertices, 0.4 + 2 * MARGIN), triangles, allowed)
+    on_line = (np.abs(vertices[hinges.edges, 0]) < 1e-12).all(axis=1)
+    assert sharper[on_line].all() and not sharper[~on_line].any()
+    flat = CreaseBound.of(hinges, vertices, vertices, triangles, eye_separation=1.0)
+    allowed = flat.at(hinges.midpoints(vertices), hinge)
+    assert creases(hinges, vertices, bent(vertices, 0.4), triangles, allowed).sum() == 6
