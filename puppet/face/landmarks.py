@@ -243,8 +243,13 @@ def _pieces(face) -> np.ndarray:
 
 
 def _edges(triangles: np.ndarray) -> np.ndarray:
-    t = np.asarray(triangles)
-    return np.unique(np.sort(np.vstack([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]]), axis=1), axis=0)
+    """The mesh's edges (a, b), a < b, each once, sorted (one int64 key per edge: ``np.unique``
+    on rows sorts a structured view, ten times slower)."""
+    t = np.asarray(triangles, dtype=np.int64)
+    pairs = np.sort(np.vstack([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]]), axis=1)
+    n = int(t.max(initial=0)) + 1
+    keys = np.unique(pairs[:, 0] * n + pairs[:, 1])
+    return np.stack([keys // n, keys % n], axis=1)
 
 
 def _skin_graph(vertices: np.ndarray, triangles: np.ndarray, on_skin: np.ndarray, seams: np.ndarray) -> Skin:

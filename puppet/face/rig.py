@@ -354,9 +354,21 @@ def rig_from_dict(data: dict, source: str = "<rig>") -> Rig:
 
 
 def save_rig(rig: Rig, path: str | os.PathLike) -> None:
-    """Write a rig as JSON (validated first, so a saved rig always loads)."""
+    """Write a rig as JSON (validated first, so a saved rig always loads): one line per key, and
+    per item of a list (a control point, a region, a muscle), so that it reads and diffs by item.
+    Each line goes through json's C encoder: an indented dump, in pure Python, took 1.1 s of the
+    3.4 s that ``puppet rig`` spent on ICT's rig outside its fold limits."""
     rig.validate()
-    Path(path).write_text(json.dumps(rig_to_dict(rig), indent=1) + "\n")
+    Path(path).write_text(_json_by_item(rig_to_dict(rig)))
+
+
+def _json_by_item(data: dict) -> str:
+    def value(v) -> str:
+        if isinstance(v, list) and v:
+            return "[\n" + ",\n".join(f"  {json.dumps(item)}" for item in v) + "\n ]"
+        return json.dumps(v)
+
+    return "{\n" + ",\n".join(f" {json.dumps(k)}: {value(v)}" for k, v in data.items()) + "\n}\n"
 
 
 def load_rig(path: str | os.PathLike) -> Rig:
