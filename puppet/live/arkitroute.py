@@ -50,7 +50,8 @@ CHANNEL_OPTIONS = {  # how each route shapes a channel before the targets; the r
     "phone": {"jawOpen": "{smoothing: %s}" % (ONE_EURO % ("2.0", "2.0")),
               "mouthSmileLeft": "{smoothing: %s}" % (ONE_EURO % ("2.0", "1.0")),
               "mouthSmileRight": "{smoothing: %s}" % (ONE_EURO % ("2.0", "1.0")),
-              "eyeBlinkLeft": "{max: 0.85, smoothing: %s}   # trackers rarely report a full blink" % (ONE_EURO % ("4.0", "5.0")),
+              "eyeBlinkLeft": "{max: 0.85, smoothing: %s}   # trackers rarely report a full blink"
+                              % (ONE_EURO % ("4.0", "5.0")),
               "eyeBlinkRight": "{max: 0.85, smoothing: %s}" % (ONE_EURO % ("4.0", "5.0")),
               "browInnerUp": "{smoothing: %s}" % (ONE_EURO % ("1.5", "1.0"))},
 }
@@ -183,7 +184,8 @@ def write_routes(document: dict, folder: str | os.PathLike, *, face: str | None 
     paths = [folder / name for name in ROUTES]
     _write(paths[0], csv_header, channel_lines("csv", shapes, csv_name) + CSV_ANGLES.rstrip("\n").split("\n"),
            target_lines("csv", vectors, residuals, csv_name) + [""] + CSV_ANGLE_TARGETS.rstrip("\n").split("\n"))
-    _write(paths[1], osc_header, channel_lines("phone", shapes, vmc_name), target_lines("phone", vectors, residuals, vmc_name))
+    _write(paths[1], osc_header, channel_lines("phone", shapes, vmc_name),
+           target_lines("phone", vectors, residuals, vmc_name))
     return paths
 
 
@@ -193,7 +195,8 @@ def _for_face(header: str, face: str) -> str:
             .replace("# Written by tools/build_arkit_mappings.py: edit that, not this file.",
                      f"# Written by puppet calibrate-face for {face}: calibrate again rather than edit.\n"
                      "# Blendshapes the face has no example of keep the default face's vectors.")
-            .replace(f"on {DEFAULT_FACE} (puppet/data/arkit_faps.json,", "on this face (arkit_faps.json beside this file,"))
+            .replace(f"on {DEFAULT_FACE} (puppet/data/arkit_faps.json,",
+                     "on this face (arkit_faps.json beside this file,"))
 
 
 def arkit_document(face, calibration: Calibration, examples, *, face_label: str = DEFAULT_FACE,
