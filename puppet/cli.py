@@ -572,7 +572,8 @@ def _calibrate_face(args: argparse.Namespace) -> int:
     """``puppet calibrate-face``: how each FAP moves this face's skin, learnt from example shapes and
     made fold-safe (``puppet.runtime.foldlimits.fold_safe_calibration``, as the embedded face's rig
     is made), written as a face folder or a rig file, with the fit on the examples (the held-out
-    ones apart: what the calibration does on shapes it never saw)."""
+    ones apart: what the calibration does on shapes it never saw); a folder also gets the face's
+    own ARKit route when examples are named after ARKit's blendshapes (``_arkit_route``)."""
     import shutil
     import time
 
