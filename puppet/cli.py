@@ -572,7 +572,8 @@ def _calibrate_face(args: argparse.Namespace) -> int:
     """``puppet calibrate-face``: how each FAP moves this face's skin, learnt from example shapes and
     made fold-safe (``puppet.runtime.foldlimits.fold_safe_calibration``, as the embedded face's rig
     is made), written as a face folder or a rig file, with the fit on the examples (the held-out
-    ones apart: what the calibration does on shapes it never saw)."""
+    ones apart: what the calibration does on shapes it never saw); a folder also gets the face's
+    own ARKit route when examples are named after ARKit's blendshapes (``_arkit_route``)."""
     import shutil
     import time
 
@@ -607,7 +608,27 @@ def _calibrate_face(args: argparse.Namespace) -> int:
         print(f"  {line}")
     if not rig_file:
         print(f"  use it with --face {args.output}")
+        _arkit_route(face, result, examples, output, args.output)
     return 0
+
+
+def _arkit_route(face, result, examples, output: Path, shown: str) -> None:
+    """The face's own ARKit route (``puppet.live.arkitroute``) in its folder, when it learnt from
+    ARKit-named examples, and how to use it."""
+    import numpy as np
+
+    from puppet.live.arkitroute import arkit_document, write_face_route
+
+    document = arkit_document(face, result, examples, face_label=f"face {face.name!r} as calibrated")
+    if not document["faps"]:
+        return
+    write_face_route(document, output, f"face {face.name!r} ({shown})")
+    route = Path(shown)
+    print(f"  its ARKit route, from {_count(len(document['faps']), 'ARKit shape')} "
+          f"(median residual {float(np.median(list(document['residual'].values()))):.3f}): "
+          f"{route / 'arkit_osc.yaml'} and {route / 'arkit_csv.yaml'}")
+    print(f"    puppet live --face {shown} --mapping {route / 'arkit_osc.yaml'}")
+    print(f"    puppet import-arkit TAKE.csv --mapping {route / 'arkit_csv.yaml'}")
 
 
 def _fit_lines(face, result, examples) -> list[str]:

@@ -21,16 +21,12 @@ import argparse
 import json
 from pathlib import Path
 
-import numpy as np
-
 from puppet.face.autorig import build_rig
 from puppet.face.examples import load_examples
 from puppet.face.load import load_face
 from puppet.face.rig import save_rig
-from puppet.fap.table import fap
-from puppet.runtime.fapcalibration import relative_residual
+from puppet.live.arkitroute import arkit_document
 from puppet.runtime.foldlimits import fold_safe_calibration
-from puppet.runtime.runtime import Runtime
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_OUT = ROOT / "puppet" / "data" / "default_rig.json"
@@ -51,20 +47,12 @@ def main(argv: list[str] | None = None) -> int:
     examples = load_examples(face, args.examples)
     result = fold_safe_calibration(face, examples, rig=rig)  # fold limits at pose time (puppet.runtime.foldlimits)
     save_rig(result.rig, args.out)
-    runtime = Runtime(face, result.rig, dtype=np.float64)
-    vectors = {name: {fap(i + 1).name: round(float(v)) for i, v in enumerate(values) if round(float(v))}
-               for name, values in sorted(result.weights.items())}
-    residuals = {name: round(relative_residual(runtime, values, examples[name]), 3)
-                 for name, values in sorted(result.weights.items())}
-    document = {"description": "ARKit blendshape -> the FAP vector (FAPU) that best reproduces the "
-                               "artist's shape on the calibrated default face within its fold limits (puppet.runtime.fapcalibration.fit_faps), "
-                               "and the relative RMS residual it leaves over the vertices the shape moves",
-                "source": SOURCE, "faps": vectors, "residual": residuals}
+    document = arkit_document(face, result, examples, source=SOURCE)
     args.arkit_out.write_text(json.dumps(document, indent=1) + "\n")
     motions = sum(len(m) for m in result.rig.fap_motions.values())
     print(f"{args.out}: {len(rig.control_points)} control points, {len(rig.regions)} regions, "
           f"{motions} calibrated motions over {len(result.rig.fap_motions)} FAPs")
-    print(f"{args.arkit_out}: {len(vectors)} ARKit shapes")
+    print(f"{args.arkit_out}: {len(document['faps'])} ARKit shapes")
     return 0
 
 
