@@ -155,3 +155,26 @@ def test_68_ibug_points_rig_the_default_face(default, tmp_path):
         assert np.linalg.norm(face.feature_points[fid] - default.feature_points[fid]) < 0.35 * size, fid
     moved = Runtime(face, rig, cache=False).deform_faps(expression=(1, 63, 0, 0)) - face.vertices
     assert np.isfinite(moved).all() and np.abs(moved).max() > 0.01 * size
+
+
+@pytest.fixture(scope="module")
+def bare_default(default, tmp_path_factory):
+    """The default face written as a bare OBJ (positions and triangles) and loaded from its own
+    feature-point vertices: a user's mesh the shipped face's artist made."""
+    mesh = _write_obj(tmp_path_factory.mktemp("bare") / "f.obj", default.vertices, default.triangles)
+    return load_face(mesh, landmarks=dict(default.feature_vertices))
+
+
+def test_a_bare_default_face_gets_the_default_faces_parts(default, bare_default):
+    """Gums are flat arches (teeth, not a mouth socket), the tongue is deeper than wide, and every
+    tooth goes with its gum: the parts are the artist's, so no mouth piece lands in the lips."""
+    assert {k: sorted(v) for k, v in bare_default.parts.items()} == {k: sorted(v) for k, v in default.parts.items()}
+
+
+def test_a_bare_default_face_rigs_with_few_folds(default, bare_default):
+    """The 6 expressions and 15 visemes at full strength, without fold limits: the folds it reaches
+    now (the shipped rig, with its limits, has none), asserted so they cannot grow back."""
+    from puppet.face.default import load_default_rig
+    from puppet.runtime.posecheck import pose_flaws
+    found = pose_flaws(Runtime(bare_default, build_rig(bare_default)), Runtime(default, load_default_rig()))
+    assert sum(f.folds for f in found.values()) <= 10

@@ -12,8 +12,9 @@ indices (``{"2.1": 152, ...}``) or a JSON list of 68 vertex indices in the iBUG 
   the file had: the rig of a rotated, scaled copy is the same rig.
 * **Parts.** Connected components: the one holding the landmarks is ``skin``; near each eye
   opening, a component about as large as the eye is that eyeball (``eye_l`` / ``eye_r``); inside
-  the mouth, small ones are teeth (upper or lower of the lip line) and large ones the ``mouth``
-  (socket, gums); anything else (lashes, tear lines) is ``attached``: it follows the skin
+  the mouth, small ones are teeth and flat arches gums (``teeth_upper`` / ``teeth_lower``: each
+  tooth goes with the gum nearest it, else by the lip line), one longer than wide under the lips
+  is the ``tongue``, and other large ones the ``mouth`` (a socket); anything else (lashes, tear lines) is ``attached``: it follows the skin
   region nearest to it. A face without eyeballs or teeth simply has none of those regions.
   Parts the file's own pieces named (``puppet.face.meshparts``: eyeballs, teeth, tongue,
   lashes) win over the components' guess off the skin; eyeballs are sided by x in the face frame.
@@ -47,6 +48,7 @@ from typing import NamedTuple
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components, dijkstra
+from scipy.spatial import cKDTree
 
 from puppet.errors import PuppetError
 from puppet.face.default import default_face
@@ -315,6 +317,7 @@ def _parts(vertices: np.ndarray, triangles: np.ndarray, on_skin: np.ndarray,
     for c in np.unique(comp[~on_skin]):
         members = comp == c
         label[members] = _part_of(vertices[members], fp)
+    _side_teeth(vertices, comp, label)
     for name in KEPT_PARTS & set(loaded):
         kept = np.asarray(loaded[name])[~on_skin[loaded[name]]]
         label[kept] = name
@@ -332,10 +335,29 @@ def _part_of(p: np.ndarray, fp: dict[str, np.ndarray]) -> str:
     mouth_w = abs(fp["8.3"][0] - fp["8.4"][0])
     lip_y = (fp["2.2"][1] + fp["2.3"][1]) / 2
     if abs(centre[0]) < mouth_w and fp["2.1"][1] < centre[1] < fp["9.15"][1] and centre[2] < fp["2.2"][2]:
-        if size.max() >= 0.75 * mouth_w:
-            return "mouth"
-        return "teeth_upper" if centre[1] >= lip_y else "teeth_lower"
+        if size.max() < 0.75 * mouth_w or size[1] < 0.5 * size[0]:  # a tooth, or a gum: a flat arch
+            return "teeth_upper" if centre[1] >= lip_y else "teeth_lower"
+        if size[2] > size[0] and centre[1] < lip_y:  # longer than wide, under the lips
+            return "tongue"
+        return "mouth"
     return "attached"
+
+
+def _side_teeth(vertices: np.ndarray, comp: np.ndarray, label: np.ndarray) -> None:
+    """Each tooth goes with the gum nearest to it: the back teeth of a lower arch rise above the
+    lips' line, which alone put them in the upper teeth. Without both gums, the line stands."""
+    teeth = np.isin(label, ["teeth_upper", "teeth_lower"])
+    sizes = np.bincount(comp[teeth], minlength=comp.max() + 1)
+    gums = {side: c for side in ("teeth_upper", "teeth_lower")
+            for c in [max(np.unique(comp[label == side]), key=lambda k: sizes[k], default=-1)]}
+    if min(gums.values()) < 0 or min(sizes[list(gums.values())]) < 2 * np.median(sizes[sizes > 0]):
+        return
+    trees = {side: cKDTree(vertices[comp == c]) for side, c in gums.items()}
+    for c in np.unique(comp[teeth]):
+        if c in gums.values():
+            continue
+        centre = vertices[comp == c].mean(axis=0)
+        label[comp == c] = min(gums, key=lambda side: trees[side].query(centre)[0])
 
 
 # -- feature points and pivots ---------------------------------------------------------------------
