@@ -22,8 +22,8 @@ indices (``{"2.1": 152, ...}``) or a JSON list of 68 vertex indices in the iBUG 
   splits vertices along uv seams, and the skin would else come in islands.
 * **Contours.** The lips' meeting line, the vermilion border and the lid openings, as closed
   loops of shortest (geodesic) paths on the skin through their landmarks; the face oval the same
-  way through the chin, jaw and hairline points (``FACE_OVAL``, placed below) as the default
-  face's runs: without it the rig has no jaw band, and an opening jaw folds the skin under it. Open holes and
+  way through the chin's sides, the jaw and hairline points (``FACE_OVAL``, placed below), as
+  the default face's runs: without it the rig has no jaw band, and an opening jaw folds the skin under it. Open holes and
   closed (stitched) mouths and eyes are handled alike.
 * **Feature points.** iBUG points map directly where MPEG-4 has the same point (eye and lip
   corners, brows, nose tip and base, lip mid points, chin); lid and lower-lip mid points are the
@@ -81,7 +81,8 @@ FDP_CONTOURS = {
     "left_lid_opening": ["3.7", "3.1", "3.11", "3.3"],
     "right_lid_opening": ["3.12", "3.2", "3.8", "3.4"],
 }
-FACE_OVAL = ["2.1", "2.11", "2.13", "11.3", "11.1", "11.2", "2.14", "2.12"]  # the default face's oval passes these
+# The default face's oval passes these (in front of 2.1, which sits under the chin).
+FACE_OVAL = ["2.11", "2.13", "11.3", "11.1", "11.2", "2.14", "2.12"]
 FDP_NEEDED = sorted({f for loop in FDP_CONTOURS.values() for f in loop} | {"2.1", "9.3", "9.15"})
 KEPT_PARTS = {"eye_l", "eye_r", "teeth_upper", "teeth_lower", "tongue", "attached"}  # a file's named pieces
 PUPILS = ("3.5", "3.6")  # coordinates when the face has no eyeball to put them on
