@@ -23,8 +23,8 @@ indices (``{"2.1": 152, ...}``) or a JSON list of 68 vertex indices in the iBUG 
 * **Contours.** The lips' meeting line, the vermilion border and the lid openings, as closed
   loops of shortest (geodesic) paths on the skin through their landmarks; the face oval the same
   way through the chin's sides, the jaw and hairline points (``FACE_OVAL``, placed below), as
-  the default face's runs: without it the rig has no jaw band, and an opening jaw folds the skin under it. Open holes and
-  closed (stitched) mouths and eyes are handled alike.
+  the default face's runs: without it the rig has no jaw band, and an opening jaw folds the skin
+  under it. Open holes and closed (stitched) mouths and eyes are handled alike.
 * **Feature points.** iBUG points map directly where MPEG-4 has the same point (eye and lip
   corners, brows, nose tip and base, lip mid points, chin); lid and lower-lip mid points are the
   halfway vertex of the geodesic path between their two iBUG neighbours. Every other FDP
