@@ -181,6 +181,14 @@ def test_a_bare_default_face_gets_the_default_faces_jaw_band(default, bare_defau
     assert all(abs(sizes[k] - shipped[k]) <= 0.02 * shipped[k] for k in shipped), (sizes, shipped)
 
 
+def test_a_bare_default_face_finds_its_neck_cut(default, bare_default):
+    """The skin's open boundary below the chin is the neck cut, so the head turns over the same
+    neck band as on the default face; a mask's rim, up past the chin, is none."""
+    assert sorted(bare_default.contours["neck_cut"]) == sorted(default.contours["neck_cut"])
+    neck = build_rig(bare_default).rigid_parts["head"].neck
+    assert np.allclose(neck, build_rig(default).rigid_parts["head"].neck, atol=1e-6)
+
+
 def test_a_bare_default_face_rigs_with_few_folds_and_creases(default, bare_default):
     """The 6 expressions and 15 visemes at full strength, without fold limits: the folds and creases
     it reaches now, near the default face's own ``build_rig`` without limits (4 folds, 151 creased

@@ -24,7 +24,8 @@ indices (``{"2.1": 152, ...}``) or a JSON list of 68 vertex indices in the iBUG 
   loops of shortest (geodesic) paths on the skin through their landmarks; the face oval the same
   way through the chin's sides, the jaw and hairline points (``FACE_OVAL``, placed below), as
   the default face's runs: without it the rig has no jaw band, and an opening jaw folds the skin
-  under it. Open holes and closed (stitched) mouths and eyes are handled alike.
+  under it. The skin's open boundary below the chin, where there is one, is the ``neck_cut``.
+  Open holes and closed (stitched) mouths and eyes are handled alike.
 * **Feature points.** iBUG points map directly where MPEG-4 has the same point (eye and lip
   corners, brows, nose tip and base, lip mid points, chin); lid and lower-lip mid points are the
   halfway vertex of the geodesic path between their two iBUG neighbours. Every other FDP
@@ -213,9 +214,49 @@ def apply_landmarks(face, landmarks) -> object:
     contours = {name: _geodesic_path(skin, ways, closed=True) for name, ways in waypoints.items()}
     feature_points, feature_vertices = _feature_points(vertices, parts, skin, given, reference)
     contours["face_oval"] = _geodesic_path(skin, [feature_vertices[f] for f in FACE_OVAL], closed=True)
+    neck = _neck_cut(vertices, face.triangles, skin.mask, seams, feature_points["2.1"][1])
+    if neck is not None:
+        contours["neck_cut"] = neck
     return replace(face, vertices=vertices, parts=parts, feature_points=feature_points,
                    feature_vertices=feature_vertices, contours=contours, placement=placement,
                    pivots=_pivots(vertices, parts, feature_points, reference))
+
+
+def _neck_cut(vertices: np.ndarray, triangles: np.ndarray, on_skin: np.ndarray, seams: np.ndarray,
+              chin_y: float) -> np.ndarray | None:
+    """The skin's open boundary below the chin, as a loop (the default face's ``neck_cut``): where a
+    head is cut off at the neck, the band from it up to the chin carries the head's turn into the
+    still bust. None when no boundary loop lies wholly below the chin (a mask, a closed head)."""
+    twin = np.arange(len(vertices))
+    twin[seams[:, 0]] = seams[:, 1]
+    tri = twin[np.asarray(triangles)[on_skin[np.asarray(triangles)].all(axis=1)]]
+    pairs = np.sort(np.vstack([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]]), axis=1)
+    n = len(vertices)
+    keys, count = np.unique(pairs[:, 0].astype(np.int64) * n + pairs[:, 1], return_counts=True)
+    rim = np.stack([keys[count == 1] // n, keys[count == 1] % n], axis=1)
+    if not len(rim):
+        return None
+    graph = sp.coo_matrix((np.ones(len(rim)), (rim[:, 0], rim[:, 1])), shape=(n, n)).tocsr()
+    graph = graph + graph.T
+    comp = connected_components(graph, directed=False)[1]
+    degree = np.diff(graph.indptr)
+    loops = [c for c in np.unique(comp[rim[:, 0]]) if (degree[comp == c] == 2).all()
+             and vertices[comp == c, 1].max() < chin_y]
+    if not loops:
+        return None
+    members = max(loops, key=lambda c: (np.count_nonzero(comp == c), -c))
+    return _walk(graph, int(np.flatnonzero(comp == members)[0]))
+
+
+def _walk(graph: sp.csr_matrix, start: int) -> np.ndarray:
+    """The vertices of the cycle through ``start`` (every vertex on it of degree 2), in order."""
+    path, previous, v = [start], -1, start
+    while True:
+        nxt = [int(w) for w in graph.indices[graph.indptr[v]:graph.indptr[v + 1]] if w != previous]
+        previous, v = v, nxt[0]
+        if v == start:
+            return np.array(path, dtype=np.int32)
+        path.append(v)
 
 
 def _landmark_component(face, landmarks, seams: np.ndarray) -> np.ndarray:
