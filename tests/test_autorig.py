@@ -192,9 +192,16 @@ def test_a_bare_default_face_finds_its_neck_cut(default, bare_default):
 def test_a_bare_default_face_rigs_with_few_folds_and_creases(default, bare_default):
     """The 6 expressions and 15 visemes at full strength, without fold limits: the folds and creases
     it reaches now, near the default face's own ``build_rig`` without limits (4 folds, 151 creased
-    edges; the shipped rig's limits take them to none), asserted so they cannot grow back."""
+    edges; the shipped rig's limits take them to none), and with fold limits as ``puppet rig`` finds
+    them (2 and 58; main had 51 and 709), asserted so they cannot grow back."""
     from puppet.face.default import load_default_rig
     from puppet.runtime.posecheck import pose_flaws
-    found = pose_flaws(Runtime(bare_default, build_rig(bare_default)), Runtime(default, load_default_rig()))
+    from puppet.runtime.foldlimits import fold_limited
+    reference = Runtime(default, load_default_rig())
+    rig = build_rig(bare_default)
+    found = pose_flaws(Runtime(bare_default, rig), reference)
     assert sum(f.folds for f in found.values()) <= 6
     assert sum(f.creases for f in found.values()) <= 210
+    limited = pose_flaws(Runtime(bare_default, fold_limited(bare_default, rig)), reference)  # as `puppet rig`
+    assert sum(f.folds for f in limited.values()) <= 2
+    assert sum(f.creases for f in limited.values()) <= 60
