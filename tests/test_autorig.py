@@ -155,3 +155,53 @@ def test_68_ibug_points_rig_the_default_face(default, tmp_path):
         assert np.linalg.norm(face.feature_points[fid] - default.feature_points[fid]) < 0.35 * size, fid
     moved = Runtime(face, rig, cache=False).deform_faps(expression=(1, 63, 0, 0)) - face.vertices
     assert np.isfinite(moved).all() and np.abs(moved).max() > 0.01 * size
+
+
+@pytest.fixture(scope="module")
+def bare_default(default, tmp_path_factory):
+    """The default face written as a bare OBJ (positions and triangles) and loaded from its own
+    feature-point vertices: a user's mesh the shipped face's artist made."""
+    mesh = _write_obj(tmp_path_factory.mktemp("bare") / "f.obj", default.vertices, default.triangles)
+    return load_face(mesh, landmarks=dict(default.feature_vertices))
+
+
+def test_a_bare_default_face_gets_the_default_faces_parts(default, bare_default):
+    """Gums are flat arches (teeth, not a mouth socket), the tongue is deeper than wide, and every
+    tooth goes with its gum: the parts are the artist's, so no mouth piece lands in the lips."""
+    assert {k: sorted(v) for k, v in bare_default.parts.items()} == {k: sorted(v) for k, v in default.parts.items()}
+
+
+def test_a_bare_default_face_gets_the_default_faces_jaw_band(default, bare_default):
+    """The face oval runs through the chin, jaw and hairline points, so the skin under the jaw line
+    goes with the jaw as on the default face: the cheeks are the artist's rig's cheeks."""
+    assert set(bare_default.contours) >= {"face_oval", "mouth_opening", "vermilion_border"}
+    sizes = {r.name: len(r.vertices) for r in build_rig(bare_default).regions}
+    shipped = {r.name: len(r.vertices) for r in build_rig(default).regions}
+    assert sizes.keys() == shipped.keys()
+    assert all(abs(sizes[k] - shipped[k]) <= 0.02 * shipped[k] for k in shipped), (sizes, shipped)
+
+
+def test_a_bare_default_face_finds_its_neck_cut(default, bare_default):
+    """The skin's open boundary below the chin is the neck cut, so the head turns over the same
+    neck band as on the default face; a mask's rim, up past the chin, is none."""
+    assert sorted(bare_default.contours["neck_cut"]) == sorted(default.contours["neck_cut"])
+    neck = build_rig(bare_default).rigid_parts["head"].neck
+    assert np.allclose(neck, build_rig(default).rigid_parts["head"].neck, atol=1e-6)
+
+
+def test_a_bare_default_face_rigs_with_few_folds_and_creases(default, bare_default):
+    """The 6 expressions and 15 visemes at full strength, without fold limits: the folds and creases
+    it reaches now, near the default face's own ``build_rig`` without limits (4 folds, 151 creased
+    edges; the shipped rig's limits take them to none), and with fold limits as ``puppet rig`` finds
+    them (2 and 58; main had 51 and 709), asserted so they cannot grow back."""
+    from puppet.face.default import load_default_rig
+    from puppet.runtime.posecheck import pose_flaws
+    from puppet.runtime.foldlimits import fold_limited
+    reference = Runtime(default, load_default_rig())
+    rig = build_rig(bare_default)
+    found = pose_flaws(Runtime(bare_default, rig), reference)
+    assert sum(f.folds for f in found.values()) <= 6
+    assert sum(f.creases for f in found.values()) <= 210
+    limited = pose_flaws(Runtime(bare_default, fold_limited(bare_default, rig)), reference)  # as `puppet rig`
+    assert sum(f.folds for f in limited.values()) <= 2
+    assert sum(f.creases for f in limited.values()) <= 60

@@ -12,16 +12,20 @@ indices (``{"2.1": 152, ...}``) or a JSON list of 68 vertex indices in the iBUG 
   the file had: the rig of a rotated, scaled copy is the same rig.
 * **Parts.** Connected components: the one holding the landmarks is ``skin``; near each eye
   opening, a component about as large as the eye is that eyeball (``eye_l`` / ``eye_r``); inside
-  the mouth, small ones are teeth (upper or lower of the lip line) and large ones the ``mouth``
-  (socket, gums); anything else (lashes, tear lines) is ``attached``: it follows the skin
+  the mouth, small ones are teeth and flat arches gums (``teeth_upper`` / ``teeth_lower``: each
+  tooth goes with the gum nearest it, else by the lip line), one longer than wide under the lips
+  is the ``tongue``, and other large ones the ``mouth`` (a socket); anything else (lashes, tear lines) is ``attached``: it follows the skin
   region nearest to it. A face without eyeballs or teeth simply has none of those regions.
   Parts the file's own pieces named (``puppet.face.meshparts``: eyeballs, teeth, tongue,
   lashes) win over the components' guess off the skin; eyeballs are sided by x in the face frame.
   Vertices at the very same place in the same part are joined (``_seams``): a glTF exporter
   splits vertices along uv seams, and the skin would else come in islands.
 * **Contours.** The lips' meeting line, the vermilion border and the lid openings, as closed
-  loops of shortest (geodesic) paths on the skin through their landmarks. Open holes and
-  closed (stitched) mouths and eyes are handled alike.
+  loops of shortest (geodesic) paths on the skin through their landmarks; the face oval the same
+  way through the chin's sides, the jaw and hairline points (``FACE_OVAL``, placed below), as
+  the default face's runs: without it the rig has no jaw band, and an opening jaw folds the skin
+  under it. The skin's open boundary below the chin, where there is one, is the ``neck_cut``.
+  Open holes and closed (stitched) mouths and eyes are handled alike.
 * **Feature points.** iBUG points map directly where MPEG-4 has the same point (eye and lip
   corners, brows, nose tip and base, lip mid points, chin); lid and lower-lip mid points are the
   halfway vertex of the geodesic path between their two iBUG neighbours. Every other FDP
@@ -47,6 +51,7 @@ from typing import NamedTuple
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components, dijkstra
+from scipy.spatial import cKDTree
 
 from puppet.errors import PuppetError
 from puppet.face.default import default_face
@@ -77,6 +82,8 @@ FDP_CONTOURS = {
     "left_lid_opening": ["3.7", "3.1", "3.11", "3.3"],
     "right_lid_opening": ["3.12", "3.2", "3.8", "3.4"],
 }
+# The default face's oval passes these (in front of 2.1, which sits under the chin).
+FACE_OVAL = ["2.11", "2.13", "11.3", "11.1", "11.2", "2.14", "2.12"]
 FDP_NEEDED = sorted({f for loop in FDP_CONTOURS.values() for f in loop} | {"2.1", "9.3", "9.15"})
 KEPT_PARTS = {"eye_l", "eye_r", "teeth_upper", "teeth_lower", "tongue", "attached"}  # a file's named pieces
 PUPILS = ("3.5", "3.6")  # coordinates when the face has no eyeball to put them on
@@ -206,9 +213,50 @@ def apply_landmarks(face, landmarks) -> object:
                    seams)
     contours = {name: _geodesic_path(skin, ways, closed=True) for name, ways in waypoints.items()}
     feature_points, feature_vertices = _feature_points(vertices, parts, skin, given, reference)
+    contours["face_oval"] = _geodesic_path(skin, [feature_vertices[f] for f in FACE_OVAL], closed=True)
+    neck = _neck_cut(vertices, face.triangles, skin.mask, seams, feature_points["2.1"][1])
+    if neck is not None:
+        contours["neck_cut"] = neck
     return replace(face, vertices=vertices, parts=parts, feature_points=feature_points,
                    feature_vertices=feature_vertices, contours=contours, placement=placement,
                    pivots=_pivots(vertices, parts, feature_points, reference))
+
+
+def _neck_cut(vertices: np.ndarray, triangles: np.ndarray, on_skin: np.ndarray, seams: np.ndarray,
+              chin_y: float) -> np.ndarray | None:
+    """The skin's open boundary below the chin, as a loop (the default face's ``neck_cut``): where a
+    head is cut off at the neck, the band from it up to the chin carries the head's turn into the
+    still bust. None when no boundary loop lies wholly below the chin (a mask, a closed head)."""
+    twin = np.arange(len(vertices))
+    twin[seams[:, 0]] = seams[:, 1]
+    tri = twin[np.asarray(triangles)[on_skin[np.asarray(triangles)].all(axis=1)]]
+    pairs = np.sort(np.vstack([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]]), axis=1)
+    n = len(vertices)
+    keys, count = np.unique(pairs[:, 0].astype(np.int64) * n + pairs[:, 1], return_counts=True)
+    rim = np.stack([keys[count == 1] // n, keys[count == 1] % n], axis=1)
+    if not len(rim):
+        return None
+    graph = sp.coo_matrix((np.ones(len(rim)), (rim[:, 0], rim[:, 1])), shape=(n, n)).tocsr()
+    graph = graph + graph.T
+    comp = connected_components(graph, directed=False)[1]
+    degree = np.diff(graph.indptr)
+    loops = [c for c in np.unique(comp[rim[:, 0]]) if (degree[comp == c] == 2).all()
+             and vertices[comp == c, 1].max() < chin_y]
+    if not loops:
+        return None
+    members = max(loops, key=lambda c: (np.count_nonzero(comp == c), -c))
+    return _walk(graph, int(np.flatnonzero(comp == members)[0]))
+
+
+def _walk(graph: sp.csr_matrix, start: int) -> np.ndarray:
+    """The vertices of the cycle through ``start`` (every vertex on it of degree 2), in order."""
+    path, previous, v = [start], -1, start
+    while True:
+        nxt = [int(w) for w in graph.indices[graph.indptr[v]:graph.indptr[v + 1]] if w != previous]
+        previous, v = v, nxt[0]
+        if v == start:
+            return np.array(path, dtype=np.int32)
+        path.append(v)
 
 
 def _landmark_component(face, landmarks, seams: np.ndarray) -> np.ndarray:
@@ -315,6 +363,7 @@ def _parts(vertices: np.ndarray, triangles: np.ndarray, on_skin: np.ndarray,
     for c in np.unique(comp[~on_skin]):
         members = comp == c
         label[members] = _part_of(vertices[members], fp)
+    _side_teeth(vertices, comp, label)
     for name in KEPT_PARTS & set(loaded):
         kept = np.asarray(loaded[name])[~on_skin[loaded[name]]]
         label[kept] = name
@@ -332,10 +381,29 @@ def _part_of(p: np.ndarray, fp: dict[str, np.ndarray]) -> str:
     mouth_w = abs(fp["8.3"][0] - fp["8.4"][0])
     lip_y = (fp["2.2"][1] + fp["2.3"][1]) / 2
     if abs(centre[0]) < mouth_w and fp["2.1"][1] < centre[1] < fp["9.15"][1] and centre[2] < fp["2.2"][2]:
-        if size.max() >= 0.75 * mouth_w:
-            return "mouth"
-        return "teeth_upper" if centre[1] >= lip_y else "teeth_lower"
+        if size.max() < 0.75 * mouth_w or size[1] < 0.5 * size[0]:  # a tooth, or a gum: a flat arch
+            return "teeth_upper" if centre[1] >= lip_y else "teeth_lower"
+        if size[2] > size[0] and centre[1] < lip_y:  # longer than wide, under the lips
+            return "tongue"
+        return "mouth"
     return "attached"
+
+
+def _side_teeth(vertices: np.ndarray, comp: np.ndarray, label: np.ndarray) -> None:
+    """Each tooth goes with the gum nearest to it: the back teeth of a lower arch rise above the
+    lips' line, which alone put them in the upper teeth. Without both gums, the line stands."""
+    teeth = np.isin(label, ["teeth_upper", "teeth_lower"])
+    sizes = np.bincount(comp[teeth], minlength=comp.max() + 1)
+    gums = {side: c for side in ("teeth_upper", "teeth_lower")
+            for c in [max(np.unique(comp[label == side]), key=lambda k: sizes[k], default=-1)]}
+    if min(gums.values()) < 0 or min(sizes[list(gums.values())]) < 2 * np.median(sizes[sizes > 0]):
+        return
+    trees = {side: cKDTree(vertices[comp == c]) for side, c in gums.items()}
+    for c in np.unique(comp[teeth]):
+        if c in gums.values():
+            continue
+        centre = vertices[comp == c].mean(axis=0)
+        label[comp == c] = min(gums, key=lambda side: trees[side].query(centre)[0])
 
 
 # -- feature points and pivots ---------------------------------------------------------------------
