@@ -263,23 +263,39 @@ def _skin_graph(vertices: np.ndarray, triangles: np.ndarray, on_skin: np.ndarray
 
 
 def _geodesic_path(skin: Skin, waypoints: list[int], closed: bool) -> np.ndarray:
-    """Vertices along shortest skin paths from waypoint to waypoint (back to the first if closed)."""
+    """Vertices along shortest skin paths from waypoint to waypoint (back to the first if closed).
+    Each leg keeps off the vertices the legs before it took, so a loop never touches itself: two
+    waypoints near one corner (found landmarks a vertex or two apart) sent two shortest legs
+    through one vertex, which became both an upper and a lower lid point, two control points on
+    one place (``duplicate sites``). A leg with no way round them takes the plain shortest path."""
     stops = list(waypoints) + ([waypoints[0]] if closed else [])
-    sources = sorted(set(stops[:-1]))
-    _, pred = dijkstra(skin.graph, directed=False, indices=sources, return_predecessors=True)
-    row = {s: i for i, s in enumerate(sources)}
     path: list[int] = [stops[0]]
     for a, b in zip(stops[:-1], stops[1:]):
-        leg, v = [], b
-        while v != a:
-            if v < 0:
-                raise LandmarkError(f"landmarks: vertices {a} and {b} are not connected on the skin")
-            leg.append(int(v))
-            v = pred[row[a], v]
-        path += leg[::-1]
+        taken = np.zeros(skin.graph.shape[0], dtype=bool)
+        taken[path] = True
+        taken[[a, b]] = False
+        path += _leg(skin.graph, a, b, taken) or _leg(skin.graph, a, b, np.zeros_like(taken))
     if closed:
         path = path[:-1]
     return np.array(path, dtype=np.int32)
+
+
+def _leg(graph: sp.csr_matrix, a: int, b: int, blocked: np.ndarray) -> list[int]:
+    """The shortest path's vertices after ``a`` up to ``b`` avoiding the ``blocked`` vertices;
+    [] when there is none (a == b gives [])."""
+    if blocked.any():
+        keep = sp.diags((~blocked).astype(float))
+        graph = (keep @ graph @ keep).tocsr()
+    _, pred = dijkstra(graph, directed=False, indices=a, return_predecessors=True)
+    leg, v = [], b
+    while v != a:
+        if v < 0:
+            if blocked.any():
+                return []
+            raise LandmarkError(f"landmarks: vertices {a} and {b} are not connected on the skin")
+        leg.append(int(v))
+        v = pred[v]
+    return leg[::-1]
 
 
 def _placement(vertices: np.ndarray, given: dict[str, int], reference: dict[str, np.ndarray]) -> np.ndarray:
