@@ -37,6 +37,7 @@ from puppet.face.gltfread import MAX_VERTICES, read_gltf, srgb_encode
 from puppet.face.landmarks import FDP_NEEDED
 from puppet.face.load import load_face
 from puppet.face.model import FaceFileError
+from puppet.photo.detect import photo_python
 from puppet.runtime.fapcalibration import fit_faps, relative_residual
 from puppet.runtime.runtime import Runtime
 from puppet.view.renderer import Renderer
@@ -308,3 +309,34 @@ def test_accessors_read_sparse_normalized_and_strided_values(tmp_path):
     np.testing.assert_allclose(piece.colors, np.eye(3), atol=1e-6)
     np.testing.assert_allclose(piece.uv, interleaved["uv"], atol=1e-7)
     assert piece.triangles.tolist() == [[0, 1, 2]]
+
+
+@pytest.mark.skipif(photo_python() is None, reason="no photo environment (.venv-photo: tools/setup.sh makes it)")
+def test_a_glb_head_alone_rigs_from_found_landmarks_with_its_eyes_teeth_and_texture(tmp_path, egl):
+    """``puppet rig head.glb -o me/`` with nothing else (its found landmarks once put one vertex on
+    both lids of a loop that touched itself: 'duplicate sites'): the folder has simple lip and lid
+    loops, renders with its texture and blue eyes, its eyes turn and its lower teeth open rigidly."""
+    head = write_head(tmp_path / "head.glb")
+    assert main(["rig", str(head), "-o", str(tmp_path / "me")]) == 0
+    face = load_face(tmp_path / "me")
+    for name, loop in face.contours.items():
+        assert len(set(loop.tolist())) == len(loop), name
+    assert np.array_equal(face.texture, load_face(head).texture)
+    runtime = Runtime(face, dtype=np.float64)
+    rest = runtime.deform_faps()
+    eye = face.parts["eye_l"]
+    looked = runtime.deform_faps({"yaw_l_eyeball": 30000})
+    assert np.linalg.norm(looked[eye] - rest[eye], axis=1).max() > 0.01 * np.ptp(rest[eye], axis=0).max()
+    assert _rigid(rest[eye], looked[eye])
+    opened = runtime.deform_faps({"open_jaw": 600})
+    lower = face.parts["teeth_lower"]
+    assert np.abs(opened[lower] - rest[lower]).max() > 0 and _rigid(rest[lower], opened[lower])
+    with Renderer.for_face(face, width=320, height=320) as r:
+        r.aim(rest)
+        image = r.render(rest.astype(np.float32)).astype(int)
+        front = rest[eye][np.argmax(rest[eye, 2])]
+        skin = rest[face.parts["skin"]]
+        cheek = skin[np.argmin(np.linalg.norm(skin - (front - (0, 0.25 * np.ptp(rest[eye, 1]) * 4, 0)), axis=1))]
+        (ex, ey), (cx, cy) = r.project(np.array([front, cheek])).astype(int)
+    assert image[ey, ex, 2] > image[ey, ex, 0] + 40, image[ey, ex]  # blue, as its material says
+    assert image[cy, cx, 0] > image[cy, cx, 2] + 40, image[cy, cx]  # skin toned, as its texture says
