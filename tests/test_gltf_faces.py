@@ -340,3 +340,13 @@ def test_a_glb_head_alone_rigs_from_found_landmarks_with_its_eyes_teeth_and_text
         (ex, ey), (cx, cy) = r.project(np.array([front, cheek])).astype(int)
     assert image[ey, ex, 2] > image[ey, ex, 0] + 40, image[ey, ex]  # blue, as its material says
     assert image[cy, cx, 0] > image[cy, cx, 2] + 40, image[cy, cx]  # skin toned, as its texture says
+
+
+def test_two_feature_points_on_one_place_are_named_with_what_to_do(tmp_path, capsys):
+    """Issue 38: not 'duplicate sites ... indices 21 and 40' but the feature points and the fix."""
+    marks = glb_landmarks() | {f: int(glb_vertex()[default_face().feature_vertices["4.1"]]) for f in ("4.1", "4.3")}
+    (tmp_path / "points.json").write_text(json.dumps(marks))
+    head = write_head(tmp_path / "head.glb")
+    assert main(["rig", str(head), "--landmarks", str(tmp_path / "points.json"), "-o", str(tmp_path / "me")]) != 0
+    line = capsys.readouterr().err.strip().splitlines()[-1]
+    assert "feature points 4.1 and 4.3 fall on the same place" in line and "pick-landmarks" in line, line

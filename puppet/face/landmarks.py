@@ -127,7 +127,7 @@ def _ibug_key(data: dict, name: str) -> str | None:
     """The key of an object with no FDP ids that holds the 68 iBUG vertex indices as one list (as
     ICT-FaceKit's ``vertex_indices.json`` does under ``idx_to_landmark_verts``); None for an object
     of FDP ids. Several such lists are a LandmarkError naming them."""
-    if any(_is_fdp(key) for key in data):
+    if any(is_fdp(key) for key in data):
         return None
     lists = [key for key, value in data.items() if isinstance(value, list) and len(value) == 68
              and all(isinstance(v, int) and not isinstance(v, bool) for v in value)]
@@ -138,7 +138,7 @@ def _ibug_key(data: dict, name: str) -> str | None:
 
 
 def _fdp_items(data: dict, name: str) -> list[tuple[str, object]]:
-    bad = [k for k in data if not _is_fdp(k)]
+    bad = [k for k in data if not is_fdp(k)]
     if bad:
         raise LandmarkError(f"{name}: unknown FDP id(s) {_clip_list(bad)} (MPEG-4 ids look like '2.1' .. '11.6'; "
                             "or give the 68 iBUG vertex indices, as a list or under one key)")
@@ -150,7 +150,8 @@ def _clip_list(items: list, most: int = 5) -> str:
     return f"[{shown}{f', ... ({len(items)} in all)' if len(items) > most else ''}]"
 
 
-def _is_fdp(key: str) -> bool:
+def is_fdp(key: str) -> bool:
+    """Whether ``key`` names an MPEG-4 feature point ('2.1' .. '11.6')."""
     group, _, index = str(key).partition(".")
     return group.isdigit() and index.isdigit() and 1 <= int(index) <= GROUP_SIZES.get(int(group), 0)
 
