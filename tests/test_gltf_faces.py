@@ -149,8 +149,9 @@ def test_a_landmarked_glb_rigs_with_turning_eyes_and_rigid_teeth(head):
 
 def test_a_skin_split_along_a_uv_seam_is_one_skin_to_the_landmarks(tmp_path):
     """An exporter splits vertices along uv seams: a skin whose halves meet only at the mid-line
-    (each half its own copy of it) is still one skin, whose lip and lid loops cross the mid-line.
-    (``build_rig`` does not join such seams yet: its mouth bag takes the far half for inside.)"""
+    (each half its own copy of it) is still one skin, whose lip and lid loops cross the mid-line,
+    and ``build_rig`` joins it too: every region covers the places it covers on the whole skin
+    (unjoined, the mouth bag took the far half for the mouth's inside and emptied the cheeks)."""
     face = load_face(write_head(tmp_path / "seam.glb", split_skin=True), landmarks=glb_landmarks(split_skin=True))
     default = default_face()
     copies = len(face.vertices) - len(default.vertices)
@@ -161,6 +162,10 @@ def test_a_skin_split_along_a_uv_seam_is_one_skin_to_the_landmarks(tmp_path):
     assert {k: len(v) for k, v in face.contours.items() if "lid" in k} == \
         {k: len(v) for k, v in load_face(write_head(tmp_path / "whole.glb"), landmarks=glb_landmarks()).contours.items()
          if "lid" in k}
+    whole = load_face(write_head(tmp_path / "whole.glb"), landmarks=glb_landmarks())
+    for split, joined in zip(build_rig(face).regions, build_rig(whole).regions, strict=True):
+        places = [{tuple(p) for p in np.round(f.vertices[r.vertices], 6)} for f, r in ((face, split), (whole, joined))]
+        assert split.name == joined.name and places[0] == places[1], split.name
 
 
 def _rigid(a: np.ndarray, b: np.ndarray) -> bool:

@@ -226,6 +226,12 @@ def _components(n: int, triangles: np.ndarray, seams: np.ndarray | None = None) 
                                 directed=False)[1]
 
 
+def seam_pairs(face) -> np.ndarray:
+    """(k, 2) pairs (vertex, its twin): the vertices an exporter split along a uv seam (one place,
+    one part), to be joined wherever connectivity matters."""
+    return _seams(face.vertices, _pieces(face))
+
+
 def _seams(vertices: np.ndarray, piece: np.ndarray) -> np.ndarray:
     """(k, 2) pairs (vertex, the first vertex at the same place in the same piece of the file)."""
     keyed = np.c_[np.asarray(vertices, dtype=float), piece]
