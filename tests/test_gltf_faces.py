@@ -251,6 +251,9 @@ def test_calibrate_face_learns_from_a_glb_s_morph_targets(tmp_path, capsys):
     ("garbage", ["not a binary glTF"]),
     ("missing buffer", ["buffers[0]", "nowhere.bin", "cannot be read"]),
     ("2M vertices", [f"{2_000_000 + 10222 - 4326:,} vertices", f"{MAX_VERTICES:,}"]),  # the skin's 4326 made 2M
+    ("EXT_meshopt_compression", ["EXT_meshopt_compression", "meshopt", "without compression"]),
+    ("KHR_draco_mesh_compression", ["KHR_draco_mesh_compression", "Draco", "without compression"]),
+    ("KHR_texture_basisu", ["KHR_texture_basisu", "KTX2", "PNG or JPEG"]),
 ])
 def test_a_bad_glb_is_one_clear_line(tmp_path, case, words):
     path = tmp_path / ("head.gltf" if case == "missing buffer" else "head.glb")
@@ -263,9 +266,11 @@ def test_a_bad_glb_is_one_clear_line(tmp_path, case, words):
         path.write_bytes(bytes(range(256)) * 10)
     elif case == "missing buffer":
         path.write_text(json.dumps(doc | {"buffers": [{"uri": "nowhere.bin", "byteLength": len(blob)}]}))
-    else:
+    elif case == "2M vertices":
         doc["accessors"][doc["meshes"][0]["primitives"][0]["attributes"]["POSITION"]]["count"] = 2_000_000
         write_glb(path, doc, blob)
+    else:  # a file that cannot be read without a compression extension
+        write_glb(path, doc | {"extensionsUsed": [case], "extensionsRequired": [case]}, blob)
     with pytest.raises(FaceFileError) as err:
         load_face(path)
     text = str(err.value)
