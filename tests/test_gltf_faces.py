@@ -360,3 +360,20 @@ def test_two_feature_points_on_one_place_are_named_with_what_to_do(tmp_path, cap
     assert main(["rig", str(head), "--landmarks", str(tmp_path / "points.json"), "-o", str(tmp_path / "me")]) != 0
     line = capsys.readouterr().err.strip().splitlines()[-1]
     assert "feature points 4.1 and 4.3 fall on the same place" in line and "pick-landmarks" in line, line
+
+
+@pytest.mark.parametrize("suffix", [".obj", ".ply"])
+def test_a_mesh_of_millions_of_vertices_is_refused_in_one_line_as_a_glb_is(tmp_path, suffix):
+    """The OBJ's vertex lines are counted before any is parsed; trimesh's formats after loading."""
+    n = MAX_VERTICES + 1
+    path = tmp_path / f"big{suffix}"
+    if suffix == ".obj":
+        path.write_text("v 0 0 0\n" * n + "f 1 2 3\n")
+    else:
+        header = f"ply\nformat binary_little_endian 1.0\nelement vertex {n}\nproperty float x\nproperty float y\n" \
+                 "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
+        path.write_bytes(header.encode() + np.zeros((n, 3), "<f4").tobytes() + bytes([3]) + np.arange(3, dtype="<i4").tobytes())
+    with pytest.raises(FaceFileError) as err:
+        load_face(path)
+    text = str(err.value)
+    assert "\n" not in text and str(path) in text and f"{n:,} vertices" in text and f"{MAX_VERTICES:,}" in text, text
