@@ -372,7 +372,8 @@ def test_a_mesh_of_millions_of_vertices_is_refused_in_one_line_as_a_glb_is(tmp_p
     else:
         header = f"ply\nformat binary_little_endian 1.0\nelement vertex {n}\nproperty float x\nproperty float y\n" \
                  "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
-        path.write_bytes(header.encode() + np.zeros((n, 3), "<f4").tobytes() + bytes([3]) + np.arange(3, dtype="<i4").tobytes())
+        face = bytes([3]) + np.arange(3, dtype="<i4").tobytes()
+        path.write_bytes(header.encode() + np.zeros((n, 3), "<f4").tobytes() + face)
     with pytest.raises(FaceFileError) as err:
         load_face(path)
     text = str(err.value)
