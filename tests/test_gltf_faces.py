@@ -378,3 +378,80 @@ def test_a_mesh_of_millions_of_vertices_is_refused_in_one_line_as_a_glb_is(tmp_p
         load_face(path)
     text = str(err.value)
     assert "\n" not in text and str(path) in text and f"{n:,} vertices" in text and f"{MAX_VERTICES:,}" in text, text
+
+
+def _awkward(case: str, path):
+    """The test head turned to look along +x in its file, standing on a body box four heads tall
+    (a whole figure), or as an OBJ whose skin repeats every 50th triangle and grows a fin (an edge
+    of three triangles)."""
+    doc, blob = head_document()
+    if case == "sideways":
+        for node in doc["nodes"]:
+            node["rotation"] = [0.0, float(np.sin(np.pi / 4)), 0.0, float(np.cos(np.pi / 4))]
+        return write_glb(path.with_suffix(".glb"), doc, blob)
+    v, t = default_face().vertices, default_face().triangles
+    if case == "non-manifold":
+        fin = v[t[0, 0]] + (0.0, 0.0, 0.03 * np.ptp(v[:, 1]))
+        triangles = np.vstack([t, t[::50], [[*t[0, :2], len(v)]]])
+        return write_obj_like(path.with_suffix(".obj"), np.vstack([v, fin]), triangles)
+    lo, hi = v.min(axis=0), v.max(axis=0)
+    h, c = hi[1] - lo[1], (lo + hi) / 2
+    box = np.array([[x, y, z] for x in (c[0] - h, c[0] + h) for y in (lo[1] - 4 * h, lo[1] + 0.05 * h)
+                    for z in (c[2] - h / 2, c[2] + h / 2)], np.float32)
+    sides = np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1], [2, 3, 7], [2, 7, 6],
+                      [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]], np.uint32)
+    data = bytearray(blob)
+    for array in (box, sides):
+        doc["bufferViews"].append({"buffer": 0, "byteOffset": len(data), "byteLength": array.nbytes})
+        data += array.tobytes()
+    n = len(doc["accessors"])
+    doc["accessors"] += [{"bufferView": len(doc["bufferViews"]) - 2, "componentType": 5126, "count": 8, "type": "VEC3",
+                          "min": box.min(axis=0).tolist(), "max": box.max(axis=0).tolist()},
+                         {"bufferView": len(doc["bufferViews"]) - 1, "componentType": 5125, "count": sides.size,
+                          "type": "SCALAR"}]
+    doc["meshes"].append({"name": "Body", "primitives": [{"attributes": {"POSITION": n}, "indices": n + 1}]})
+    doc["nodes"].append({"name": "Body", "mesh": len(doc["meshes"]) - 1})
+    doc["scenes"][0]["nodes"].append(len(doc["nodes"]) - 1)
+    doc["buffers"] = [{"byteLength": len(data)}]
+    return write_glb(path.with_suffix(".glb"), doc, bytes(data))
+
+
+def write_obj_like(path, vertices: np.ndarray, triangles: np.ndarray):
+    """A bare OBJ of these vertices and triangles."""
+    lines = [f"v {x:.9g} {y:.9g} {z:.9g}" for x, y, z in vertices]
+    lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in triangles]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(photo_python() is None, reason="no photo environment (.venv-photo: tools/setup.sh makes it)")
+@pytest.mark.parametrize("case", ["sideways", "non-manifold"])
+def test_an_awkward_head_rigs_from_found_landmarks(tmp_path, case):
+    """A face looking sideways in its file, a non-manifold skin: each rigs with no --landmarks, and
+    its jaw opens its lower lip away from its upper lip."""
+    mesh = _awkward(case, tmp_path / "head")
+    assert main(["rig", str(mesh), "-o", str(tmp_path / "me")]) == 0
+    face = load_face(tmp_path / "me")
+    runtime = Runtime(face, dtype=np.float64)
+    rest, opened = runtime.deform_faps(), runtime.deform_faps({"open_jaw": 600})
+    lip = face.feature_vertices["2.3"]
+    assert rest[lip, 1] - opened[lip, 1] > 0.02 * np.ptp(rest[face.parts["skin"], 1]) > 0
+    np.testing.assert_allclose(opened[face.feature_vertices["9.3"]], rest[face.feature_vertices["9.3"]], atol=1e-6)
+
+
+def test_a_whole_figure_rigs_its_head_and_its_body_stays_with_the_head(tmp_path):
+    """A head on a body box (given landmarks): the body is no lash riding the cheeks (two of its
+    corners did, and the jaw's fold limit shrank to a twentieth): it stays, and the jaw opens as on
+    the head alone."""
+    figure = load_face(_awkward("whole figure", tmp_path / "figure"), landmarks=glb_landmarks())
+    head = load_face(write_head(tmp_path / "head.glb"), landmarks=glb_landmarks())
+    drops = []
+    for face in (figure, head):
+        runtime = Runtime(face, build_rig(face), dtype=np.float64, cache=False)
+        rest, opened = runtime.deform_faps(), runtime.deform_faps({"open_jaw": 600})
+        drops.append(rest[face.feature_vertices["2.3"], 1] - opened[face.feature_vertices["2.3"], 1])
+        if face is figure:
+            body = face.parts["attached"]
+            assert len(body) == 8 and np.array_equal(opened[body], rest[body])
+    assert drops[0] == pytest.approx(drops[1], rel=1e-6) and drops[1] > 0

@@ -224,8 +224,23 @@ class _Builder:
             self.region_of[m] = np.where(v[m, 1] >= self._lip_line(v[m, 0]), "upper_mouth", "lower_mouth")
         if "attached" in self.face.parts:  # lashes, tear lines...: they follow the skin under them
             a = self.face.parts["attached"]
-            nearest = cKDTree(v[skin]).query(v[a])[1]
-            self.region_of[a] = label[nearest]
+            gap, nearest = cKDTree(v[skin]).query(v[a])
+            self.region_of[a] = np.where(self._far_pieces(a, gap), "rest", label[nearest])
+
+    def _far_pieces(self, members: np.ndarray, gap: np.ndarray) -> np.ndarray:
+        """Per vertex of ``members``, whether its connected piece reaches farther than
+        ``ATTACHED_REACH`` from the skin anywhere (``gap``: each vertex's distance): not a lash but a
+        body, a hat, hair, which stay with the head. A whole figure's body box riding the cheeks by
+        two corners stretched its sides and capped the jaw's opening at a twentieth."""
+        inside = np.zeros(len(self.v), dtype=bool)
+        inside[members] = True
+        e = self.edges[inside[self.edges].all(axis=1)]
+        n = len(self.v)
+        piece = connected_components(sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n)),
+                                     directed=False)[1][members]
+        reach = np.zeros(piece.max() + 1)
+        np.maximum.at(reach, piece, gap)
+        return reach[piece] > self._scale(ATTACHED_REACH)
 
     def _lip_line(self, x: np.ndarray) -> np.ndarray:
         """The height of the lips' meeting line at each x, which splits the skin between the two
@@ -612,6 +627,7 @@ def _loop_path_via(loop: list[int], i: int, j: int, via: int) -> list[int]:
     return forward if via in forward else [loop[(i - k) % n] for k in range((i - j) % n + 1)]
 
 
+ATTACHED_REACH = 0.5  # eye separations: an attached piece farther than this from the skin stays with the head
 LID_TAPER = 0.25  # the share of a lid margin, from each eye corner, over which its points ease in
 
 

@@ -257,19 +257,21 @@ def _combine(face: Face, lifts: np.ndarray, facing: np.ndarray, found: np.ndarra
                           views=views, rotation=rotation, face_width=width)
 
 
-UPPER_LOWER = (("2.2", "2.3"), ("3.1", "3.3"), ("3.2", "3.4"))  # FDPs where a closed mouth or eye meets
+UPPER_LOWER = (("2.2", "2.3"), ("2.6", "2.8"), ("2.7", "2.9"), ("3.1", "3.3"), ("3.2", "3.4"))
+"""(upper, lower) lip and lid points, which meet where a mouth or an eye is closed."""
 
 
 def _apart(chosen: np.ndarray, vertices: np.ndarray, skin: np.ndarray, tree: cKDTree, lifts: np.ndarray,
            found: np.ndarray, up: np.ndarray) -> None:
-    """An upper and a lower lip (lid) point never share a vertex (in place): on a closed mouth the
-    inner upper and lower lip (2.2, 2.3) lift to one spot and snapped to one vertex, and the lip
-    loop through them pinched into a figure eight. The pair takes the two skin vertices nearest
-    their lifts with the upper one above the lower (``up``: the face frame's +y in the file)."""
+    """An upper lip (lid) point lies above its lower one, on another vertex (in place): on a closed
+    mouth the inner upper and lower lip (2.2, 2.3) lift to one spot and snapped to one vertex (the
+    lip loop through them pinched into a figure eight), or swapped (on a whole figure: the jaw
+    opened the upper lip). Such a pair takes the two skin vertices nearest their lifts with the
+    upper one above the lower (``up``: the face frame's +y in the file)."""
     index = {fid: i for i, fid in MEDIAPIPE_FDP.items()}
     for upper, lower in UPPER_LOWER:
         i, j = index[upper], index[lower]
-        if chosen[i] < 0 or chosen[i] != chosen[j]:
+        if chosen[i] < 0 or chosen[j] < 0 or vertices[chosen[i]] @ up > vertices[chosen[j]] @ up:
             continue
         targets = [np.nanmean(lifts[found, k], axis=0) for k in (i, j)]
         near = np.unique(skin[tree.query(np.array(targets), k=min(len(skin), 12))[1]].ravel())
