@@ -241,9 +241,11 @@ def _combine(face: Face, lifts: np.ndarray, facing: np.ndarray, found: np.ndarra
         cost = np.linalg.norm(vertices[near][:, None] - lifts[use, i][None], axis=2).sum(axis=1)
         chosen[i] = near[np.argmin(cost)]
     _apart(chosen, vertices, skin, tree, lifts, found, rotation[1])
-    for i in np.flatnonzero(chosen >= 0):
+    for i in np.flatnonzero(chosen >= 0):  # over the views the choice used
         seen = found & np.isfinite(lifts[:, i]).all(axis=1)
-        spread[i] = np.median(np.linalg.norm(lifts[seen, i] - vertices[chosen[i]], axis=1))
+        use = seen & (facing[:, i] >= MIN_FACING)
+        use = use if use.any() else seen & (facing[:, i] == facing[seen, i].max())
+        spread[i] = np.median(np.linalg.norm(lifts[use, i] - vertices[chosen[i]], axis=1))
     missing = sorted({MEDIAPIPE_FDP[i] for i in MEDIAPIPE_FDP if chosen[i] < 0} & set(FDP_NEEDED))
     if missing:
         raise DetectionError(f"{name}: the face was found but FDP(s) {missing} were seen in no view "
