@@ -37,6 +37,7 @@ from puppet.face.gltfread import MAX_VERTICES, read_gltf, srgb_encode
 from puppet.face.landmarks import FDP_NEEDED
 from puppet.face.load import load_face
 from puppet.face.model import FaceFileError
+from puppet.photo.detect import photo_python
 from puppet.runtime.fapcalibration import fit_faps, relative_residual
 from puppet.runtime.runtime import Runtime
 from puppet.view.renderer import Renderer
@@ -148,8 +149,9 @@ def test_a_landmarked_glb_rigs_with_turning_eyes_and_rigid_teeth(head):
 
 def test_a_skin_split_along_a_uv_seam_is_one_skin_to_the_landmarks(tmp_path):
     """An exporter splits vertices along uv seams: a skin whose halves meet only at the mid-line
-    (each half its own copy of it) is still one skin, whose lip and lid loops cross the mid-line.
-    (``build_rig`` does not join such seams yet: its mouth bag takes the far half for inside.)"""
+    (each half its own copy of it) is still one skin, whose lip and lid loops cross the mid-line,
+    and ``build_rig`` joins it too: every region covers the places it covers on the whole skin
+    (unjoined, the mouth bag took the far half for the mouth's inside and emptied the cheeks)."""
     face = load_face(write_head(tmp_path / "seam.glb", split_skin=True), landmarks=glb_landmarks(split_skin=True))
     default = default_face()
     copies = len(face.vertices) - len(default.vertices)
@@ -160,6 +162,10 @@ def test_a_skin_split_along_a_uv_seam_is_one_skin_to_the_landmarks(tmp_path):
     assert {k: len(v) for k, v in face.contours.items() if "lid" in k} == \
         {k: len(v) for k, v in load_face(write_head(tmp_path / "whole.glb"), landmarks=glb_landmarks()).contours.items()
          if "lid" in k}
+    whole = load_face(write_head(tmp_path / "whole.glb"), landmarks=glb_landmarks())
+    for split, joined in zip(build_rig(face).regions, build_rig(whole).regions, strict=True):
+        places = [{tuple(p) for p in np.round(f.vertices[r.vertices], 6)} for f, r in ((face, split), (whole, joined))]
+        assert split.name == joined.name and places[0] == places[1], split.name
 
 
 def _rigid(a: np.ndarray, b: np.ndarray) -> bool:
@@ -245,6 +251,9 @@ def test_calibrate_face_learns_from_a_glb_s_morph_targets(tmp_path, capsys):
     ("garbage", ["not a binary glTF"]),
     ("missing buffer", ["buffers[0]", "nowhere.bin", "cannot be read"]),
     ("2M vertices", [f"{2_000_000 + 10222 - 4326:,} vertices", f"{MAX_VERTICES:,}"]),  # the skin's 4326 made 2M
+    ("EXT_meshopt_compression", ["EXT_meshopt_compression", "meshopt", "without compression"]),
+    ("KHR_draco_mesh_compression", ["KHR_draco_mesh_compression", "Draco", "without compression"]),
+    ("KHR_texture_basisu", ["KHR_texture_basisu", "KTX2", "PNG or JPEG"]),
 ])
 def test_a_bad_glb_is_one_clear_line(tmp_path, case, words):
     path = tmp_path / ("head.gltf" if case == "missing buffer" else "head.glb")
@@ -257,9 +266,11 @@ def test_a_bad_glb_is_one_clear_line(tmp_path, case, words):
         path.write_bytes(bytes(range(256)) * 10)
     elif case == "missing buffer":
         path.write_text(json.dumps(doc | {"buffers": [{"uri": "nowhere.bin", "byteLength": len(blob)}]}))
-    else:
+    elif case == "2M vertices":
         doc["accessors"][doc["meshes"][0]["primitives"][0]["attributes"]["POSITION"]]["count"] = 2_000_000
         write_glb(path, doc, blob)
+    else:  # a file that cannot be read without a compression extension
+        write_glb(path, doc | {"extensionsUsed": [case], "extensionsRequired": [case]}, blob)
     with pytest.raises(FaceFileError) as err:
         load_face(path)
     text = str(err.value)
@@ -308,3 +319,139 @@ def test_accessors_read_sparse_normalized_and_strided_values(tmp_path):
     np.testing.assert_allclose(piece.colors, np.eye(3), atol=1e-6)
     np.testing.assert_allclose(piece.uv, interleaved["uv"], atol=1e-7)
     assert piece.triangles.tolist() == [[0, 1, 2]]
+
+
+@pytest.mark.skipif(photo_python() is None, reason="no photo environment (.venv-photo: tools/setup.sh makes it)")
+def test_a_glb_head_alone_rigs_from_found_landmarks_with_its_eyes_teeth_and_texture(tmp_path, egl):
+    """``puppet rig head.glb -o me/`` with nothing else (its found landmarks once put one vertex on
+    both lids of a loop that touched itself: 'duplicate sites'): the folder has simple lip and lid
+    loops, renders with its texture and blue eyes, its eyes turn and its lower teeth open rigidly."""
+    head = write_head(tmp_path / "head.glb")
+    assert main(["rig", str(head), "-o", str(tmp_path / "me")]) == 0
+    face = load_face(tmp_path / "me")
+    for name, loop in face.contours.items():
+        assert len(set(loop.tolist())) == len(loop), name
+    assert np.array_equal(face.texture, load_face(head).texture)
+    runtime = Runtime(face, dtype=np.float64)
+    rest = runtime.deform_faps()
+    eye = face.parts["eye_l"]
+    looked = runtime.deform_faps({"yaw_l_eyeball": 30000})
+    assert np.linalg.norm(looked[eye] - rest[eye], axis=1).max() > 0.01 * np.ptp(rest[eye], axis=0).max()
+    assert _rigid(rest[eye], looked[eye])
+    opened = runtime.deform_faps({"open_jaw": 600})
+    lower = face.parts["teeth_lower"]
+    assert np.abs(opened[lower] - rest[lower]).max() > 0 and _rigid(rest[lower], opened[lower])
+    with Renderer.for_face(face, width=320, height=320) as r:
+        r.aim(rest)
+        image = r.render(rest.astype(np.float32)).astype(int)
+        front = rest[eye][np.argmax(rest[eye, 2])]
+        skin = rest[face.parts["skin"]]
+        cheek = skin[np.argmin(np.linalg.norm(skin - (front - (0, 0.25 * np.ptp(rest[eye, 1]) * 4, 0)), axis=1))]
+        (ex, ey), (cx, cy) = r.project(np.array([front, cheek])).astype(int)
+    assert image[ey, ex, 2] > image[ey, ex, 0] + 40, image[ey, ex]  # blue, as its material says
+    assert image[cy, cx, 0] > image[cy, cx, 2] + 40, image[cy, cx]  # skin toned, as its texture says
+
+
+def test_two_feature_points_on_one_place_are_named_with_what_to_do(tmp_path, capsys):
+    """Issue 38: not 'duplicate sites ... indices 21 and 40' but the feature points and the fix."""
+    marks = glb_landmarks() | {f: int(glb_vertex()[default_face().feature_vertices["4.1"]]) for f in ("4.1", "4.3")}
+    (tmp_path / "points.json").write_text(json.dumps(marks))
+    head = write_head(tmp_path / "head.glb")
+    assert main(["rig", str(head), "--landmarks", str(tmp_path / "points.json"), "-o", str(tmp_path / "me")]) != 0
+    line = capsys.readouterr().err.strip().splitlines()[-1]
+    assert "feature points 4.1 and 4.3 fall on the same place" in line and "pick-landmarks" in line, line
+
+
+@pytest.mark.parametrize("suffix", [".obj", ".ply"])
+def test_a_mesh_of_millions_of_vertices_is_refused_in_one_line_as_a_glb_is(tmp_path, suffix):
+    """The OBJ's vertex lines are counted before any is parsed; trimesh's formats after loading."""
+    n = MAX_VERTICES + 1
+    path = tmp_path / f"big{suffix}"
+    if suffix == ".obj":
+        path.write_text("v 0 0 0\n" * n + "f 1 2 3\n")
+    else:
+        header = f"ply\nformat binary_little_endian 1.0\nelement vertex {n}\nproperty float x\nproperty float y\n" \
+                 "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
+        face = bytes([3]) + np.arange(3, dtype="<i4").tobytes()
+        path.write_bytes(header.encode() + np.zeros((n, 3), "<f4").tobytes() + face)
+    with pytest.raises(FaceFileError) as err:
+        load_face(path)
+    text = str(err.value)
+    assert "\n" not in text and str(path) in text and f"{n:,} vertices" in text and f"{MAX_VERTICES:,}" in text, text
+
+
+def _awkward(case: str, path):
+    """The test head turned to look along +x in its file, standing on a body box four heads tall
+    (a whole figure), or as an OBJ whose skin repeats every 50th triangle and grows a fin (an edge
+    of three triangles)."""
+    doc, blob = head_document()
+    if case == "sideways":
+        for node in doc["nodes"]:
+            node["rotation"] = [0.0, float(np.sin(np.pi / 4)), 0.0, float(np.cos(np.pi / 4))]
+        return write_glb(path.with_suffix(".glb"), doc, blob)
+    v, t = default_face().vertices, default_face().triangles
+    if case == "non-manifold":
+        fin = v[t[0, 0]] + (0.0, 0.0, 0.03 * np.ptp(v[:, 1]))
+        triangles = np.vstack([t, t[::50], [[*t[0, :2], len(v)]]])
+        return write_obj_like(path.with_suffix(".obj"), np.vstack([v, fin]), triangles)
+    lo, hi = v.min(axis=0), v.max(axis=0)
+    h, c = hi[1] - lo[1], (lo + hi) / 2
+    box = np.array([[x, y, z] for x in (c[0] - h, c[0] + h) for y in (lo[1] - 4 * h, lo[1] + 0.05 * h)
+                    for z in (c[2] - h / 2, c[2] + h / 2)], np.float32)
+    sides = np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1], [2, 3, 7], [2, 7, 6],
+                      [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]], np.uint32)
+    data = bytearray(blob)
+    for array in (box, sides):
+        doc["bufferViews"].append({"buffer": 0, "byteOffset": len(data), "byteLength": array.nbytes})
+        data += array.tobytes()
+    n = len(doc["accessors"])
+    doc["accessors"] += [{"bufferView": len(doc["bufferViews"]) - 2, "componentType": 5126, "count": 8, "type": "VEC3",
+                          "min": box.min(axis=0).tolist(), "max": box.max(axis=0).tolist()},
+                         {"bufferView": len(doc["bufferViews"]) - 1, "componentType": 5125, "count": sides.size,
+                          "type": "SCALAR"}]
+    doc["meshes"].append({"name": "Body", "primitives": [{"attributes": {"POSITION": n}, "indices": n + 1}]})
+    doc["nodes"].append({"name": "Body", "mesh": len(doc["meshes"]) - 1})
+    doc["scenes"][0]["nodes"].append(len(doc["nodes"]) - 1)
+    doc["buffers"] = [{"byteLength": len(data)}]
+    return write_glb(path.with_suffix(".glb"), doc, bytes(data))
+
+
+def write_obj_like(path, vertices: np.ndarray, triangles: np.ndarray):
+    """A bare OBJ of these vertices and triangles."""
+    lines = [f"v {x:.9g} {y:.9g} {z:.9g}" for x, y, z in vertices]
+    lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in triangles]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(photo_python() is None, reason="no photo environment (.venv-photo: tools/setup.sh makes it)")
+@pytest.mark.parametrize("case", ["sideways", "non-manifold"])
+def test_an_awkward_head_rigs_from_found_landmarks(tmp_path, case):
+    """A face looking sideways in its file, a non-manifold skin: each rigs with no --landmarks, and
+    its jaw opens its lower lip away from its upper lip."""
+    mesh = _awkward(case, tmp_path / "head")
+    assert main(["rig", str(mesh), "-o", str(tmp_path / "me")]) == 0
+    face = load_face(tmp_path / "me")
+    runtime = Runtime(face, dtype=np.float64)
+    rest, opened = runtime.deform_faps(), runtime.deform_faps({"open_jaw": 600})
+    lip = face.feature_vertices["2.3"]
+    assert rest[lip, 1] - opened[lip, 1] > 0.02 * np.ptp(rest[face.parts["skin"], 1]) > 0
+    np.testing.assert_allclose(opened[face.feature_vertices["9.3"]], rest[face.feature_vertices["9.3"]], atol=1e-6)
+
+
+def test_a_whole_figure_rigs_its_head_and_its_body_stays_with_the_head(tmp_path):
+    """A head on a body box (given landmarks): the body is no lash riding the cheeks (two of its
+    corners did, and the jaw's fold limit shrank to a twentieth): it stays, and the jaw opens as on
+    the head alone."""
+    figure = load_face(_awkward("whole figure", tmp_path / "figure"), landmarks=glb_landmarks())
+    head = load_face(write_head(tmp_path / "head.glb"), landmarks=glb_landmarks())
+    drops = []
+    for face in (figure, head):
+        runtime = Runtime(face, build_rig(face), dtype=np.float64, cache=False)
+        rest, opened = runtime.deform_faps(), runtime.deform_faps({"open_jaw": 600})
+        drops.append(rest[face.feature_vertices["2.3"], 1] - opened[face.feature_vertices["2.3"], 1])
+        if face is figure:
+            body = face.parts["attached"]
+            assert len(body) == 8 and np.array_equal(opened[body], rest[body])
+    assert drops[0] == pytest.approx(drops[1], rel=1e-6) and drops[1] > 0

@@ -59,6 +59,7 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
 from puppet.face.default import default_face, load_default_rig
+from puppet.face.landmarks import seam_pairs
 from puppet.face.motiontransfer import transfer_motions
 from puppet.face.muscles import default_muscles
 from puppet.face.rig import ControlPoint, LipLine, Region, Rig, RigError, RigidPart, load_rig
@@ -157,6 +158,7 @@ class _Builder:
         self.points: list[ControlPoint] = []
         self._named: set[str] = set()  # the points' names: ``_add`` asks thousands of times on a grid
         self.region_of = np.full(len(self.v), "", dtype=object)
+        self.edges = _welded_edges(face)
 
     # -- regions ------------------------------------------------------------------------
 
@@ -222,8 +224,23 @@ class _Builder:
             self.region_of[m] = np.where(v[m, 1] >= self._lip_line(v[m, 0]), "upper_mouth", "lower_mouth")
         if "attached" in self.face.parts:  # lashes, tear lines...: they follow the skin under them
             a = self.face.parts["attached"]
-            nearest = cKDTree(v[skin]).query(v[a])[1]
-            self.region_of[a] = label[nearest]
+            gap, nearest = cKDTree(v[skin]).query(v[a])
+            self.region_of[a] = np.where(self._far_pieces(a, gap), "rest", label[nearest])
+
+    def _far_pieces(self, members: np.ndarray, gap: np.ndarray) -> np.ndarray:
+        """Per vertex of ``members``, whether its connected piece reaches farther than
+        ``ATTACHED_REACH`` from the skin anywhere (``gap``: each vertex's distance): not a lash but a
+        body, a hat, hair, which stay with the head. A whole figure's body box riding the cheeks by
+        two corners stretched its sides and capped the jaw's opening at a twentieth."""
+        inside = np.zeros(len(self.v), dtype=bool)
+        inside[members] = True
+        e = self.edges[inside[self.edges].all(axis=1)]
+        n = len(self.v)
+        piece = connected_components(sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n)),
+                                     directed=False)[1][members]
+        reach = np.zeros(piece.max() + 1)
+        np.maximum.at(reach, piece, gap)
+        return reach[piece] > self._scale(ATTACHED_REACH)
 
     def _lip_line(self, x: np.ndarray) -> np.ndarray:
         """The height of the lips' meeting line at each x, which splits the skin between the two
@@ -267,8 +284,7 @@ class _Builder:
         skin[self.face.parts["skin"]] = True
         on_oval = np.zeros(n, dtype=bool)
         on_oval[oval] = True
-        tri = np.asarray(self.face.triangles)
-        edges = np.vstack([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
+        edges = self.edges
         edges = edges[skin[edges].all(axis=1)]
         cut = edges[~on_oval[edges].any(axis=1)]
         _, comp = connected_components(sp.coo_matrix((np.ones(len(cut)), (cut[:, 0], cut[:, 1])), shape=(n, n)),
@@ -290,13 +306,12 @@ class _Builder:
     def _mouth_bag(self, skin: np.ndarray) -> np.ndarray:
         """Skin vertices reachable from inside the mouth without crossing the lips' meeting line."""
         loop = np.asarray(self.face.contours["mouth_opening"])
-        tri = np.asarray(self.face.triangles)
         n = len(self.v)
         blocked = np.zeros(n, dtype=bool)
         blocked[loop] = True
         on_skin = np.zeros(n, dtype=bool)
         on_skin[skin] = True
-        edges = np.vstack([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
+        edges = self.edges
         keep = on_skin[edges].all(axis=1) & ~blocked[edges].any(axis=1)
         e = edges[keep]
         graph = sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
@@ -312,8 +327,7 @@ class _Builder:
         halves = self._lip_halves()
         inside = np.zeros(len(self.v), dtype=bool)
         inside[bag] = inside[np.concatenate(halves)] = True
-        tri = np.asarray(self.face.triangles)
-        e = np.vstack([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
+        e = self.edges
         e = e[inside[e].all(axis=1)]
         w = np.linalg.norm(self.v[e[:, 0]] - self.v[e[:, 1]], axis=1)
         graph = sp.coo_matrix((w, (e[:, 0], e[:, 1])), shape=(len(self.v),) * 2).tocsr()
@@ -371,8 +385,7 @@ class _Builder:
 
     def _borders(self) -> None:
         """Passive points, fixed anchors or nothing on each border (see module docstring)."""
-        tri = np.asarray(self.face.triangles)
-        edges = np.vstack([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
+        edges = self.edges
         region = self.region_of
         spacing = self._scale(BORDER_SPACING)
         for name in DFFD_REGIONS:
@@ -599,6 +612,14 @@ def _lid_group(fdp: str) -> str | None:
     return {"3.1": "upper_lid_l", "3.2": "upper_lid_r", "3.3": "lower_lid_l", "3.4": "lower_lid_r"}.get(fdp)
 
 
+def _welded_edges(face) -> np.ndarray:
+    """Every triangle's edges (a, b), and each vertex an exporter split along a uv seam joined to
+    its twin: the skin's connectivity by position (the mouth bag, the jaw band), else a skin split
+    at the mid-line is two halves and the mouth bag took the far one for the mouth's inside."""
+    tri = np.asarray(face.triangles)
+    return np.vstack([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]], seam_pairs(face)])
+
+
 def _loop_path_via(loop: list[int], i: int, j: int, via: int) -> list[int]:
     """The vertices from loop[i] to loop[j] along the closed loop, the way that passes ``via``."""
     n = len(loop)
@@ -606,6 +627,7 @@ def _loop_path_via(loop: list[int], i: int, j: int, via: int) -> list[int]:
     return forward if via in forward else [loop[(i - k) % n] for k in range((i - j) % n + 1)]
 
 
+ATTACHED_REACH = 0.5  # eye separations: an attached piece farther than this from the skin stays with the head
 LID_TAPER = 0.25  # the share of a lid margin, from each eye corner, over which its points ease in
 
 

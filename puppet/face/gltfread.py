@@ -24,7 +24,10 @@ small enough that numpy reads it directly. What is read:
 
 Frames: glTF's front faces +z with +y up, which is the face frame (+x the face's own left). A
 VRM 0.x model faces -z by that format's rule, so it is turned half a turn about y here.
-Any other extension is ignored. Bad input is one :class:`FaceFileError` naming the file.
+Any other extension is ignored, unless the file says it cannot be read without it
+(``extensionsRequired``: compressed geometry or textures): then it is refused, naming it
+(``IGNORABLE`` are required ones read or harmless here). Bad input is one :class:`FaceFileError`
+naming the file.
 Above ``MAX_VERTICES`` vertices the file is refused before its arrays are read (the rig works on
 faces of tens of thousands of vertices; a million is past anything it can rig in useful time), and
 a file above ``MAX_BYTES`` before it is read at all.
@@ -52,6 +55,12 @@ MAX_VERTICES = 1_000_000
 MAX_BYTES = 1 << 30  # a file larger than this is refused before it is read (1 GiB)
 COMPONENTS = {5120: "<i1", 5121: "<u1", 5122: "<i2", 5123: "<u2", 5125: "<u4", 5126: "<f4"}
 NORMALIZED_SCALE = {5120: 127.0, 5121: 255.0, 5122: 32767.0, 5123: 65535.0}
+IGNORABLE = {"KHR_mesh_quantization", "KHR_materials_unlit", "KHR_materials_emissive_strength"}
+"""Extensions a file may require that are read here (quantized accessors: any component type) or
+change nothing the rig or the renderer use."""
+COMPRESSED = {"KHR_draco_mesh_compression": "Draco-compressed geometry", "EXT_meshopt_compression":
+              "meshopt-compressed buffers", "KHR_texture_basisu": "Basis Universal (KTX2) textures",
+              "EXT_texture_webp": "WebP textures", "EXT_texture_avif": "AVIF textures"}
 WIDTHS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
 TRIANGLES, TRIANGLE_STRIP, TRIANGLE_FAN = 4, 5, 6
 
@@ -256,6 +265,7 @@ class _Reader:
     # -- scene ----------------------------------------------------------------------------------
 
     def scene(self) -> GltfScene:
+        self._check_required()
         placed = list(self._placed_meshes())
         self._check_size(placed)
         pieces = [piece for node, mesh_index, matrix in placed
@@ -305,6 +315,14 @@ class _Reader:
             return m
         except (TypeError, ValueError) as exc:
             raise self.fail(f"nodes[{i}] has a transform that is not numbers ({exc})") from None
+
+    def _check_required(self) -> None:
+        """Refuse a file that needs an extension not read here (``extensionsRequired``), naming it."""
+        needed = [str(e) for e in self._list("extensionsRequired") if str(e) not in IGNORABLE]
+        if needed:
+            what = "; ".join(f"{e} ({COMPRESSED[e]})" if e in COMPRESSED else e for e in needed)
+            raise self.fail(f"needs glTF extension(s) {what}, which puppet cannot read: export it again "
+                            "without compression, with PNG or JPEG textures")
 
     def _check_size(self, placed: list) -> None:
         total = 0

@@ -134,7 +134,7 @@ def _ibug_key(data: dict, name: str) -> str | None:
     """The key of an object with no FDP ids that holds the 68 iBUG vertex indices as one list (as
     ICT-FaceKit's ``vertex_indices.json`` does under ``idx_to_landmark_verts``); None for an object
     of FDP ids. Several such lists are a LandmarkError naming them."""
-    if any(_is_fdp(key) for key in data):
+    if any(is_fdp(key) for key in data):
         return None
     lists = [key for key, value in data.items() if isinstance(value, list) and len(value) == 68
              and all(isinstance(v, int) and not isinstance(v, bool) for v in value)]
@@ -145,7 +145,7 @@ def _ibug_key(data: dict, name: str) -> str | None:
 
 
 def _fdp_items(data: dict, name: str) -> list[tuple[str, object]]:
-    bad = [k for k in data if not _is_fdp(k)]
+    bad = [k for k in data if not is_fdp(k)]
     if bad:
         raise LandmarkError(f"{name}: unknown FDP id(s) {_clip_list(bad)} (MPEG-4 ids look like '2.1' .. '11.6'; "
                             "or give the 68 iBUG vertex indices, as a list or under one key)")
@@ -157,7 +157,8 @@ def _clip_list(items: list, most: int = 5) -> str:
     return f"[{shown}{f', ... ({len(items)} in all)' if len(items) > most else ''}]"
 
 
-def _is_fdp(key: str) -> bool:
+def is_fdp(key: str) -> bool:
+    """Whether ``key`` names an MPEG-4 feature point ('2.1' .. '11.6')."""
     group, _, index = str(key).partition(".")
     return group.isdigit() and index.isdigit() and 1 <= int(index) <= GROUP_SIZES.get(int(group), 0)
 
@@ -273,6 +274,12 @@ def _components(n: int, triangles: np.ndarray, seams: np.ndarray | None = None) 
                                 directed=False)[1]
 
 
+def seam_pairs(face) -> np.ndarray:
+    """(k, 2) pairs (vertex, its twin): the vertices an exporter split along a uv seam (one place,
+    one part), to be joined wherever connectivity matters."""
+    return _seams(face.vertices, _pieces(face))
+
+
 def _seams(vertices: np.ndarray, piece: np.ndarray) -> np.ndarray:
     """(k, 2) pairs (vertex, the first vertex at the same place in the same piece of the file)."""
     keyed = np.c_[np.asarray(vertices, dtype=float), piece]
@@ -311,23 +318,39 @@ def _skin_graph(vertices: np.ndarray, triangles: np.ndarray, on_skin: np.ndarray
 
 
 def _geodesic_path(skin: Skin, waypoints: list[int], closed: bool) -> np.ndarray:
-    """Vertices along shortest skin paths from waypoint to waypoint (back to the first if closed)."""
+    """Vertices along shortest skin paths from waypoint to waypoint (back to the first if closed).
+    Each leg keeps off the vertices the legs before it took, so a loop never touches itself: two
+    waypoints near one corner (found landmarks a vertex or two apart) sent two shortest legs
+    through one vertex, which became both an upper and a lower lid point, two control points on
+    one place (``duplicate sites``). A leg with no way round them takes the plain shortest path."""
     stops = list(waypoints) + ([waypoints[0]] if closed else [])
-    sources = sorted(set(stops[:-1]))
-    _, pred = dijkstra(skin.graph, directed=False, indices=sources, return_predecessors=True)
-    row = {s: i for i, s in enumerate(sources)}
     path: list[int] = [stops[0]]
     for a, b in zip(stops[:-1], stops[1:]):
-        leg, v = [], b
-        while v != a:
-            if v < 0:
-                raise LandmarkError(f"landmarks: vertices {a} and {b} are not connected on the skin")
-            leg.append(int(v))
-            v = pred[row[a], v]
-        path += leg[::-1]
+        taken = np.zeros(skin.graph.shape[0], dtype=bool)
+        taken[path] = True
+        taken[[a, b]] = False
+        path += _leg(skin.graph, a, b, taken) or _leg(skin.graph, a, b, np.zeros_like(taken))
     if closed:
         path = path[:-1]
     return np.array(path, dtype=np.int32)
+
+
+def _leg(graph: sp.csr_matrix, a: int, b: int, blocked: np.ndarray) -> list[int]:
+    """The shortest path's vertices after ``a`` up to ``b`` avoiding the ``blocked`` vertices;
+    [] when there is none (a == b gives [])."""
+    if blocked.any():
+        keep = sp.diags((~blocked).astype(float))
+        graph = (keep @ graph @ keep).tocsr()
+    _, pred = dijkstra(graph, directed=False, indices=a, return_predecessors=True)
+    leg, v = [], b
+    while v != a:
+        if v < 0:
+            if blocked.any():
+                return []
+            raise LandmarkError(f"landmarks: vertices {a} and {b} are not connected on the skin")
+        leg.append(int(v))
+        v = pred[v]
+    return leg[::-1]
 
 
 def _placement(vertices: np.ndarray, given: dict[str, int], reference: dict[str, np.ndarray]) -> np.ndarray:

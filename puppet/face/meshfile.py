@@ -21,6 +21,7 @@ feature points: ``puppet.face.landmarks`` gives it them.
 from __future__ import annotations
 
 import os
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -28,7 +29,7 @@ import numpy as np
 from PIL import Image, UnidentifiedImageError
 
 from puppet.face.atlas import pack, place_uv
-from puppet.face.gltfread import read_gltf
+from puppet.face.gltfread import MAX_BYTES, MAX_VERTICES, read_gltf
 from puppet.face.meshparts import Piece, cornea_vertices, name_parts, overlay_vertices
 from puppet.face.model import Face, FaceFileError, TexturedFace
 
@@ -236,9 +237,11 @@ def read_obj(path: str | os.PathLike) -> ObjMesh:
     ignored. Indices may be negative (relative). Errors name the file and line."""
     path = Path(path)
     try:
+        _check_bytes(path)
         text = path.read_text(encoding="utf-8", errors="replace")
     except OSError as exc:
         raise FaceFileError(f"cannot read face mesh {str(path)!r}: {exc.strerror or exc}") from exc
+    _check_vertices(path, len(re.findall(r"^[ \t]*v[ \t]", text, flags=re.MULTILINE)))
     positions: list[list[float]] = []
     colors: list[list[float]] = []
     uvs: list[list[float]] = []
@@ -319,9 +322,25 @@ def _obj_index(token: str, count: int, what: str) -> int:
 
 # -- other formats through trimesh ---------------------------------------------------------------
 
+def _check_bytes(path: Path) -> None:
+    """Refuse a file above ``MAX_BYTES`` before it is read."""
+    size = path.stat().st_size
+    if size > MAX_BYTES:
+        raise FaceFileError(f"face mesh {str(path)!r}: {size:,} bytes; files of up to {MAX_BYTES:,} are read")
+
+
+def _check_vertices(path: Path, count: int) -> None:
+    """Refuse a mesh above ``MAX_VERTICES`` (as glTF is: a million is past anything the rig can rig
+    in useful time), before its lines are parsed (an OBJ's ``v`` lines counted first)."""
+    if count > MAX_VERTICES:
+        raise FaceFileError(f"face mesh {str(path)!r}: {count:,} vertices; faces of up to {MAX_VERTICES:,} are read "
+                            "(decimate it first)")
+
+
 def _read_with_trimesh(path: Path):
     import trimesh
 
+    _check_bytes(path)
     try:
         loaded = trimesh.load(str(path), process=False, maintain_order=True)
     except Exception as exc:  # trimesh raises many kinds; name the file either way
@@ -333,6 +352,7 @@ def _read_with_trimesh(path: Path):
     meshes = [m for m in meshes if isinstance(m, trimesh.Trimesh)]
     if not meshes:
         raise FaceFileError(f"face mesh {str(path)!r} holds no triangle mesh")
+    _check_vertices(path, sum(len(m.vertices) for m in meshes))
     positions, triangles, uvs, colors = [], [], [], []
     offset = 0
     for m in meshes:

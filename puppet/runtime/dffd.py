@@ -30,6 +30,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from puppet.errors import PuppetError
+from puppet.face.landmarks import is_fdp
 from puppet.runtime.sibson import SibsonError, natural_neighbour_mask, sibson_coordinates
 
 
@@ -68,8 +69,8 @@ class RegionDeformer:
     """Coefficient matrix of one region: rows = queries, columns = the region's control points."""
 
     def __init__(self, name: str, queries: np.ndarray, sites: np.ndarray, weights: np.ndarray,
-                 box_scale: float = 1.5) -> None:
-        self.name = name
+                 box_scale: float = 1.5, names: list[str] | None = None) -> None:
+        self.name, self.names = name, names
         self.box_scale = box_scale
         self.weights = np.asarray(weights, dtype=float)
         self.box = box_corners(np.vstack([queries, sites]), box_scale)
@@ -84,6 +85,7 @@ class RegionDeformer:
         """Rebuild a deformer from cached matrices without recomputing Sibson coordinates."""
         self = cls.__new__(cls)
         self.name, self.weights, self.box = name, np.asarray(weights, float), np.asarray(box, float)
+        self.names = None
         self.box_scale = box_scale
         self.queries, self.sites = np.array(queries, float), np.array(sites, float)
         self.sibson = sp.csr_matrix(sibson)
@@ -103,7 +105,7 @@ class RegionDeformer:
             try:
                 rows |= natural_neighbour_mask(queries, np.vstack([sites, self.box]), moved_sites)
             except SibsonError as exc:
-                raise DffdError(f"region {self.name!r}: {exc}") from None
+                raise self._error(exc) from None
         redo = np.flatnonzero(rows)
         if len(redo):
             fresh = self._sibson(queries[redo], sites)
@@ -130,7 +132,21 @@ class RegionDeformer:
         try:
             return sibson_coordinates(queries, np.vstack([sites, self.box]))
         except SibsonError as exc:
-            raise DffdError(f"region {self.name!r}: {exc}") from None
+            raise self._error(exc) from None
+
+    def _error(self, exc: SibsonError) -> DffdError:
+        """The region's error; sites on one place named by their control points when ``names``
+        says them: FDP ids are feature points, to be moved apart in ``puppet pick-landmarks``."""
+        real = [(i, j) for i, j in exc.pairs if j < len(self.sites)]
+        if not real or self.names is None:
+            return DffdError(f"region {self.name!r}: {exc}")
+        a, b = (self.names[k] for k in real[0])
+        more = f" ({len(real)} such pairs)" if len(real) > 1 else ""
+        if is_fdp(a) and is_fdp(b):
+            return DffdError(f"region {self.name!r}: feature points {a} and {b} fall on the same place{more}: "
+                             "move one in puppet pick-landmarks and rig again")
+        return DffdError(f"region {self.name!r}: control points {a!r} and {b!r} fall on the same place{more}: "
+                         "move the landmarks near them apart in puppet pick-landmarks and rig again")
 
 
 def _replace_rows(matrix: sp.csr_matrix, rows: np.ndarray, new_rows: sp.csr_matrix) -> sp.csr_matrix:

@@ -183,7 +183,8 @@ class Runtime:
                     region.name, queries, self._p0[cps], weights, box, sibson, self.rig.box_scale)
             else:
                 deformers[region.name] = RegionDeformer(
-                    region.name, queries, self._p0[cps], weights, self.rig.box_scale)
+                    region.name, queries, self._p0[cps], weights, self.rig.box_scale,
+                    names=list(region.control_points))
                 computed = True
         if cache and computed:
             coefcache.store(key, {n: (d.box, d.sibson) for n, d in deformers.items()})

@@ -69,7 +69,12 @@ _FACETS = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
 
 
 class SibsonError(PuppetError, ValueError):
-    """Invalid input for Sibson coordinates (bad sites, or queries outside their hull)."""
+    """Invalid input for Sibson coordinates (bad sites, or queries outside their hull). ``pairs``:
+    the (k, 2) indices of sites on one place, for a caller that can name them."""
+
+    def __init__(self, message: str, pairs: np.ndarray | None = None) -> None:
+        super().__init__(message)
+        self.pairs = np.zeros((0, 2), dtype=np.int64) if pairs is None else np.asarray(pairs)
 
 
 @dataclass(frozen=True)
@@ -216,7 +221,8 @@ def _check_sites(sites: np.ndarray, extent: float) -> None:
     pairs = cKDTree(sites).query_pairs(DUPLICATE_TOL * extent, output_type="ndarray")
     if len(pairs):
         shown = ", ".join(f"{i} and {j}" for i, j in sorted(map(tuple, pairs))[:5])
-        raise SibsonError(f"duplicate sites: {len(pairs)} pairs, e.g. indices {shown}")
+        raise SibsonError(f"duplicate sites: {len(pairs)} pairs, e.g. indices {shown}",
+                          np.array(sorted(map(tuple, pairs))))
     sv = np.linalg.svd(sites - sites.mean(axis=0), compute_uv=False)
     if sv[2] <= 1e-12 * sv[0]:
         raise SibsonError("all sites are coplanar (or collinear); need a 3D point set")

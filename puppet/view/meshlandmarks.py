@@ -240,6 +240,11 @@ def _combine(face: Face, lifts: np.ndarray, facing: np.ndarray, found: np.ndarra
         near = skin[tree.query(lifts[use, i])[1]]
         cost = np.linalg.norm(vertices[near][:, None] - lifts[use, i][None], axis=2).sum(axis=1)
         chosen[i] = near[np.argmin(cost)]
+    _apart(chosen, vertices, skin, tree, lifts, found, rotation[1])
+    for i in np.flatnonzero(chosen >= 0):  # over the views the choice used
+        seen = found & np.isfinite(lifts[:, i]).all(axis=1)
+        use = seen & (facing[:, i] >= MIN_FACING)
+        use = use if use.any() else seen & (facing[:, i] == facing[seen, i].max())
         spread[i] = np.median(np.linalg.norm(lifts[use, i] - vertices[chosen[i]], axis=1))
     missing = sorted({MEDIAPIPE_FDP[i] for i in MEDIAPIPE_FDP if chosen[i] < 0} & set(FDP_NEEDED))
     if missing:
@@ -252,6 +257,32 @@ def _combine(face: Face, lifts: np.ndarray, facing: np.ndarray, found: np.ndarra
     agree = {MEDIAPIPE_FDP[i]: float(spread[i] / width) for i in MEDIAPIPE_FDP if chosen[i] >= 0}
     return FoundLandmarks(fdp=fdp, vertices=chosen, spread=agree, views_found=int(found.sum()),
                           views=views, rotation=rotation, face_width=width)
+
+
+UPPER_LOWER = (("2.2", "2.3"), ("2.6", "2.8"), ("2.7", "2.9"), ("3.1", "3.3"), ("3.2", "3.4"))
+"""(upper, lower) lip and lid points, which meet where a mouth or an eye is closed."""
+
+
+def _apart(chosen: np.ndarray, vertices: np.ndarray, skin: np.ndarray, tree: cKDTree, lifts: np.ndarray,
+           found: np.ndarray, up: np.ndarray) -> None:
+    """An upper lip (lid) point lies above its lower one, on another vertex (in place): on a closed
+    mouth the inner upper and lower lip (2.2, 2.3) lift to one spot and snapped to one vertex (the
+    lip loop through them pinched into a figure eight), or swapped (on a whole figure: the jaw
+    opened the upper lip). Such a pair takes the two skin vertices nearest their lifts with the
+    upper one above the lower (``up``: the face frame's +y in the file)."""
+    index = {fid: i for i, fid in MEDIAPIPE_FDP.items()}
+    for upper, lower in UPPER_LOWER:
+        i, j = index[upper], index[lower]
+        if chosen[i] < 0 or chosen[j] < 0 or vertices[chosen[i]] @ up > vertices[chosen[j]] @ up:
+            continue
+        targets = [np.nanmean(lifts[found, k], axis=0) for k in (i, j)]
+        near = np.unique(skin[tree.query(np.array(targets), k=min(len(skin), 12))[1]].ravel())
+        cost = [np.linalg.norm(vertices[near] - t, axis=1) for t in targets]
+        above = (vertices[near] @ up)[:, None] > (vertices[near] @ up)[None] + 1e-12 * np.ptp(vertices)
+        total = np.where(above, cost[0][:, None] + cost[1][None], np.inf)
+        if np.isfinite(total).any():
+            a, b = np.unravel_index(np.argmin(total), total.shape)
+            chosen[i], chosen[j] = near[a], near[b]
 
 
 def skin_vertices(vertices: np.ndarray, triangles: np.ndarray, lifts: np.ndarray) -> np.ndarray:
