@@ -8,14 +8,11 @@ with weights drawn unit normal times ``--spread`` (seeds 1, 2, ...). Each is wri
 mesh (an OBJ of positions and triangles: no parts, contours or feature points) and loaded as a
 user's mesh is, from landmarks: for now the default face's feature-point vertices (the same
 topology, so they are the same places). Its rig is ``build_rig`` (without fold limits: their
-search is another issue's), with the default face's FAP motions carried over two ways:
+search is another issue's), with the default face's FAP motions carried over, before and after:
 
 * **before**: ``build_rig`` of the revision ``--before`` (default: where this branch left main),
   run from a copy of that revision's package (``git archive``) in a subprocess that saves the rig;
 * **after**: ``build_rig`` here, as ``puppet rig`` now does it;
-* **local**, **smoothed**: the same with ``transfer_motions(local=True)`` (motions in each point's
-  surface frame) and with ``smoothing=2`` (the carried field averaged over the target grid): the
-  alternatives measured, not shipped.
 
 The truth: the artist's ARKit shapes (``../shared/assets/makehuman/faceunits_arkit``, deltas on
 MakeHuman's base mesh) applied to the shaped face as the same deltas (turned into its face
@@ -45,10 +42,9 @@ import numpy as np
 
 from puppet.bench.assets import shared_assets
 from puppet.face.autorig import build_rig, rig_for_face
-from puppet.face.default import default_face, load_default_rig
+from puppet.face.default import default_face
 from puppet.face.examples import load_examples
 from puppet.face.load import load_face
-from puppet.face.motiontransfer import transfer_motions
 from puppet.face.rig import Rig, load_rig
 from puppet.photo.shapemodel import load_shape_model
 from puppet.runtime.fapcalibration import fit_faps, relative_residual
@@ -56,8 +52,6 @@ from puppet.runtime.posecheck import pose_flaws
 from puppet.runtime.runtime import Runtime
 
 ROOT = Path(__file__).resolve().parents[1]
-WAYS = {"after": None, "local": {"local": True}, "smoothed": {"smoothing": 2}}
-"""The ways measured beside "before": ``transfer_motions`` keywords (None: ``build_rig``'s own)."""
 BEFORE_RIG = """
 import json, sys
 from puppet.face.autorig import build_rig
@@ -107,12 +101,9 @@ def flaws(runtime: Runtime, reference: Runtime) -> str:
             f"{found[worst].folds} folds, {found[worst].creases} creases)")
 
 
-def transferred(face, way: dict | None):
-    """``face``'s rig with the default face's motions carried over ``way`` (None: as ``build_rig`` does)."""
-    rig = build_rig(face, calibrated=True)
-    if way is not None:
-        rig.fap_motions = transfer_motions(load_default_rig(), default_face(), rig, face, **way)
-    return rig
+def transferred(face) -> Rig:
+    """``face``'s rig with the default face's motions carried over, as ``puppet rig`` builds it."""
+    return build_rig(face, calibrated=True)
 
 
 class Before:
@@ -138,9 +129,9 @@ class Before:
 def measure_ways(face, mesh: Path, landmarks, before: Before, reference: Runtime,
                  shapes: dict[str, np.ndarray] | None) -> None:
     """Print each way's residual (when ``shapes`` are given), folds, creases and time."""
-    for name in ("before", *WAYS):
+    for name in ("before", "after"):
         start = time.perf_counter()
-        rig = before.rig(mesh, landmarks) if name == "before" else transferred(face, WAYS[name])
+        rig = before.rig(mesh, landmarks) if name == "before" else transferred(face)
         runtime = Runtime(face, rig, cache=False)
         rigged = time.perf_counter() - start
         residual = f"{median_residual(runtime, shapes):.3f}" if shapes else "  -  "

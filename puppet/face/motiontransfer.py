@@ -12,14 +12,14 @@ jaw's opening draws the lower lip's points back): those motions go to the same f
 the new face (3% of the motion, but without them the ARKit fits' median residual on the default
 face itself rose from 0.30 to 0.35).
 
-Two alternatives, measured by ``tools/transfer_check.py`` and off by default:
+Two alternatives were measured with ``tools/transfer_check.py`` and left out:
 
-* ``local``: a motion travels in the frame of the skin under its point (the surface normal, and
+* in local frames: a motion travels in the frame of the skin under its point (the surface normal, and
   the face's x axis laid into the tangent plane), not in the face frame, so that a brow raise
   slides along a steeper forehead. On faces of other shapes with the artist's shapes as the truth
   it fitted worse (median residual 0.351 -> 0.390 and 0.358 -> 0.454 on two shape-model faces)
   and creased more (ICT: 20,926 -> 27,579 creased edges over the 21 poses).
-* ``smoothing``: rounds of averaging each carried motion with those of its ``NEIGHBOURS`` nearest
+* smoothed: two rounds of averaging each carried motion with those of its ``NEIGHBOURS`` nearest
   grid points of the region (half and half). Fewer creases on ICT (18,931) but worse fits
   (0.392, 0.360).
 
@@ -39,8 +39,7 @@ from puppet.face.rig import Rig
 NEIGHBOURS = 4
 
 
-def transfer_motions(source: Rig, source_face, target: Rig, target_face, *, local: bool = False,
-                     smoothing: int = 0) -> dict[int, dict[str, np.ndarray]]:
+def transfer_motions(source: Rig, source_face, target: Rig, target_face) -> dict[int, dict[str, np.ndarray]]:
     """``source``'s FAP motions (a rig of ``source_face``) for ``target``'s active points (a rig of
     ``target_face``); faces have vertices, triangles and feature points {FDP id: xyz}."""
     if not source.fap_motions:
@@ -49,8 +48,6 @@ def transfer_motions(source: Rig, source_face, target: Rig, target_face, *, loca
     moved = sorted({name for motions in source.fap_motions.values() for name in motions})
     source_point = {p.name: p for p in source.control_points}  # Rig.point builds this dict every call
     target_point = {p.name: p for p in target.control_points}
-    source_frames = _Frames(source_face) if local else None
-    target_frames = _Frames(target_face) if local else None
     out: dict[int, dict[str, np.ndarray]] = {}
     for region in target.regions:
         names = [n for n in region.control_points if target_point[n].role == "active"
@@ -65,18 +62,9 @@ def transfer_motions(source: Rig, source_face, target: Rig, target_face, *, loca
         weights = 1.0 / np.maximum(np.atleast_2d(distance.T).T, 1e-9)
         weights /= weights.sum(axis=1, keepdims=True)
         nearest = np.atleast_2d(nearest.T).T
-        smooth = _Smoother(np.array([target_point[n].position for n in names]), smoothing)
-        into = out_of = None
-        if local:
-            out_of = source_frames.at([source_point[n] for n in known])
-            into = target_frames.at([target_point[n] for n in names])
         for number, motions in source.fap_motions.items():
             table = np.array([motions.get(n, np.zeros(3)) for n in known])
-            if local:
-                table = np.einsum("pij,pj->pi", out_of, table)  # face frame -> each point's own frame
-            blended = smooth(np.einsum("pk,pka->pa", weights, table[nearest]))
-            if local:
-                blended = np.einsum("pji,pj->pi", into, blended)  # target point's frame -> face frame
+            blended = np.einsum("pk,pka->pa", weights, table[nearest])
             keep = np.linalg.norm(blended, axis=1) > 0
             if keep.any():
                 out.setdefault(number, {}).update(
@@ -95,45 +83,6 @@ def feature_warp(source_points: dict[str, np.ndarray], target_points: dict[str, 
     shared = sorted(set(source_points) & set(target_points))
     return RBFInterpolator(np.array([target_points[k] for k in shared]),
                            np.array([source_points[k] for k in shared]), kernel="thin_plate_spline")
-
-
-class _Frames:
-    """Each vertex's frame (rows: tangent along the face's x axis, tangent along y, normal)."""
-
-    def __init__(self, face) -> None:
-        v = np.asarray(face.vertices, float)
-        tri = np.asarray(face.triangles)
-        normals = np.zeros_like(v)
-        area = np.cross(v[tri[:, 1]] - v[tri[:, 0]], v[tri[:, 2]] - v[tri[:, 0]])
-        for k in range(3):
-            np.add.at(normals, tri[:, k], area)
-        self.vertices = v
-        self.normals = normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
-
-    def at(self, points) -> np.ndarray:
-        """The frames (P, 3, 3) at control points (a point off the skin takes its nearest vertex's)."""
-        index = np.array([p.vertex if p.vertex is not None else -1 for p in points])
-        off = index < 0
-        if off.any():
-            index[off] = cKDTree(self.vertices).query(np.array([p.position for p in np.array(points)[off]]))[1]
-        n = self.normals[index]
-        x = np.array([1.0, 0.0, 0.0]) - n[:, :1] * n
-        x /= np.maximum(np.linalg.norm(x, axis=1, keepdims=True), 1e-12)
-        return np.stack([x, np.cross(n, x), n], axis=1)
-
-
-class _Smoother:
-    """Rounds of averaging a field on points with its ``NEIGHBOURS`` nearest points' (half and half)."""
-
-    def __init__(self, positions: np.ndarray, rounds: int) -> None:
-        self.rounds = rounds if len(positions) > NEIGHBOURS else 0
-        if self.rounds:
-            self.nearest = cKDTree(positions).query(positions, k=NEIGHBOURS + 1)[1][:, 1:]
-
-    def __call__(self, field: np.ndarray) -> np.ndarray:
-        for _ in range(self.rounds):
-            field = (field + field[self.nearest].mean(axis=1)) / 2
-        return field
 
 
 def _region_members(rig: Rig, region: str) -> list[str]:
