@@ -17,6 +17,7 @@ from puppet.face.autorig import build_rig, rig_for_face
 from puppet.face.default import default_face, load_default_rig
 from puppet.face.examples import load_examples
 from puppet.face.load import load_face
+from puppet.face.motiontransfer import feature_warp
 from puppet.runtime.posecheck import POSES, pose_flaws
 from puppet.runtime.runtime import Runtime
 from tools.transfer_check import in_face_frame, median_residual, shaped_face
@@ -46,6 +47,18 @@ def test_the_default_face_gets_back_every_calibrated_motion():
         assert set(motions) <= set(carried[number]), number  # feature points' motions included
         for name in carried[number]:
             np.testing.assert_allclose(carried[number][name], motions.get(name, np.zeros(3)), atol=1e-6)
+
+
+def test_two_feature_points_at_one_place_still_warp_the_face_onto_the_default():
+    """Found landmarks can put two feature points on one vertex (10.6 and 10.8 on an ear): the warp
+    keeps one of them and still takes every other feature point where it sits on the default face
+    (with both, the spline's system was singular and its points landed 1e14 away)."""
+    source = default_face().feature_points
+    target = {k: v * 1.1 + 0.2 for k, v in source.items()}
+    target["10.8"] = target["10.6"].copy()
+    others = sorted(k for k in source if k != "10.8")
+    warped = feature_warp(source, target)(np.array([target[k] for k in others]))
+    np.testing.assert_allclose(warped, np.array([source[k] for k in others]), atol=1e-6)
 
 
 def test_high_jaw_angles_leave_the_upper_face_off_the_jaw():

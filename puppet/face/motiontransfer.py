@@ -79,10 +79,14 @@ def transfer_motions(source: Rig, source_face, target: Rig, target_face) -> dict
 
 def feature_warp(source_points: dict[str, np.ndarray], target_points: dict[str, np.ndarray]) -> RBFInterpolator:
     """The thin-plate spline that takes points of the target face to where they sit on the source
-    face, through the feature points {FDP id: xyz} both faces have."""
+    face, through the feature points {FDP id: xyz} both faces have; of target points at one place,
+    the first in FDP order only (the spline's system is singular with both: its solution was
+    1e14 off, and differed between scipy releases)."""
     shared = sorted(set(source_points) & set(target_points))
-    return RBFInterpolator(np.array([target_points[k] for k in shared]),
-                           np.array([source_points[k] for k in shared]), kernel="thin_plate_spline")
+    nodes = np.array([target_points[k] for k in shared], dtype=float)
+    values = np.array([source_points[k] for k in shared], dtype=float)
+    first = np.sort(np.unique(nodes, axis=0, return_index=True)[1])
+    return RBFInterpolator(nodes[first], values[first], kernel="thin_plate_spline")
 
 
 def _region_members(rig: Rig, region: str) -> list[str]:
