@@ -55,6 +55,7 @@ from scipy.spatial import cKDTree
 
 from puppet.errors import PuppetError
 from puppet.face.default import default_face
+from puppet.face.meshparts import components
 from puppet.face.muscles import place, place_coefficients
 
 __all__ = ["LandmarkError", "apply_landmarks", "ibug_to_fdp", "read_landmarks"]
@@ -262,16 +263,9 @@ def _walk(graph: sp.csr_matrix, start: int) -> np.ndarray:
 
 def _landmark_component(face, landmarks, seams: np.ndarray) -> np.ndarray:
     """Per vertex, whether it lies in the connected component holding most landmarks (the skin)."""
-    comp = _components(len(face.vertices), face.triangles, seams)
+    comp = components(len(face.vertices), face.triangles, seams)
     marks = list(landmarks.values()) if isinstance(landmarks, dict) else landmarks
     return comp == np.bincount(comp[marks]).argmax()
-
-
-def _components(n: int, triangles: np.ndarray, seams: np.ndarray | None = None) -> np.ndarray:
-    """Connected components, the ``seams`` pairs (``_seams``) joined too."""
-    e = _edges(triangles) if seams is None else np.vstack([_edges(triangles), seams])
-    return connected_components(sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n)),
-                                directed=False)[1]
 
 
 def seam_pairs(face) -> np.ndarray:
@@ -381,7 +375,7 @@ def _parts(vertices: np.ndarray, triangles: np.ndarray, on_skin: np.ndarray,
            fp: dict[str, np.ndarray], loaded: dict[str, np.ndarray], seams: np.ndarray) -> dict[str, np.ndarray]:
     """Split the mesh's components into skin, eyeballs, teeth, mouth and attached (module docstring);
     off the skin, the parts the file's pieces named (``loaded``) are kept, eyeballs sided anew."""
-    comp = _components(len(vertices), triangles, seams)
+    comp = components(len(vertices), triangles, seams)
     label = np.full(len(vertices), "skin", dtype=object)
     for c in np.unique(comp[~on_skin]):
         members = comp == c

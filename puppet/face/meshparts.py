@@ -136,9 +136,13 @@ def _mid_x(vertices: np.ndarray, pieces: list[Piece]) -> float:
     return float(x.min() + x.max()) / 2
 
 
-def _components(n: int, triangles: np.ndarray) -> np.ndarray:
+def components(n: int, triangles: np.ndarray, seams: np.ndarray | None = None) -> np.ndarray:
+    """Per vertex of ``n``, its connected component's label; ``seams`` (pairs of vertices) are
+    joined too."""
     t = np.asarray(triangles, dtype=np.int64)
-    rows, cols = np.r_[t[:, 0], t[:, 1]], np.r_[t[:, 1], t[:, 2]]
+    rows, cols = np.r_[t[:, 0], t[:, 1], t[:, 2]], np.r_[t[:, 1], t[:, 2], t[:, 0]]
+    if seams is not None and len(seams):
+        rows, cols = np.r_[rows, seams[:, 0]], np.r_[cols, seams[:, 1]]
     graph = sp.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n))
     return connected_components(graph, directed=False)[1]
 
@@ -146,7 +150,7 @@ def _components(n: int, triangles: np.ndarray) -> np.ndarray:
 def _eyes_by_shape(vertices: np.ndarray, triangles: np.ndarray, largest: np.ndarray,
                    free: np.ndarray) -> np.ndarray:
     """The vertices of the two eyeball-like components (module docstring), none if no pair."""
-    comp = _components(len(vertices), triangles)
+    comp = components(len(vertices), triangles)
     outside = free.copy()
     outside[largest] = False
     if not outside.any():
@@ -179,7 +183,7 @@ def _split_teeth(vertices: np.ndarray, triangles: np.ndarray, label: np.ndarray)
     teeth = np.flatnonzero(label == "teeth")
     if not len(teeth):
         return
-    comp = np.unique(_components(len(vertices), triangles)[teeth], return_inverse=True)[1]
+    comp = np.unique(components(len(vertices), triangles)[teeth], return_inverse=True)[1]
     count = np.bincount(comp)
     y, z = (np.bincount(comp, weights=vertices[teeth, k]) / count for k in (1, 2))
     if len(count) > 2:

@@ -45,13 +45,12 @@ from pathlib import Path
 
 import moderngl
 import numpy as np
-import scipy.sparse as sp
 from PIL import Image
-from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from puppet.face.default import default_face
 from puppet.face.landmarks import FDP_NEEDED
+from puppet.face.meshparts import components
 from puppet.face.model import Face
 from puppet.photo.build import MEDIAPIPE_FDP, mediapipe_points
 from puppet.photo.detect import DetectionError, detect_faces
@@ -287,10 +286,7 @@ def _apart(chosen: np.ndarray, vertices: np.ndarray, skin: np.ndarray, tree: cKD
 
 def skin_vertices(vertices: np.ndarray, triangles: np.ndarray, lifts: np.ndarray) -> np.ndarray:
     """The vertices of the connected component most lifted landmarks lie nearest (the skin)."""
-    t = np.asarray(triangles)
-    n = len(vertices)
-    graph = sp.coo_matrix((np.ones(t.size), (t.ravel(), np.roll(t, 1, axis=1).ravel())), shape=(n, n))
-    component = connected_components(graph, directed=False)[1]
+    component = components(len(vertices), triangles)
     points = lifts.reshape(-1, 3)
     points = points[np.isfinite(points).all(axis=1)]
     hits = component[cKDTree(vertices).query(points)[1]]
