@@ -20,6 +20,7 @@ feature points: ``puppet.face.landmarks`` gives it them.
 
 from __future__ import annotations
 
+import itertools
 import os
 import re
 from dataclasses import dataclass, field
@@ -63,7 +64,7 @@ def _obj_face(path: Path) -> Face:
     """An OBJ file as a face: parts from its groups and materials, colours and texture from its MTL."""
     mesh = read_obj(path)
     positions, triangles, tri_uv = mesh.triangulated()
-    polygon_of = np.repeat(np.arange(len(mesh.polygons)), [len(p) - 2 for p in mesh.polygons])
+    polygon_of = mesh.triangle_polygons()
     keys = [f"{g or ''} {m or ''}".strip() for g, m in zip(mesh.groups, mesh.materials)]
     parts = {"skin": np.arange(len(positions), dtype=np.int32)}
     if any(keys):
@@ -206,30 +207,43 @@ def _gltf_face(path: Path) -> Face:
 
 @dataclass
 class ObjMesh:
-    """An OBJ file as written: vertices and polygons in file order (0-based indices)."""
+    """An OBJ file as written: vertices and polygons in file order (0-based indices), the polygons'
+    corners one after another (``starts``), as numpy arrays so that large files read in a blink."""
 
     positions: np.ndarray  # (N, 3) float64
     uvs: np.ndarray  # (T, 2) float64
-    polygons: list[list[int]]  # vertex indices per polygon
-    polygon_uvs: list[list[int] | None]  # uv indices per polygon corner, None where it has none
+    corners: np.ndarray  # (C,) int64 vertex index of each polygon corner, polygon after polygon
+    corner_uvs: np.ndarray  # (C,) int64 uv index of each corner, -1 where its polygon has none
+    starts: np.ndarray  # (P + 1,) int64 where each polygon's corners start (and the end)
     groups: list[str | None]  # the 'g' group each polygon was in
     colors: np.ndarray | None = None  # (N, 3) float32 when every 'v' line carries r g b
     materials: list[str | None] = field(default_factory=list)  # the 'usemtl' material of each polygon
     mtllibs: list[str] = field(default_factory=list)  # the 'mtllib' files named, in order
 
+    @property
+    def polygons(self) -> list[list[int]]:
+        """Vertex indices per polygon."""
+        return _split(self.corners, self.starts)
+
+    @property
+    def polygon_uvs(self) -> list[list[int] | None]:
+        """uv indices per polygon corner, None where the polygon has none."""
+        return [None if uv and uv[0] < 0 else uv for uv in _split(self.corner_uvs, self.starts)]
+
+    def triangle_polygons(self) -> np.ndarray:
+        """The polygon each of ``triangulated``'s triangles comes from (F,)."""
+        return np.repeat(np.arange(len(self.starts) - 1), np.diff(self.starts) - 2)
+
     def triangulated(self) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         """(positions, triangles (F, 3) int32, triangle_uv (F, 3) int32 or None): polygons
         fan-triangulated from their first corner, so a quad a b c d gives a b c and a c d."""
-        tris, tri_uv = [], []
-        has_uv = all(p is not None for p in self.polygon_uvs) and len(self.uvs) > 0
-        for poly, puv in zip(self.polygons, self.polygon_uvs):
-            for k in range(1, len(poly) - 1):
-                tris.append((poly[0], poly[k], poly[k + 1]))
-                if has_uv:
-                    tri_uv.append((puv[0], puv[k], puv[k + 1]))
-        triangles = np.array(tris, dtype=np.int32).reshape(-1, 3)
-        uv = np.array(tri_uv, dtype=np.int32).reshape(-1, 3) if has_uv else None
-        return self.positions, triangles, uv
+        polygon = self.triangle_polygons()
+        first = self.starts[polygon]
+        k = np.arange(len(polygon)) - np.searchsorted(polygon, polygon) + 1
+        at = np.stack([first, first + k, first + k + 1], axis=1)
+        has_uv = len(self.uvs) > 0 and bool((self.corner_uvs >= 0).all())
+        uv = self.corner_uvs[at].astype(np.int32) if has_uv else None
+        return self.positions, self.corners[at].astype(np.int32).reshape(-1, 3), uv
 
 
 def read_obj(path: str | os.PathLike) -> ObjMesh:
@@ -245,8 +259,7 @@ def read_obj(path: str | os.PathLike) -> ObjMesh:
     positions: list[list[float]] = []
     colors: list[list[float]] = []
     uvs: list[list[float]] = []
-    polygons: list[list[int]] = []
-    polygon_uvs: list[list[int] | None] = []
+    polygons: list[_Polygon] = []
     groups: list[str | None] = []
     materials: list[str | None] = []
     mtllibs: list[str] = []
@@ -270,17 +283,7 @@ def read_obj(path: str | os.PathLike) -> ObjMesh:
                     raise ValueError("a texture coordinate needs u")
                 uvs.append(values + [0.0] * (2 - len(values)))
             elif tag == "f":
-                corners = parts[1:]
-                if len(corners) < 3:
-                    raise ValueError(f"a face needs 3 or more corners, got {len(corners)}")
-                vi, ti = [], []
-                for corner in corners:
-                    fields = corner.split("/")
-                    vi.append(_obj_index(fields[0], len(positions), "vertex"))
-                    if len(fields) > 1 and fields[1]:
-                        ti.append(_obj_index(fields[1], len(uvs), "texture coordinate"))
-                polygons.append(vi)
-                polygon_uvs.append(ti if len(ti) == len(vi) else None)
+                polygons.append(_polygon(lineno, line, parts[1:], len(positions), len(uvs)))
                 groups.append(group)
                 materials.append(material)
             elif tag == "g":
@@ -297,11 +300,13 @@ def read_obj(path: str | os.PathLike) -> ObjMesh:
     if colors and len(colors) == len(positions):
         c = np.array(colors, dtype=np.float32)
         color_array = c / 255.0 if c.max(initial=0.0) > 1.0 else c
+    starts = np.concatenate([[0], np.cumsum([len(p.vertices) for p in polygons], dtype=np.int64)])
     return ObjMesh(
         positions=np.array(positions, dtype=np.float64),
         uvs=np.array(uvs, dtype=np.float64).reshape(-1, 2),
-        polygons=polygons,
-        polygon_uvs=polygon_uvs,
+        corners=_resolved(path, polygons, starts, "vertex"),
+        corner_uvs=_resolved(path, polygons, starts, "texture coordinate"),
+        starts=starts,
         groups=groups,
         colors=color_array,
         materials=materials,
@@ -309,15 +314,53 @@ def read_obj(path: str | os.PathLike) -> ObjMesh:
     )
 
 
-def _obj_index(token: str, count: int, what: str) -> int:
-    """A 1-based (or negative, relative) OBJ index as a 0-based index, checked against count."""
-    i = int(token)
-    if i == 0:
-        raise ValueError(f"{what} index 0 (OBJ indices start at 1)")
-    j = i - 1 if i > 0 else count + i
-    if not 0 <= j < count:
-        raise ValueError(f"{what} index {i} out of range (only {count} defined so far)")
-    return j
+@dataclass(frozen=True)
+class _Polygon:
+    """An 'f' line as written: its OBJ indices (1-based or negative) and the counts they are
+    relative to (the vertices and texture coordinates defined before it)."""
+
+    lineno: int
+    line: str
+    vertices: list[int]
+    uvs: list[int] | None
+    vertex_count: int
+    uv_count: int
+
+
+def _polygon(lineno: int, line: str, corners: list[str], vertex_count: int, uv_count: int) -> _Polygon:
+    """An 'f' line's corners ``v``, ``v/vt``, ``v//vn`` or ``v/vt/vn`` (uvs kept when every corner has one)."""
+    if len(corners) < 3:
+        raise ValueError(f"a face needs 3 or more corners, got {len(corners)}")
+    fields = [corner.split("/") for corner in corners]
+    uvs = [int(f[1]) for f in fields if len(f) > 1 and f[1]]
+    return _Polygon(lineno, line, [int(f[0]) for f in fields], uvs if len(uvs) == len(fields) else None,
+                    vertex_count, uv_count)
+
+
+def _resolved(path: Path, polygons: list[_Polygon], starts: np.ndarray, what: str) -> np.ndarray:
+    """The polygons' corner indices of ``what`` (vertex or texture coordinate) 0-based (C,), -1 for
+    the corners of a polygon without uvs; an index 0 or out of range names its line."""
+    vertex = what == "vertex"
+    raw = [p.vertices if vertex else p.uvs or [0] * len(p.vertices) for p in polygons]
+    flat = np.fromiter(itertools.chain.from_iterable(raw), dtype=np.int64, count=int(starts[-1]))
+    sizes = np.diff(starts)
+    count = np.repeat(np.array([p.vertex_count if vertex else p.uv_count for p in polygons], dtype=np.int64), sizes)
+    has = np.repeat(np.array([vertex or p.uvs is not None for p in polygons], dtype=bool), sizes)
+    index = np.where(flat > 0, flat - 1, count + flat)
+    bad = has & ((flat == 0) | (index < 0) | (index >= count))
+    if bad.any():
+        k = int(np.argmax(bad))
+        p = polygons[int(np.searchsorted(starts, k, side="right")) - 1]
+        problem = (f"{what} index 0 (OBJ indices start at 1)" if flat[k] == 0
+                   else f"{what} index {flat[k]} out of range (only {count[k]} defined so far)")
+        raise FaceFileError(f"{path}:{p.lineno}: {problem}: {p.line.strip()[:80]!r}")
+    return np.where(has, index, -1)
+
+
+def _split(flat: np.ndarray, starts: np.ndarray) -> list[list[int]]:
+    """``flat`` cut at ``starts`` into lists."""
+    values = flat.tolist()
+    return [values[a:b] for a, b in zip(starts[:-1].tolist(), starts[1:].tolist())]
 
 
 # -- other formats through trimesh ---------------------------------------------------------------

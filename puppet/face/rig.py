@@ -395,7 +395,7 @@ def _follow(low: float, high: float, m_low: float | None = None,
 
 
 def _floats(a: np.ndarray, digits: int = 7) -> list[float]:
-    return [round(float(x), digits) for x in a]
+    return [round(x, digits) for x in np.asarray(a, dtype=float).tolist()]
 
 
 def _point_to_dict(p: ControlPoint) -> dict:

@@ -101,6 +101,7 @@ def follow_ranges(search: Bisection, pairs=LIP_PAIRS,
     on a runtime without fold limits)."""
     free = search.with_follow({})
     numbers = sorted({n for pair in pairs for n in pair})
+    free.ahead(lambda reach: fold_free_reach(free.runtime, numbers=numbers, reach=reach))
     alone = fold_free_reach(free.runtime, numbers=numbers, reach=free)
     unlimited = (-np.inf, np.inf)
     out = {}
@@ -141,6 +142,7 @@ def _narrowed(pair: tuple[int, int], ranges: tuple[float, ...], reach: dict[int,
 
 def _reach(search: Bisection) -> dict[int, tuple[float, float]]:
     """Each FAP's fold-free reach on the search's runtime, the same on both sides, a margin inside."""
+    search.ahead(lambda reach: fold_free_reach(search.runtime, reach=reach))
     reach = _symmetric(fold_free_reach(search.runtime, reach=search), mirror)
     return {n: (REACH_MARGIN * low, REACH_MARGIN * high) for n, (low, high) in reach.items()}
 

@@ -45,6 +45,9 @@ from __future__ import annotations
 
 import bisect
 import math
+import multiprocessing
+import os
+from collections.abc import Callable
 
 import numpy as np
 
@@ -59,6 +62,10 @@ leaves out: far beyond rounding, so its fold test is the whole face's to the las
 NEAR = 0.5
 """A triangle whose normal . rest normal falls below this share of |n0|^2 on a face tried is one
 the model follows on the stretches beside it."""
+WORKERS = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+"""Processes ``FoldSearch.ahead`` searches in: the cores this process may run on."""
+_FORKED: FoldSearch | None = None
+"""The search ``ahead``'s workers inherit when forked (set only while they run)."""
 
 
 class Bisection:
@@ -72,6 +79,10 @@ class Bisection:
         """The largest fold-free value of ``numbers`` together between 0 and ``end`` (None when
         ``end`` folds nothing), as ``fapcalibration.common_reach`` asks for one."""
         return bisected_reach(self.runtime, numbers, end, steps)
+
+    def ahead(self, ask: Callable[[Callable], object]) -> None:
+        """Nothing: the plain search finds each end when it is asked for it (``FoldSearch.ahead``
+        finds them all at once)."""
 
     def with_follow(self, fap_follow: dict) -> Bisection:
         """The same search on the face under other follow ranges (a new runtime)."""
@@ -104,12 +115,40 @@ class FoldSearch(Bisection):
 
     def __call__(self, numbers: list[int], end: float, steps: int) -> float | None:
         """``Bisection``'s value, found once per FAPs, end and follow of the pairs they are in."""
-        follow = self.runtime.rig.fap_follow
-        theirs = tuple(sorted((pair, follow[pair]) for pair in follow if set(pair) & set(numbers)))
-        key = (tuple(numbers), end, steps, theirs)
+        key = self._key(numbers, end, steps)
         if key not in self._found:
             self._found[key] = _Trials(self, numbers, end).reach(steps)
         return self._found[key]
+
+    def ahead(self, ask: Callable[[Callable], object]) -> None:
+        """Search at once every end that ``ask(reach)`` will ask this search for and that is not
+        known yet, in ``WORKERS`` processes forked from this one (each inherits the runtime):
+        ``ask`` is run first with a reach that only notes what it is asked for (the limits ask
+        for every FAP's two ends whatever each finds). The values are the ones asked one by one
+        (``tests/test_foldsearch.py``); where a process cannot fork, nothing is done ahead."""
+        asked: dict[tuple, tuple[list[int], float, int]] = {}
+
+        def note(numbers: list[int], end: float, steps: int) -> None:
+            asked[self._key(numbers, end, steps)] = (list(numbers), end, steps)
+
+        ask(note)
+        todo = {key: args for key, args in asked.items() if key not in self._found}
+        if WORKERS < 2 or len(todo) < 2 or "fork" not in multiprocessing.get_all_start_methods():
+            return
+        global _FORKED
+        _FORKED = self
+        try:
+            with multiprocessing.get_context("fork").Pool(min(WORKERS, len(todo))) as pool:
+                found = pool.map(_searched, list(todo.values()), chunksize=1)
+        finally:
+            _FORKED = None
+        self._found.update(zip(todo, found))
+
+    def _key(self, numbers: list[int], end: float, steps: int) -> tuple:
+        """What a search's value depends on: its FAPs, end, steps and the follow of their pairs."""
+        follow = self.runtime.rig.fap_follow
+        theirs = tuple(sorted((pair, follow[pair]) for pair in follow if set(pair) & set(numbers)))
+        return tuple(numbers), end, steps, theirs
 
     def moved(self, face: np.ndarray) -> np.ndarray:
         """How far each vertex of ``face`` (the whole face, as the runtime gives it) lies from rest,
@@ -228,6 +267,12 @@ class _Trials:
             c = np.einsum("ij,ij->i", np.cross(d1, d2), n0)
             self._stretches[key] = (a, b, c, touched)
         return self._stretches[key]
+
+
+def _searched(args: tuple[list[int], float, int]) -> float | None:
+    """One end searched in an ``ahead`` worker, on the search it inherited."""
+    numbers, end, steps = args
+    return _Trials(_FORKED, numbers, end).reach(steps)
 
 
 def _dots(corners: np.ndarray, rest_normals: np.ndarray) -> np.ndarray:
