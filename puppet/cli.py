@@ -653,7 +653,8 @@ def _fit_lines(face, result, examples) -> list[str]:
 
 def _fold_limits_line(rig) -> str:
     """What a rig's fold limits hold (``puppet.runtime.foldlimits``)."""
-    return f"fold limits: {len(rig.fap_reach)} FAPs capped, {len(rig.fap_follow)} lip pairs following each other"
+    return (f"fold limits: {len(rig.fap_reach)} FAPs capped, {len(rig.fap_follow)} lip pairs following each other, "
+            f"{len(rig.guarded)} vertices guarded where the expressions and visemes fold")
 
 
 def _count(n: int, noun: str) -> str:

@@ -193,7 +193,8 @@ def test_a_bare_default_face_rigs_with_few_folds_and_creases(default, bare_defau
     """The 6 expressions and 15 visemes at full strength, without fold limits: the folds and creases
     it reaches now, near the default face's own ``build_rig`` without limits (4 folds, 151 creased
     edges; the shipped rig's limits take them to none), and with fold limits as ``puppet rig`` finds
-    them (2 and 58; main had 51 and 709), asserted so they cannot grow back."""
+    them: no fold (the two that the limits left are the rig's ``guarded``, which the fold guard
+    holds) and 58 creases (main had 51 and 709), asserted so they cannot grow back."""
     from puppet.face.default import load_default_rig
     from puppet.runtime.posecheck import pose_flaws
     from puppet.runtime.foldlimits import fold_limited
@@ -202,6 +203,8 @@ def test_a_bare_default_face_rigs_with_few_folds_and_creases(default, bare_defau
     found = pose_flaws(Runtime(bare_default, rig), reference)
     assert sum(f.folds for f in found.values()) <= 6
     assert sum(f.creases for f in found.values()) <= 210
-    limited = pose_flaws(Runtime(bare_default, fold_limited(bare_default, rig)), reference)  # as `puppet rig`
-    assert sum(f.folds for f in limited.values()) <= 2
+    limited_rig = fold_limited(bare_default, rig)  # as `puppet rig`
+    assert len(limited_rig.guarded) > 0
+    limited = pose_flaws(Runtime(bare_default, limited_rig), reference)
+    assert sum(f.folds for f in limited.values()) == 0
     assert sum(f.creases for f in limited.values()) <= 60

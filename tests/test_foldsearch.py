@@ -33,7 +33,7 @@ def searched(request, unlimited, face):
     """(runtime, FoldSearch) without follow, and with the shipped rig's follow (the lip FAPs'
     motion bends where the other lip point starts to follow)."""
     follow = {} if request.param == "no follow" else puppet.Runtime(face).rig.fap_follow
-    return unlimited.with_follow(follow), FoldSearch(unlimited).with_follow(follow)
+    return unlimited.with_limits(follow), FoldSearch(unlimited).with_follow(follow)
 
 
 def _folds(runtime, numbers, value) -> bool:
@@ -65,12 +65,12 @@ def test_nothing_folds_at_a_limit_and_the_face_folds_just_past_it(searched, numb
 
 
 def test_a_follow_changes_the_fap_engine_alone(unlimited, face):
-    """``Runtime.with_follow`` shares the deformers and the sliver guard: it deforms every pose as
+    """``Runtime.with_limits`` shares the deformers and the sliver guard: it deforms every pose as
     a runtime set up anew with that follow does, to the bit."""
     follow = puppet.Runtime(face).rig.fap_follow
     rig = copy.copy(unlimited.rig)
     rig.fap_follow = follow
-    fresh, shared = puppet.Runtime(face, rig), unlimited.with_follow(follow)
+    fresh, shared = puppet.Runtime(face, rig), unlimited.with_limits(follow)
     assert shared.B is unlimited.B and shared.faps is not unlimited.faps
     for pose in ({12: 600.0}, {59: -300.0, 31: -80.0}, {3: 500.0, 19: 1024.0}, {6: 120.0, 53: -40.0}):
         np.testing.assert_array_equal(shared.deform_faps(pose), fresh.deform_faps(pose))

@@ -106,13 +106,17 @@ class FapEngine:
         self._translations = self._own + self._calibrated_matrix()
         self._moves = np.ascontiguousarray(self._translations.T, dtype=runtime.dtype)  # a FAP's motion a row
         self._moving = np.abs(self._translations).sum(axis=0) > 0  # the FAPs that move some point
+        self._read_reach()
+        self._read_follow()
+
+    def _read_reach(self) -> None:
+        """The face's limits and the rig's reach (the gaze FAPs' on the skin only) as arrays."""
         self.reach = self._face_limits()
         self.skin_reach = np.stack([np.full(N_FAPS, -np.inf), np.full(N_FAPS, np.inf)])
         for number, (low, high) in self.rig.fap_reach.items():
             limits = self.skin_reach if number in GAZE_FAPS else self.reach
             limits[0, number - 1] = max(limits[0, number - 1], low)
             limits[1, number - 1] = min(limits[1, number - 1], high)
-        self._read_follow()
 
     def _read_follow(self) -> None:
         """The rig's follow pairs as arrays: each pair's FAPs (0-based) and its range's half-planes."""
@@ -120,13 +124,14 @@ class FapEngine:
         self._follow_a, self._follow_b = (np.array([pair[k] - 1 for pair, _ in pairs], dtype=np.int64) for k in (0, 1))
         self._follow_rows = np.array([follow.rows(*ranges) for _, ranges in pairs]).reshape(len(pairs), 4, 3)
 
-    def with_follow(self, runtime) -> FapEngine:
-        """This engine for ``runtime``, this one's runtime with other follow pairs
-        (``Runtime.with_follow``): the FAPs' motions, the face's limits and the lids' closing
-        shapes stay (none depends on the follow; the motions take 0.1 s to gather on a 27k-vertex
-        face), the follow is read anew."""
+    def with_limits(self, runtime) -> FapEngine:
+        """This engine for ``runtime``, this one's runtime with other follow pairs and reach
+        (``Runtime.with_limits``): the FAPs' motions and the lids' closing shapes stay (neither
+        depends on the limits; the motions take 0.1 s to gather on a 27k-vertex face), the limits
+        are read anew."""
         other = copy.copy(self)
         other.runtime, other.rig = runtime, runtime.rig
+        other._read_reach()
         other._read_follow()
         return other
 

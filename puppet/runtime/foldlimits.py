@@ -64,6 +64,7 @@ from puppet.fap.table import fap
 from puppet.runtime.fapcalibration import Calibration, calibrate, common_reach, fit_faps, fold_free_reach
 from puppet.runtime.fapengine import GAZE_FAPS, lid_shares
 from puppet.runtime.foldsearch import Bisection, FoldSearch
+from puppet.runtime.posecheck import folded_vertices
 from puppet.runtime.runtime import Runtime
 
 FOLLOW_SHARE = 0.75  # follow keeps a pair within three quarters of its fold-free difference: at a
@@ -176,8 +177,10 @@ def _symmetric(limits: dict, other_side) -> dict:
 
 def fold_safe(runtime) -> Rig:
     """A copy of the runtime's (calibrated) rig with its lid margin motions faded toward the eye
-    corners (``lid_faded``) and its ``fap_follow`` and ``fap_reach`` found anew on that."""
-    faded = _with(runtime, fap_motions=lid_faded(runtime.rig), fap_follow={}, fap_reach={})
+    corners (``lid_faded``) and its ``fap_follow`` and ``fap_reach`` found anew on that (with no
+    ``guarded``: ``within_limits`` finds it last)."""
+    faded = _with(runtime, fap_motions=lid_faded(runtime.rig), fap_follow={}, fap_reach={},
+                  guarded=np.zeros(0, dtype=np.int64))
     rig = copy.copy(faded.rig)
     rig.fap_follow, rig.fap_reach = fold_limits(faded)
     return rig
@@ -189,12 +192,16 @@ def fold_limited(face, rig: Rig, search: type[Bisection] = FoldSearch) -> Rig:
     motions are the default face's carried over (their lid margins faded already). The upper lids'
     closing stays open (``GUARDED``: a blink must close, the sliver guard holds its folds); with no
     example shapes to say how far the face needs open_jaw, it stops where it folds. On the ICT
-    face the six expressions folded 2,368 triangles without these limits and 102 with them.
+    face the six expressions folded 2,368 triangles without these limits and 102 with them; the
+    triangles the expressions and visemes still fold within them (FAPs that fold nothing alone
+    fold together) are the rig's ``guarded``, which the runtime's fold guard keeps from folding.
     ``search``: as for ``fold_limits``."""
     out = copy.copy(rig)
-    out.fap_follow, out.fap_reach = {}, {}
-    out.fap_follow, reach = fold_limits(Runtime(face, out), search)
+    out.fap_follow, out.fap_reach, out.guarded = {}, {}, np.zeros(0, dtype=np.int64)
+    runtime = Runtime(face, out)
+    out.fap_follow, reach = fold_limits(runtime, search)
     out.fap_reach = {n: (low, np.inf) if n in GUARDED else (low, high) for n, (low, high) in reach.items()}
+    out.guarded = folded_vertices(runtime.with_limits(out.fap_follow, out.fap_reach))
     return out
 
 
@@ -217,13 +224,15 @@ def within_limits(face, calibration: Calibration, examples) -> Calibration:
     within the reach that gives. The second fits use less where the other limits bind (the
     jawOpen fit opens the jaw 930 MNS unlimited, 916 within the lids' and lips' limits), and
     the reach keeps only that, short of where the FAP alone folds unless the sliver guard holds
-    it (open_jaw folds the chin from 913 MNS and stops there)."""
+    it (open_jaw folds the chin from 913 MNS and stops there). What the expressions and visemes
+    still fold within the limits is the rig's ``guarded`` (none on the default face)."""
     safe = fold_safe(Runtime(face, calibration.rig))
     fold_free = dict(safe.fap_reach)
     safe.fap_reach = {n: r for n, r in fold_free.items() if n not in NEEDED}
     for _ in range(2):  # the NEEDED FAPs unlimited, then within the reach that gave
         safe.fap_reach = needed_reach(face, safe, examples, fold_free)
     weights = _fits(Runtime(face, safe, dtype=np.float64), examples)
+    safe.guarded = folded_vertices(Runtime(face, safe))
     return dataclasses.replace(calibration, rig=safe, weights=weights)
 
 

@@ -28,7 +28,7 @@ sets up a new runtime: on the ICT head (26,719 vertices) 3,500 deformations and 
 * **Each search once.** A FAP's reach depends only on the follow of the lip pairs it belongs to
   (``foldlimits``' follow moves a pair's other FAP, and nothing else): a search is kept by its FAPs,
   end and those follows, and a FAP outside the pairs is searched once for all three follows the
-  limits try. A new follow is a new FAP engine on the same runtime (``Runtime.with_follow``).
+  limits try. A new follow is a new FAP engine on the same runtime (``Runtime.with_limits``).
 
 On the ICT head the search takes 916 deformations and one runtime, 4-6 s here (``puppet bench
 --only rig`` times both searches in one run); the limits are the plain search's to the digit, on
@@ -86,7 +86,7 @@ class Bisection:
 
     def with_follow(self, fap_follow: dict) -> Bisection:
         """The same search on the face under other follow ranges (a new runtime)."""
-        rig = self.runtime.with_follow(fap_follow).rig
+        rig = self.runtime.with_limits(fap_follow).rig
         return type(self)(Runtime(self.runtime.face, rig, dtype=self.runtime.dtype))
 
 
@@ -110,7 +110,7 @@ class FoldSearch(Bisection):
         its FAP engine, and searches whose FAPs the change does not touch are kept."""
         other = object.__new__(type(self))
         other.__dict__.update(self.__dict__)
-        other.runtime = self.runtime.with_follow(fap_follow)
+        other.runtime = self.runtime.with_limits(fap_follow)
         return other
 
     def __call__(self, numbers: list[int], end: float, steps: int) -> float | None:

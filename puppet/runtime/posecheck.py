@@ -50,6 +50,16 @@ def eye_separation(face) -> float:
     return face.fapu["ES0"] * 1024
 
 
+def folded_vertices(runtime: Runtime, poses: dict[str, dict] | None = None) -> np.ndarray:
+    """The vertices (sorted) of the triangles that ``poses`` (``POSES`` by default) fold on the
+    runtime's face: what a rig's ``guarded`` lists (``puppet.runtime.foldlimits.fold_limited``)."""
+    rest, tri = np.asarray(runtime.face.vertices, float), np.asarray(runtime.face.triangles)
+    folded = np.zeros(len(tri), dtype=bool)
+    for pose in (poses or POSES).values():
+        folded |= folded_triangles(rest, runtime.deform_faps(**pose), tri)
+    return np.unique(tri[folded])
+
+
 def pose_flaws(runtime: Runtime, reference: Runtime, poses: dict[str, dict] | None = None) -> dict[str, PoseFlaws]:
     """{pose name: its flaws} on ``runtime``'s face, creases bounded by ``reference`` (the default
     face's runtime) in the same pose; ``poses`` defaults to ``POSES``."""

@@ -515,17 +515,21 @@ class Runtime:
         """This face's FAP engine (``puppet.runtime.fapengine.FapEngine``), made on first use."""
         return FapEngine(self)
 
-    def with_follow(self, fap_follow: Mapping[tuple[int, int], tuple[float, ...]]) -> Runtime:
-        """This runtime on a copy of its rig with ``fap_follow`` in place of the rig's: only the FAP
-        engine reads the follow pairs (``FapEngine.with_follow``), so the deformers, B and the
-        sliver guard are shared and the copy costs no set-up (a new runtime of the ICT head, 27k
-        vertices, takes 1-2 s). The fold-limit search tries a face under several follows."""
+    def with_limits(self, fap_follow: Mapping[tuple[int, int], tuple[float, ...]],
+                    fap_reach: Mapping[int, tuple[float, float]] | None = None) -> Runtime:
+        """This runtime on a copy of its rig with ``fap_follow`` (and ``fap_reach``, when given) in
+        place of the rig's: only the FAP engine reads the limits (``FapEngine.with_limits``), so
+        the deformers, B and the sliver guard are shared and the copy costs no set-up (a new
+        runtime of the ICT head, 27k vertices, takes 1-2 s). The fold-limit search tries a face
+        under several follows, and ``foldlimits`` finds what the poses fold within the limits."""
         other = copy.copy(self)
         other.rig = copy.copy(self.rig)
         other.rig.fap_follow = dict(fap_follow)
+        if fap_reach is not None:
+            other.rig.fap_reach = dict(fap_reach)
         other.rig.validate()
         if "faps" in self.__dict__:
-            other.faps = self.faps.with_follow(other)
+            other.faps = self.faps.with_limits(other)
         return other
 
     def deform_pose(self, pose: Pose, *, out: np.ndarray | None = None, normals_out: np.ndarray | None = None,
