@@ -404,18 +404,17 @@ def _found_landmarks(mesh: str, out: Path):
     to ``out`` ({FDP id: vertex}, what ``--landmarks`` takes), for the user to correct."""
     import json
 
-    from puppet.face.landmarks import apply_landmarks
     from puppet.face.meshfile import load_mesh
     from puppet.photo.detect import detector_python
-    from puppet.view.meshlandmarks import find_landmarks
+    from puppet.view.meshlandmarks import found_face
 
     bare = load_mesh(mesh)
     detector_python(mesh)
     _step("rig", 1, 3, "landmarks: the mesh rendered from 5 sides, MediaPipe's landmarks found and lifted onto it")
-    found = find_landmarks(bare, mesh, step=lambda text: print(f"rig: {text}", file=sys.stderr, flush=True))
+    face, found = found_face(bare, mesh, step=lambda text: print(f"rig: {text}", file=sys.stderr, flush=True))
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(found.fdp, indent=1) + "\n", encoding="utf-8")
-    return apply_landmarks(bare, found.fdp), found
+    return face, found
 
 
 def _step(command: str, k: int, n: int, what: str) -> None:

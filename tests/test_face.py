@@ -13,7 +13,7 @@ import pytest
 
 import puppet
 from puppet.face.load import load_face
-from puppet.face.meshfile import read_obj
+from puppet.face.meshfile import load_mesh, read_obj, write_bare_obj
 from puppet.face.model import Face, FaceFileError, MissingFeaturePointsError
 
 REPO = Path(__file__).resolve().parents[1]
@@ -374,6 +374,21 @@ def test_load_obj_polygons_without_uvs(tmp_path):
     f = load_face(path)
     assert f.triangles.tolist() == [[0, 1, 2], [0, 2, 3], [0, 3, 4]]
     assert f.uv is None and f.triangle_uv is None
+
+
+def test_a_bare_obj_reads_back_as_written(tmp_path):
+    """write_bare_obj -> load_mesh: the same positions to the last bit, the same triangles, one skin
+    part and nothing else (no colours, uv, groups or materials), as a user's bare mesh loads."""
+    shipped = load_face()
+    vertices = shipped.vertices + np.random.default_rng(3).normal(scale=1e-3, size=shipped.vertices.shape)
+    path = write_bare_obj(tmp_path / "bare.obj", vertices, shipped.triangles)
+    back = load_mesh(path)
+    np.testing.assert_array_equal(back.vertices, vertices)
+    np.testing.assert_array_equal(back.triangles, shipped.triangles)
+    assert list(back.parts) == ["skin"] and back.parts["skin"].tolist() == list(range(len(vertices)))
+    assert back.colors is None and back.uv is None and back.feature_vertices == {}
+    mesh = read_obj(path)
+    assert set(mesh.groups) == {None} and set(mesh.materials) == {None} and mesh.mtllibs == [] and len(mesh.uvs) == 0
 
 
 def test_load_ply_and_glb_keep_vertex_order(tmp_path):

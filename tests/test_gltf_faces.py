@@ -36,6 +36,7 @@ from puppet.face.examples import load_examples
 from puppet.face.gltfread import MAX_VERTICES, read_gltf, srgb_encode
 from puppet.face.landmarks import FDP_NEEDED
 from puppet.face.load import load_face
+from puppet.face.meshfile import write_bare_obj
 from puppet.face.model import FaceFileError
 from puppet.photo.detect import photo_python
 from puppet.runtime.fapcalibration import fit_faps, relative_residual
@@ -393,7 +394,7 @@ def _awkward(case: str, path):
     if case == "non-manifold":
         fin = v[t[0, 0]] + (0.0, 0.0, 0.03 * np.ptp(v[:, 1]))
         triangles = np.vstack([t, t[::50], [[*t[0, :2], len(v)]]])
-        return write_obj_like(path.with_suffix(".obj"), np.vstack([v, fin]), triangles)
+        return write_bare_obj(path.with_suffix(".obj"), np.vstack([v, fin]), triangles)
     lo, hi = v.min(axis=0), v.max(axis=0)
     h, c = hi[1] - lo[1], (lo + hi) / 2
     box = np.array([[x, y, z] for x in (c[0] - h, c[0] + h) for y in (lo[1] - 4 * h, lo[1] + 0.05 * h)
@@ -414,14 +415,6 @@ def _awkward(case: str, path):
     doc["scenes"][0]["nodes"].append(len(doc["nodes"]) - 1)
     doc["buffers"] = [{"byteLength": len(data)}]
     return write_glb(path.with_suffix(".glb"), doc, bytes(data))
-
-
-def write_obj_like(path, vertices: np.ndarray, triangles: np.ndarray):
-    """A bare OBJ of these vertices and triangles."""
-    lines = [f"v {x:.9g} {y:.9g} {z:.9g}" for x, y, z in vertices]
-    lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in triangles]
-    path.write_text("\n".join(lines) + "\n")
-    return path
 
 
 @pytest.mark.slow

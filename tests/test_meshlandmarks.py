@@ -19,7 +19,7 @@ from puppet.face.autorig import rig_for_face
 from puppet.face.default import default_face
 from puppet.face.landmarks import FDP_NEEDED, read_landmarks
 from puppet.face.load import load_face
-from puppet.face.meshfile import load_mesh
+from puppet.face.meshfile import load_mesh, write_bare_obj
 from puppet.photo.detect import PHOTO_PYTHON, photo_python
 from puppet.runtime.runtime import Runtime
 
@@ -30,18 +30,10 @@ TURNS = {"upside down": Rotation.from_euler("z", 180, degrees=True),
          "tilted 30 and rolled 20 degrees": Rotation.from_euler("xz", [30, 20], degrees=True)}
 
 
-def write_obj(vertices: np.ndarray, triangles: np.ndarray, path: Path) -> Path:
-    """A bare OBJ, as a user's mesh comes: positions and triangles, nothing else."""
-    lines = [f"v {x:.17g} {y:.17g} {z:.17g}" for x, y, z in np.asarray(vertices, float)]
-    lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in np.asarray(triangles)]
-    path.write_text("\n".join(lines) + "\n")
-    return path
-
-
 @pytest.fixture(scope="module")
 def default_obj(tmp_path_factory) -> Path:
     face = default_face()
-    return write_obj(face.vertices, face.triangles, tmp_path_factory.mktemp("mesh") / "head.obj")
+    return write_bare_obj(tmp_path_factory.mktemp("mesh") / "head.obj", face.vertices, face.triangles)
 
 
 @pytest.fixture(scope="module")
@@ -53,9 +45,7 @@ def found(default_obj):
 
 def errors(found, truth: dict[str, int]) -> dict[str, float]:
     """Per FDP both have, the distance between the found and the true vertex, in face widths."""
-    v = default_face().vertices
-    return {f: float(np.linalg.norm(v[found.fdp[f]] - v[truth[f]])) / found.face_width
-            for f in set(found.fdp) & set(truth)}
+    return found.errors(default_face().vertices, truth)
 
 
 @needs_detector
@@ -75,7 +65,7 @@ def test_a_face_turned_in_its_file_is_found_the_same(found, turn, tmp_path):
     from puppet.view.meshlandmarks import find_landmarks
 
     face = default_face()
-    turned = write_obj(TURNS[turn].apply(face.vertices) + [3.0, -2.0, 1.0], face.triangles, tmp_path / "turned.obj")
+    turned = write_bare_obj(tmp_path / "turned.obj", TURNS[turn].apply(face.vertices) + [3.0, -2.0, 1.0], face.triangles)
     again = find_landmarks(load_mesh(turned), str(turned))
     assert np.median(list(errors(again, found.fdp).values())) < 0.01
     assert np.degrees(Rotation.from_matrix(again.rotation @ TURNS[turn].as_matrix()).magnitude()) < 10
@@ -91,7 +81,7 @@ def test_a_mesh_with_no_face_is_refused_in_one_line(tmp_path, capsys):
     import trimesh
 
     sphere = trimesh.creation.icosphere(subdivisions=3, radius=10.0)
-    mesh = write_obj(sphere.vertices, sphere.faces, tmp_path / "ball.obj")
+    mesh = write_bare_obj(tmp_path / "ball.obj", sphere.vertices, sphere.faces)
     assert cli.main(["rig", str(mesh), "-o", str(tmp_path / "ball")]) == 2
     lines = refusals(capsys.readouterr().err)
     assert len(lines) == 1 and lines[0].startswith(f"puppet rig: no face found in 25 rendered views of {mesh}: its 24")

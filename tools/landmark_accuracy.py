@@ -29,23 +29,15 @@ import numpy as np
 from puppet.bench.assets import shared_assets
 from puppet.face.default import default_face
 from puppet.face.landmarks import IBUG_FDP, IBUG_MIDWAY, apply_landmarks
-from puppet.face.meshfile import load_mesh
+from puppet.face.meshfile import load_mesh, write_bare_obj
 from puppet.view.meshlandmarks import find_landmarks
 from tools.rig_faces import ict_inputs, mediapipe_inputs
-
-
-def write_obj(face, path: Path) -> Path:
-    """The face's vertices and triangles as a bare OBJ, as a user's mesh would come."""
-    lines = [f"v {x:.17g} {y:.17g} {z:.17g}" for x, y, z in np.asarray(face.vertices, float)]
-    lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in np.asarray(face.triangles)]
-    path.write_text("\n".join(lines) + "\n")
-    return path
 
 
 def truths(folder: Path) -> dict[str, tuple[Path, dict[str, int]]]:
     """Face name -> (its mesh, its given FDP -> vertex); missing assets left out with a note."""
     default = default_face()
-    faces = {"default": (write_obj(default, folder / "default.obj"),
+    faces = {"default": (write_bare_obj(folder / "default.obj", default.vertices, default.triangles),
                          {f: int(v) for f, v in default.feature_vertices.items()})}
     assets = shared_assets()
     ict = ict_inputs(assets)
@@ -69,13 +61,11 @@ def measure(name: str, mesh: Path, given: dict[str, int], keep: Path | None) -> 
     start = time.perf_counter()
     found = find_landmarks(face, str(mesh), keep=None if keep is None else keep / name)
     seconds = time.perf_counter() - start
-    common = sorted(set(found.fdp) & set(given))
-    v = np.asarray(face.vertices, float)
-    error = {f: float(np.linalg.norm(v[found.fdp[f]] - v[given[f]])) / found.face_width * 100 for f in common}
+    error = {f: e * 100 for f, e in found.errors(face.vertices, given).items()}
     values = np.array(list(error.values()))
     worst = sorted(error, key=error.get, reverse=True)[:5]
     print(f"{name}: {len(face.vertices)} vertices, {found.summary()}; {seconds:.1f} s")
-    print(f"  error over {len(common)} FDPs, % of face width: median {np.median(values):.1f}, "
+    print(f"  error over {len(error)} FDPs, % of face width: median {np.median(values):.1f}, "
           f"max {values.max():.1f}; worst {', '.join(f'{f} {error[f]:.1f}' for f in worst)}")
 
 

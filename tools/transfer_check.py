@@ -1,12 +1,12 @@
 """How well the default face's calibration carries over to faces of other shapes, where the truth is known.
 
-    PYTHONPATH=. .venv/bin/python tools/transfer_check.py [--faces 3] [--spread 2.0] [--every 1] [--ict]
+    PYTHONPATH=. .venv/bin/python tools/transfer_check.py [--faces 3] [--spread 2.0] [--every 1] [--ict] [--found]
 
 Faces of other shapes come from the shipped shape model (``puppet.photo.shapemodel``: MakeHuman's
 own shape modifiers, a weight of 1 one standard deviation of its population): the default face
 with weights drawn unit normal times ``--spread`` (seeds 1, 2, ...). Each is written as a bare
-mesh (an OBJ of positions and triangles: no parts, contours or feature points) and loaded as a
-user's mesh is, from landmarks: for now the default face's feature-point vertices (the same
+mesh (``write_bare_obj``: positions and triangles, no parts, contours or feature points) and
+loaded as a user's mesh is, from landmarks: the default face's feature-point vertices (the same
 topology, so they are the same places). Its rig is ``build_rig`` (without fold limits: their
 search is another issue's), with the default face's FAP motions carried over, before and after:
 
@@ -24,6 +24,13 @@ folded triangles and creased edges (``puppet.runtime.posecheck``) summed over th
 expressions and 15 visemes, with the worst pose; and the seconds each took. ``--every K`` fits
 every K-th shape only (quicker); ``--ict`` adds ICT-FaceKit's head (folds and creases only:
 its truth is not known).
+
+``--found`` rigs each shaped face also from the landmarks found on its bare OBJ, as ``puppet rig``
+does without ``--landmarks`` (``meshlandmarks.found_face``; needs the photo environment), and
+prints instead of before and after: how sure the finding was, the found points' error against the
+feature-point vertices (median and largest, % of the face width, as ``tools/landmark_accuracy.py``
+measures it), and the same figures for the rig **given** those vertices and the rig from the
+landmarks **found** (both ``build_rig`` here; ICT's head, with ``--ict``, as without ``--found``).
 """
 
 from __future__ import annotations
@@ -36,20 +43,24 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
 from puppet.bench.assets import shared_assets
+from puppet.errors import PuppetError
 from puppet.face.autorig import build_rig, rig_for_face
 from puppet.face.default import default_face
 from puppet.face.examples import load_examples
 from puppet.face.load import load_face
+from puppet.face.meshfile import load_mesh, write_bare_obj
 from puppet.face.rig import Rig, load_rig
 from puppet.photo.shapemodel import load_shape_model
 from puppet.runtime.fapcalibration import fit_faps, relative_residual
 from puppet.runtime.posecheck import pose_flaws
 from puppet.runtime.runtime import Runtime
+from puppet.view.meshlandmarks import found_face
 
 ROOT = Path(__file__).resolve().parents[1]
 BEFORE_RIG = """
@@ -61,13 +72,6 @@ mesh, landmarks, out = sys.argv[1:4]
 save_rig(build_rig(load_face(mesh, landmarks=json.loads(landmarks))), out)
 """
 """The subprocess that rigs a mesh with another revision's package."""
-
-
-def write_bare_obj(path: Path, vertices: np.ndarray, triangles: np.ndarray) -> None:
-    """An OBJ of positions and triangles only, as a user's exported mesh is."""
-    lines = [f"v {x:.7f} {y:.7f} {z:.7f}" for x, y, z in vertices]
-    lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in triangles]
-    path.write_text("\n".join(lines) + "\n")
 
 
 def shaped_face(folder: Path, seed: int, spread: float) -> tuple[Path, dict[str, int]]:
@@ -129,14 +133,41 @@ class Before:
 def measure_ways(face, mesh: Path, landmarks, before: Before, reference: Runtime,
                  shapes: dict[str, np.ndarray] | None) -> None:
     """Print each way's residual (when ``shapes`` are given), folds, creases and time."""
-    for name in ("before", "after"):
-        start = time.perf_counter()
-        rig = before.rig(mesh, landmarks) if name == "before" else transferred(face)
-        runtime = Runtime(face, rig, cache=False)
-        rigged = time.perf_counter() - start
-        residual = f"{median_residual(runtime, shapes):.3f}" if shapes else "  -  "
-        print(f"  {name:<8} {residual}  {flaws(runtime, reference)}  "
-              f"(rig {rigged:.1f} s, all {time.perf_counter() - start:.0f} s)")
+    measure("before", face, lambda: before.rig(mesh, landmarks), reference, shapes)
+    measure("after", face, lambda: transferred(face), reference, shapes)
+
+
+def measure(name: str, face, rig: Callable[[], Rig], reference: Runtime, shapes: dict[str, np.ndarray] | None) -> None:
+    """Print one line: the residual of ``face`` rigged by ``rig()`` (when ``shapes`` are given, in
+    its face frame), its folds, creases and time; or why it could not be rigged, as ``puppet rig``
+    would say it (found landmarks can be such: two control points on one place)."""
+    start = time.perf_counter()
+    try:
+        runtime = Runtime(face, rig(), cache=False)
+    except PuppetError as error:
+        print(f"  {name:<8} not rigged: {error}")
+        return
+    rigged = time.perf_counter() - start
+    residual = f"{median_residual(runtime, shapes):.3f}" if shapes else "  -  "
+    print(f"  {name:<8} {residual}  {flaws(runtime, reference)}  "
+          f"(rig {rigged:.1f} s, all {time.perf_counter() - start:.0f} s)")
+
+
+def measure_found(given, mesh: Path, landmarks: dict[str, int], reference: Runtime,
+                  shapes: dict[str, np.ndarray]) -> None:
+    """``--found``: the landmarks found on ``mesh`` and their error against ``landmarks``, then the
+    figures of ``given`` (the face from ``landmarks``) and of the face from the found landmarks."""
+    start = time.perf_counter()
+    bare = load_mesh(mesh)
+    face, found = found_face(bare, str(mesh))
+    error = {f: e * 100 for f, e in found.errors(bare.vertices, landmarks).items()}
+    values = np.array(list(error.values()))
+    worst = sorted(error, key=error.get, reverse=True)[:5]
+    print(f"  landmarks {found.summary()} ({time.perf_counter() - start:.0f} s)")
+    print(f"  found vs given over {len(error)} FDPs, % of face width: median {np.median(values):.1f}, "
+          f"max {values.max():.1f}; worst {', '.join(f'{f} {error[f]:.1f}' for f in worst)}")
+    measure("given", given, lambda: transferred(given), reference, in_face_frame(given, shapes))
+    measure("found", face, lambda: transferred(face), reference, in_face_frame(face, shapes))
 
 
 def arguments() -> argparse.Namespace:
@@ -145,6 +176,8 @@ def arguments() -> argparse.Namespace:
     parser.add_argument("--spread", type=float, default=2.0, help="shape weights' standard deviation")
     parser.add_argument("--every", type=int, default=1, help="fit every K-th ARKit shape only")
     parser.add_argument("--ict", action="store_true", help="add ICT-FaceKit's head (folds and creases)")
+    parser.add_argument("--found", action="store_true",
+                        help="rig from landmarks found on the bare mesh too (given vs found, not before vs after)")
     parser.add_argument("--before", default=None,
                         help="the revision measured as before (default: merge-base with main)")
     return parser.parse_args()
@@ -182,7 +215,10 @@ def main() -> None:
             moved = np.linalg.norm(np.asarray(face.vertices) - np.asarray(default.vertices), axis=1)
             print(f"shaped face {seed}: skin moved {np.median(moved) / es:.3f} ES (median), "
                   f"up to {moved.max() / es:.3f}")
-            measure_ways(face, mesh, landmarks, before, reference, in_face_frame(face, shapes))
+            if args.found:
+                measure_found(face, mesh, landmarks, reference, shapes)
+            else:
+                measure_ways(face, mesh, landmarks, before, reference, in_face_frame(face, shapes))
         from tools.rig_faces import ict_inputs  # rig_faces draws a shaped face from here: imported late
         inputs = ict_inputs(shared_assets()) if args.ict else None
         if args.ict and inputs is None:

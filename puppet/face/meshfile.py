@@ -16,6 +16,9 @@ The pieces a file is made of (glTF primitives, OBJ groups and materials) name th
 groups nor materials is one part, ``skin``. Other formats go through trimesh with
 ``process=False``, the geometries of a scene merged in order into one part. No loaded face has
 feature points: ``puppet.face.landmarks`` gives it them.
+
+``write_bare_obj`` goes the other way: a mesh as a user's exporter gives it at its barest,
+positions and triangles only (tools and tests make users' meshes with it).
 """
 
 from __future__ import annotations
@@ -203,6 +206,16 @@ def _gltf_face(path: Path) -> Face:
         weight[s:s + len(p.uv)] = 1.0
     return TexturedFace(name=path.stem, vertices=vertices, triangles=triangles, parts=parts, colors=colors,
                         uv=uv, triangle_uv=triangles.copy(), texture=atlas, texture_weight=weight)
+
+
+def write_bare_obj(path: str | os.PathLike, vertices: np.ndarray, triangles: np.ndarray) -> Path:
+    """An OBJ of ``vertices`` (v lines, written to read back exactly) and ``triangles`` (f lines,
+    0-based here, 1-based there) and nothing else: no groups, materials, uv or normals. Returns its path."""
+    path = Path(path)
+    lines = [f"v {x:.17g} {y:.17g} {z:.17g}" for x, y, z in np.asarray(vertices, float).tolist()]
+    lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in np.asarray(triangles).tolist()]
+    path.write_text("\n".join(lines) + "\n")
+    return path
 
 
 @dataclass

@@ -49,7 +49,7 @@ from PIL import Image
 from scipy.spatial import cKDTree
 
 from puppet.face.default import default_face
-from puppet.face.landmarks import FDP_NEEDED
+from puppet.face.landmarks import FDP_NEEDED, apply_landmarks
 from puppet.face.meshparts import components
 from puppet.face.model import Face
 from puppet.photo.build import MEDIAPIPE_FDP, mediapipe_points
@@ -106,6 +106,13 @@ class FoundLandmarks:
                 f"({self.views} rendered); views agree within {np.median(spread):.1f}% of the face width "
                 f"(median; worst {spread.max():.1f}% at FDP {worst})")
 
+    def errors(self, vertices: np.ndarray, given: dict[str, int]) -> dict[str, float]:
+        """Per FDP found and in ``given`` ({FDP id: vertex}, landmarks known otherwise), the distance
+        between the found and the given vertex of ``vertices`` (the mesh's), in face widths."""
+        v = np.asarray(vertices, float)
+        return {f: float(np.linalg.norm(v[self.fdp[f]] - v[given[f]])) / self.face_width
+                for f in sorted(set(self.fdp) & set(given))}
+
 
 def find_landmarks(face: Face, name: str, *, size: int = SIZE, keep: str | Path | None = None,
                    step: Callable[[str], None] | None = None) -> FoundLandmarks:
@@ -119,6 +126,13 @@ def find_landmarks(face: Face, name: str, *, size: int = SIZE, keep: str | Path 
         frames, tried = _find_face(shots, folder, name, say)
         rotation, lifts, facing, found = _views(shots, folder, name, frames)
     return _combine(face, lifts, facing, found, tried + len(VIEWS) * len(frames), rotation, name)
+
+
+def found_face(mesh: Face, name: str, *, step: Callable[[str], None] | None = None) -> tuple[Face, FoundLandmarks]:
+    """The mesh ``mesh`` (``load_mesh``'s) made rig-ready from the landmarks found on it, as
+    ``puppet rig`` does without ``--landmarks``, and those landmarks."""
+    found = find_landmarks(mesh, name, step=step)
+    return apply_landmarks(mesh, found.fdp), found
 
 
 def _find_face(shots: Shots, folder: Path, name: str,
