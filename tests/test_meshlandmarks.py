@@ -53,7 +53,7 @@ def test_the_default_faces_landmarks_are_found_near_its_own(found):
     own = {f: int(v) for f, v in default_face().feature_vertices.items()}
     error = errors(found, own)
     assert set(FDP_NEEDED) <= set(found.fdp) and len(error) >= 40
-    assert np.median(list(error.values())) < 0.03  # 1.8% measured (tools/landmark_accuracy.py)
+    assert np.median(list(error.values())) < 0.03  # 1.5% measured (tools/landmark_accuracy.py)
     assert np.percentile(list(error.values()), 90) < 0.10
     assert max(error[f] for f in ("3.7", "3.8", "3.11", "3.12", "8.3", "8.4", "9.3")) < 0.03  # corners, nose tip
     assert found.views_found == 5 and "5 of 5 views" in found.summary()
@@ -149,3 +149,25 @@ def test_the_picker_on_a_mesh_moves_a_dragged_point_onto_the_vertex_under_it(def
 def _post(url: str, points: np.ndarray) -> urllib.request.Request:
     return urllib.request.Request(url + "points", data=json.dumps({"points": points.tolist()}).encode(),
                                   headers={"Content-Type": "application/json"})
+
+
+@needs_detector
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [1, 2])
+def test_a_face_of_another_shape_rigs_from_its_found_landmarks(tmp_path, capsys, seed):
+    """Faces of other shapes (the shipped shape model, two standard deviations out), as bare OBJs:
+    ``puppet rig`` without --landmarks rigs them. Their closed mouths' inner lip points were lifted
+    onto the other lip or into the mouth, the lip loop ran over the lips (75 vertices for 38) and
+    rig stopped on control points in one place; each now lies on its own lip, above its pair."""
+    from puppet.photo.shapemodel import load_shape_model
+
+    face, model = default_face(), load_shape_model()
+    weights = np.random.default_rng(seed).normal(size=len(model)) * 2.0
+    mesh = write_bare_obj(tmp_path / "shaped.obj", np.asarray(face.vertices, float) + model.offsets(weights),
+                          face.triangles)
+    assert cli.main(["rig", str(mesh), "-o", str(tmp_path / "me")]) == 0, capsys.readouterr().err
+    rigged = load_face(tmp_path / "me")
+    loop, border = rigged.contours["mouth_opening"], rigged.contours["vermilion_border"]
+    assert len(loop) <= 1.2 * len(face.contours["mouth_opening"]) and not set(loop) & set(border)
+    fv, up = rigged.feature_vertices, rigged.vertices[:, 1]
+    assert all(up[fv[a]] > up[fv[b]] for a, b in (("2.2", "2.3"), ("2.6", "2.8"), ("2.7", "2.9")))

@@ -436,7 +436,7 @@ def _feature_points(vertices: np.ndarray, parts: dict[str, np.ndarray], skin: Sk
             fp[pupil] = eye[np.argmax(eye[:, 2])].copy()
     blocks = _Blocks(np.array(list(fp.values())))
     for fid in sorted(set(reference.feature_points) - set(fp) - SKIPPED):
-        ids = _frame_ids(reference.feature_points, fid, sorted(given))
+        ids = _frame_ids(reference.feature_points, fid, sorted(given), fp)
         target = _placed(fp, reference.feature_points[fid], reference.feature_points, ids)
         if fid in reference.feature_vertices and fid not in PUPILS:
             fv[fid] = _snap(vertices, skin, blocks, target, [given[i] for i in ids])
@@ -456,15 +456,19 @@ def _placed(fp: dict[str, np.ndarray], point: np.ndarray, reference: dict[str, n
     return target
 
 
-def _frame_ids(reference: dict[str, np.ndarray], fid: str, known: list[str]) -> list[str]:
+def _frame_ids(reference: dict[str, np.ndarray], fid: str, known: list[str],
+               here: dict[str, np.ndarray]) -> list[str]:
     """The three given feature points nearest ``fid`` on the default face that make a proper
-    triangle (no angle under 15 degrees): the frame its position is written in."""
+    triangle (no angle under 15 degrees) on the default face and on this one (``here``): the
+    frame its position is written in. (Proper on the default face alone, three mid-line points
+    found nearly in line, the chin's 2.1, 2.10 and the lip's 2.3, turned the frame's sideways
+    axis at random: 2.11 and 2.12 both landed on the chin's mid-line, one vertex.)"""
     order = sorted(known, key=lambda k: (np.linalg.norm(reference[k] - reference[fid]), k))
     for k in range(3, len(order) + 1):
         for a in range(k - 2):
             for b in range(a + 1, k - 1):
                 ids = [order[a], order[b], order[k - 1]]
-                if _min_angle(np.array([reference[i] for i in ids])) > np.radians(15):
+                if min(_min_angle(np.array([points[i] for i in ids])) for points in (reference, here)) > np.radians(15):
                     return ids
     raise LandmarkError(f"landmarks: no three given feature points frame FDP {fid}")
 
@@ -513,11 +517,12 @@ def _pivots(vertices: np.ndarray, parts: dict[str, np.ndarray], fp: dict[str, np
             eye = vertices[parts[name]]
             pivots[name] = (eye.min(axis=0) + eye.max(axis=0)) / 2
         else:
-            ids = _nearest_ids(reference.feature_points, reference.pivots[name], known)
+            ids = _nearest_ids(reference.feature_points, reference.pivots[name], known, fp)
             pivots[name] = _placed(fp, reference.pivots[name], reference.feature_points, ids)
     return pivots
 
 
-def _nearest_ids(reference: dict[str, np.ndarray], point: np.ndarray, known: list[str]) -> list[str]:
+def _nearest_ids(reference: dict[str, np.ndarray], point: np.ndarray, known: list[str],
+                 here: dict[str, np.ndarray]) -> list[str]:
     probe = dict(reference, _probe=np.asarray(point, float))
-    return _frame_ids(probe, "_probe", known)
+    return _frame_ids(probe, "_probe", known, here)

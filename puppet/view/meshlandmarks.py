@@ -240,7 +240,7 @@ def _combine(face: Face, lifts: np.ndarray, facing: np.ndarray, found: np.ndarra
         raise DetectionError(f"no face found in {len(VIEWS)} rendered views of {name} turned to face the camera")
     vertices = np.asarray(face.vertices, float)
     skin = skin_vertices(vertices, face.triangles, lifts[found])
-    tree = cKDTree(vertices[skin])
+    rows = _lip_rows(face, skin, rotation)
     chosen = np.full(N_MESH, -1)
     spread = np.full(N_MESH, np.nan)
     for i in range(N_MESH):
@@ -250,10 +250,11 @@ def _combine(face: Face, lifts: np.ndarray, facing: np.ndarray, found: np.ndarra
         use = seen & (facing[:, i] >= MIN_FACING)
         if not use.any():
             use = seen & (facing[:, i] == facing[seen, i].max())
-        near = skin[tree.query(lifts[use, i])[1]]
+        among, tree = _row(rows, MEDIAPIPE_FDP.get(i))
+        near = among[tree.query(lifts[use, i])[1]]
         cost = np.linalg.norm(vertices[near][:, None] - lifts[use, i][None], axis=2).sum(axis=1)
         chosen[i] = near[np.argmin(cost)]
-    _apart(chosen, vertices, skin, tree, lifts, found, rotation[1])
+    _apart(chosen, vertices, rows, lifts, found, rotation[1])
     for i in np.flatnonzero(chosen >= 0):  # over the views the choice used
         seen = found & np.isfinite(lifts[:, i]).all(axis=1)
         use = seen & (facing[:, i] >= MIN_FACING)
@@ -272,30 +273,62 @@ def _combine(face: Face, lifts: np.ndarray, facing: np.ndarray, found: np.ndarra
                           views=views, rotation=rotation, face_width=width)
 
 
+LIP_ROWS = {"2.2": "upper", "2.6": "upper", "2.7": "upper", "2.3": "lower", "2.8": "lower", "2.9": "lower"}
+"""The inner lip points and the lip they lie on. Where the lips meet (a closed mouth),
+MediaPipe finds an upper and a lower point on one spot, which lifts onto the seam between the
+lips: the nearest vertex can be the other lip's, or one inside the mouth (on a shape-model face
+the loop through them then ran over the lips and into the mouth, 75 vertices for 38, and its
+control points fell on the vermilion border's). Each is taken from its own lip's row
+(``_lip_rows``); the corners, where the rows meet, from the whole skin."""
+
+
+def _lip_rows(face: Face, skin: np.ndarray, rotation: np.ndarray) -> dict[str | None, tuple[np.ndarray, cKDTree]]:
+    """{"upper" / "lower": (the skin vertices that face forward and down / up, a tree of them),
+    None: (the whole skin, a tree)}: where the lips meet, the upper lip's surface faces down and
+    the lower's up; inside the mouth the surface faces back. (The face frame's axes:
+    ``rotation``'s rows, in the file.)"""
+    vertices = np.asarray(face.vertices, float)
+    normals = VertexNormals(np.asarray(face.triangles), len(vertices))(vertices)[skin]
+    forward, up = normals @ rotation[2] > 0, normals @ rotation[1]
+    out = {None: (skin, cKDTree(vertices[skin]))}
+    for name, keep in (("upper", forward & (up < 0)), ("lower", forward & (up > 0))):
+        if keep.any():
+            out[name] = (skin[keep], cKDTree(vertices[skin[keep]]))
+    return out
+
+
 UPPER_LOWER = (("2.2", "2.3"), ("2.6", "2.8"), ("2.7", "2.9"), ("3.1", "3.3"), ("3.2", "3.4"))
 """(upper, lower) lip and lid points, which meet where a mouth or an eye is closed."""
 
 
-def _apart(chosen: np.ndarray, vertices: np.ndarray, skin: np.ndarray, tree: cKDTree, lifts: np.ndarray,
-           found: np.ndarray, up: np.ndarray) -> None:
+def _row(rows: dict[str | None, tuple[np.ndarray, cKDTree]], fdp: str | None) -> tuple[np.ndarray, cKDTree]:
+    """The skin vertices FDP ``fdp`` is taken from, and their tree (``LIP_ROWS``; else the skin)."""
+    return rows.get(LIP_ROWS.get(fdp), rows[None])
+
+
+def _apart(chosen: np.ndarray, vertices: np.ndarray, rows: dict[str | None, tuple[np.ndarray, cKDTree]],
+           lifts: np.ndarray, found: np.ndarray, up: np.ndarray) -> None:
     """An upper lip (lid) point lies above its lower one, on another vertex (in place): on a closed
     mouth the inner upper and lower lip (2.2, 2.3) lift to one spot and snapped to one vertex (the
     lip loop through them pinched into a figure eight), or swapped (on a whole figure: the jaw
-    opened the upper lip). Such a pair takes the two skin vertices nearest their lifts with the
-    upper one above the lower (``up``: the face frame's +y in the file)."""
+    opened the upper lip). Such a pair takes the two skin vertices nearest their lifts (each from
+    its ``LIP_ROWS`` row) with the upper one above the lower (``up``: the face frame's +y in the file)."""
     index = {fid: i for i, fid in MEDIAPIPE_FDP.items()}
     for upper, lower in UPPER_LOWER:
         i, j = index[upper], index[lower]
         if chosen[i] < 0 or chosen[j] < 0 or vertices[chosen[i]] @ up > vertices[chosen[j]] @ up:
             continue
         targets = [np.nanmean(lifts[found, k], axis=0) for k in (i, j)]
-        near = np.unique(skin[tree.query(np.array(targets), k=min(len(skin), 12))[1]].ravel())
-        cost = [np.linalg.norm(vertices[near] - t, axis=1) for t in targets]
-        above = (vertices[near] @ up)[:, None] > (vertices[near] @ up)[None] + 1e-12 * np.ptp(vertices)
+        near = []
+        for fdp, target in zip((upper, lower), targets):
+            among, tree = _row(rows, fdp)
+            near.append(among[tree.query(target, k=min(len(among), 12))[1]])
+        cost = [np.linalg.norm(vertices[n] - t, axis=1) for n, t in zip(near, targets)]
+        above = (vertices[near[0]] @ up)[:, None] > (vertices[near[1]] @ up)[None] + 1e-12 * np.ptp(vertices)
         total = np.where(above, cost[0][:, None] + cost[1][None], np.inf)
         if np.isfinite(total).any():
             a, b = np.unravel_index(np.argmin(total), total.shape)
-            chosen[i], chosen[j] = near[a], near[b]
+            chosen[i], chosen[j] = near[0][a], near[1][b]
 
 
 def skin_vertices(vertices: np.ndarray, triangles: np.ndarray, lifts: np.ndarray) -> np.ndarray:
