@@ -439,7 +439,7 @@ def _feature_points(vertices: np.ndarray, parts: dict[str, np.ndarray], skin: Sk
         ids = _frame_ids(reference.feature_points, fid, sorted(given), fp)
         target = _placed(fp, reference.feature_points[fid], reference.feature_points, ids)
         if fid in reference.feature_vertices and fid not in PUPILS:
-            fv[fid] = _snap(vertices, skin, blocks, target, [given[i] for i in ids])
+            fv[fid] = _snap(vertices, skin, blocks, target, [given[i] for i in ids], np.array(list(fv.values())))
             fp[fid] = vertices[fv[fid]].copy()
         else:
             fp[fid] = target
@@ -456,19 +456,26 @@ def _placed(fp: dict[str, np.ndarray], point: np.ndarray, reference: dict[str, n
     return target
 
 
+PROPER = np.radians(15)
+"""The smallest angle of a proper frame triangle (``_frame_ids``)."""
+
+
 def _frame_ids(reference: dict[str, np.ndarray], fid: str, known: list[str],
                here: dict[str, np.ndarray]) -> list[str]:
     """The three given feature points nearest ``fid`` on the default face that make a proper
-    triangle (no angle under 15 degrees) on the default face and on this one (``here``): the
-    frame its position is written in. (Proper on the default face alone, three mid-line points
-    found nearly in line, the chin's 2.1, 2.10 and the lip's 2.3, turned the frame's sideways
-    axis at random: 2.11 and 2.12 both landed on the chin's mid-line, one vertex.)"""
+    triangle there (no angle under ``PROPER``) and not a sliver on this face (``here``: no angle
+    under half of it): the frame its position is written in. (Proper on the default face alone,
+    the chin's 2.1 and 2.10 and a lip point, found nearly in line on a face of another shape
+    (6.6 degrees), turned the frame's sideways axis at random: 2.11 and 2.12 both landed on the
+    chin's mid-line, one vertex. Proper on both, ICT's ears and jaw angles, framed at 15.0
+    degrees on ICT, were framed by points farther away and placed inside the head.)"""
     order = sorted(known, key=lambda k: (np.linalg.norm(reference[k] - reference[fid]), k))
     for k in range(3, len(order) + 1):
         for a in range(k - 2):
             for b in range(a + 1, k - 1):
                 ids = [order[a], order[b], order[k - 1]]
-                if min(_min_angle(np.array([points[i] for i in ids])) for points in (reference, here)) > np.radians(15):
+                if (_min_angle(np.array([reference[i] for i in ids])) > PROPER
+                        and _min_angle(np.array([here[i] for i in ids])) > PROPER / 2):
                     return ids
     raise LandmarkError(f"landmarks: no three given feature points frame FDP {fid}")
 
@@ -492,10 +499,13 @@ class _Blocks:
 
 
 def _snap(vertices: np.ndarray, skin: Skin, blocks: _Blocks, target: np.ndarray,
-          anchors: list[int]) -> int:
+          anchors: list[int], taken: np.ndarray) -> int:
     """The skin vertex nearest ``target`` in its block (and the blocks around it) and within
-    geodesic reach of the nearest frame point: twice the straight distance, plus a block."""
+    geodesic reach of the nearest frame point: twice the straight distance, plus a block; not one
+    another feature point has ``taken`` (two on one vertex are two control points on one place:
+    a face of another shape put the chin's 2.11 on 2.10's)."""
     verts = np.flatnonzero(skin.mask)
+    verts = verts[~np.isin(verts, taken)]
     near = np.abs(blocks.cell(vertices[verts, :2]) - blocks.cell(target[:2])).max(axis=1) <= 1
     anchor = min(anchors, key=lambda a: (np.linalg.norm(vertices[a] - target), a))
     reach = 2 * np.linalg.norm(vertices[anchor] - target) + np.max((blocks.hi - blocks.lo) / GRID)
