@@ -172,6 +172,7 @@ def test_a_rig_s_guarded_vertices_round_trip_and_are_checked(runtime, tmp_path):
     """The vertices a rig's fold guard watches are saved as runs and read back; the shipped rig has
     none and writes no key; an index past the face is refused by name."""
     import copy
+
     from puppet.face.rig import RigError, rig_to_dict
 
     assert "guarded" not in rig_to_dict(runtime.rig)

@@ -24,8 +24,6 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
-
 from puppet.bench.assets import shared_assets
 from puppet.face.default import default_face
 from puppet.face.landmarks import IBUG_FDP, IBUG_MIDWAY, apply_landmarks
@@ -61,12 +59,8 @@ def measure(name: str, mesh: Path, given: dict[str, int], keep: Path | None) -> 
     start = time.perf_counter()
     found = find_landmarks(face, str(mesh), keep=None if keep is None else keep / name)
     seconds = time.perf_counter() - start
-    error = {f: e * 100 for f, e in found.errors(face.vertices, given).items()}
-    values = np.array(list(error.values()))
-    worst = sorted(error, key=error.get, reverse=True)[:5]
     print(f"{name}: {len(face.vertices)} vertices, {found.summary()}; {seconds:.1f} s")
-    print(f"  error over {len(error)} FDPs, % of face width: median {np.median(values):.1f}, "
-          f"max {values.max():.1f}; worst {', '.join(f'{f} {error[f]:.1f}' for f in worst)}")
+    print(f"  error {found.error_summary(face.vertices, given)}")
 
 
 def main() -> None:

@@ -160,12 +160,8 @@ def measure_found(given, mesh: Path, landmarks: dict[str, int], reference: Runti
     start = time.perf_counter()
     bare = load_mesh(mesh)
     face, found = found_face(bare, str(mesh))
-    error = {f: e * 100 for f, e in found.errors(bare.vertices, landmarks).items()}
-    values = np.array(list(error.values()))
-    worst = sorted(error, key=error.get, reverse=True)[:5]
     print(f"  landmarks {found.summary()} ({time.perf_counter() - start:.0f} s)")
-    print(f"  found vs given over {len(error)} FDPs, % of face width: median {np.median(values):.1f}, "
-          f"max {values.max():.1f}; worst {', '.join(f'{f} {error[f]:.1f}' for f in worst)}")
+    print(f"  found vs given {found.error_summary(bare.vertices, landmarks)}")
     measure("given", given, lambda: transferred(given), reference, in_face_frame(given, shapes))
     measure("found", face, lambda: transferred(face), reference, in_face_frame(face, shapes))
 

@@ -60,7 +60,6 @@ from puppet.fap.table import N_FAPS
 from puppet.runtime.fapcalibration import bisected_reach
 from puppet.runtime.runtime import Runtime
 
-
 CLEAR = 0.5
 """The share of a triangle's rest |n0|^2 that ``FoldSearch.touched`` keeps as the margin of one it
 leaves out: far beyond rounding, so its fold test is the whole face's to the last bit."""

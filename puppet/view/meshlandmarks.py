@@ -113,6 +113,14 @@ class FoundLandmarks:
         return {f: float(np.linalg.norm(v[self.fdp[f]] - v[given[f]])) / self.face_width
                 for f in sorted(set(self.fdp) & set(given))}
 
+    def error_summary(self, vertices: np.ndarray, given: dict[str, int]) -> str:
+        """``errors`` in a line: over how many FDPs, the median, the largest and the worst five (%)."""
+        error = {f: e * 100 for f, e in self.errors(vertices, given).items()}
+        values = np.array(list(error.values()))
+        worst = sorted(error, key=error.get, reverse=True)[:5]
+        return (f"over {len(error)} FDPs, % of face width: median {np.median(values):.1f}, max {values.max():.1f}; "
+                f"worst {', '.join(f'{f} {error[f]:.1f}' for f in worst)}")
+
 
 def find_landmarks(face: Face, name: str, *, size: int = SIZE, keep: str | Path | None = None,
                    step: Callable[[str], None] | None = None) -> FoundLandmarks:
