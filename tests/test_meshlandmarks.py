@@ -65,7 +65,8 @@ def test_a_face_turned_in_its_file_is_found_the_same(found, turn, tmp_path):
     from puppet.view.meshlandmarks import find_landmarks
 
     face = default_face()
-    turned = write_bare_obj(tmp_path / "turned.obj", TURNS[turn].apply(face.vertices) + [3.0, -2.0, 1.0], face.triangles)
+    turned = write_bare_obj(tmp_path / "turned.obj", TURNS[turn].apply(face.vertices) + [3.0, -2.0, 1.0],
+                            face.triangles)
     again = find_landmarks(load_mesh(turned), str(turned))
     assert np.median(list(errors(again, found.fdp).values())) < 0.01
     assert np.degrees(Rotation.from_matrix(again.rotation @ TURNS[turn].as_matrix()).magnitude()) < 10
