@@ -12,15 +12,10 @@ from puppet.bench.assets import shared_assets
 from puppet.face.autorig import _loop_path_via, build_rig
 from puppet.face.landmarks import IBUG_FDP, LandmarkError, read_landmarks
 from puppet.face.load import load_face
+from puppet.face.meshfile import write_bare_obj
 from puppet.face.rig import rig_to_dict
 from puppet.runtime.runtime import Runtime
 from tools.rig_faces import ict_inputs, mediapipe_inputs
-
-
-def _write_obj(path, vertices, triangles):
-    lines = [f"v {float(x)!r} {float(y)!r} {float(z)!r}" for x, y, z in vertices] + [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in triangles]
-    path.write_text("\n".join(lines) + "\n")
-    return path
 
 
 def _rotation(axis, angle):
@@ -71,8 +66,8 @@ def test_a_scaled_rotated_copy_moves_the_same_scaled_and_rotated(default, tmp_pa
     R = _rotation((0.3, 1.0, -0.4), 0.7)
     shift = np.array([2.0, -1.0, 0.5])
     landmarks = dict(default.feature_vertices)
-    a = load_face(_write_obj(tmp_path / "a.obj", default.vertices, default.triangles), landmarks=landmarks)
-    b = load_face(_write_obj(tmp_path / "b.obj", 1.7 * default.vertices @ R.T + shift, default.triangles),
+    a = load_face(write_bare_obj(tmp_path / "a.obj", default.vertices, default.triangles), landmarks=landmarks)
+    b = load_face(write_bare_obj(tmp_path / "b.obj", 1.7 * default.vertices @ R.T + shift, default.triangles),
                   landmarks=landmarks)
     rig_a, rig_b = build_rig(a), build_rig(b)
     assert [(r.name, r.vertices.tolist()) for r in rig_a.regions] == [(r.name, r.vertices.tolist()) for r in rig_b.regions]
@@ -96,7 +91,7 @@ def test_a_scaled_rotated_copy_moves_the_same_scaled_and_rotated(default, tmp_pa
     ("not landmarks", "expected an object"),
 ])
 def test_landmark_errors_are_clear(default, tmp_path, landmarks, message):
-    mesh = _write_obj(tmp_path / "m.obj", default.vertices, default.triangles)
+    mesh = write_bare_obj(tmp_path / "m.obj", default.vertices, default.triangles)
     with pytest.raises(LandmarkError, match=message):
         source = tmp_path / "l.json"
         source.write_text(json.dumps(landmarks))
@@ -146,7 +141,7 @@ def _ibug_for(face) -> list[int]:
 
 
 def test_68_ibug_points_rig_the_default_face(default, tmp_path):
-    mesh = _write_obj(tmp_path / "m.obj", default.vertices, default.triangles)
+    mesh = write_bare_obj(tmp_path / "m.obj", default.vertices, default.triangles)
     face = load_face(mesh, landmarks=_ibug_for(default))
     rig = build_rig(face)
     assert _covered_once(face, rig)
@@ -161,7 +156,7 @@ def test_68_ibug_points_rig_the_default_face(default, tmp_path):
 def bare_default(default, tmp_path_factory):
     """The default face written as a bare OBJ (positions and triangles) and loaded from its own
     feature-point vertices: a user's mesh the shipped face's artist made."""
-    mesh = _write_obj(tmp_path_factory.mktemp("bare") / "f.obj", default.vertices, default.triangles)
+    mesh = write_bare_obj(tmp_path_factory.mktemp("bare") / "f.obj", default.vertices, default.triangles)
     return load_face(mesh, landmarks=dict(default.feature_vertices))
 
 

@@ -13,6 +13,7 @@ import pytest
 from puppet.cli import main
 from puppet.face.folder import load_folder_rig
 from puppet.face.load import load_face
+from puppet.face.meshfile import write_bare_obj
 from puppet.io.fapfile import write_fap
 from puppet.runtime.musclesolver import folded_triangles
 from puppet.runtime.runtime import Runtime
@@ -23,10 +24,7 @@ def rigged(tmp_path_factory):
     """The default face's skin and teeth written as a bare OBJ, its landmarks as JSON, rigged into a folder."""
     root = tmp_path_factory.mktemp("rigged")
     face = load_face()
-    mesh = root / "head.obj"
-    lines = [f"v {x!r} {y!r} {z!r}" for x, y, z in face.vertices.tolist()]
-    lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in face.triangles.tolist()]
-    mesh.write_text("\n".join(lines) + "\n")
+    mesh = write_bare_obj(root / "head.obj", face.vertices, face.triangles)
     points = root / "points.json"
     points.write_text(json.dumps(face.feature_vertices))
     said = io.StringIO()

@@ -52,6 +52,7 @@ import bisect
 import math
 import multiprocessing
 import os
+import warnings
 from collections.abc import Callable
 
 import numpy as np
@@ -68,6 +69,8 @@ NEAR = 0.5
 the model follows on the stretches beside it."""
 WORKERS = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
 """Processes ``FoldSearch.ahead`` searches in: the cores this process may run on."""
+AHEAD_TIMEOUT = 120.0
+"""Seconds ``FoldSearch.ahead`` waits for its processes (ICT's ends take 1-3 s) before searching here."""
 _FORKED: FoldSearch | None = None
 """The search ``ahead``'s workers inherit when forked (set only while they run)."""
 
@@ -129,7 +132,13 @@ class FoldSearch(Bisection):
         known yet, in ``WORKERS`` processes forked from this one (each inherits the runtime):
         ``ask`` is run first with a reach that only notes what it is asked for (the limits ask
         for every FAP's two ends whatever each finds). The values are the ones asked one by one
-        (``tests/test_foldsearch.py``); where a process cannot fork, nothing is done ahead."""
+        (``tests/test_foldsearch.py``); where a process cannot fork, nothing is done ahead.
+
+        Python 3.12+ warns that a process with threads may deadlock a forked child: here the
+        threads are numpy's BLAS pool (and, after ``meshlandmarks``' renders, the GL driver's),
+        which the children never use; they only run numpy on the arrays they inherit. The
+        warning is not shown, and a pool that has not answered within ``AHEAD_TIMEOUT`` is given
+        up: the ends are then searched here, one by one, as asked."""
         asked: dict[tuple, tuple[list[int], float, int]] = {}
 
         def note(numbers: list[int], end: float, steps: int) -> None:
@@ -142,8 +151,13 @@ class FoldSearch(Bisection):
         global _FORKED
         _FORKED = self
         try:
-            with multiprocessing.get_context("fork").Pool(min(WORKERS, len(todo))) as pool:
-                found = pool.map(_searched, list(todo.values()), chunksize=1)
+            with warnings.catch_warnings():
+                warnings.filterwarnings("ignore", r"This process .* is multi-threaded", DeprecationWarning)
+                pool = multiprocessing.get_context("fork").Pool(min(WORKERS, len(todo)))
+            with pool:
+                found = pool.map_async(_searched, list(todo.values()), chunksize=1).get(AHEAD_TIMEOUT)
+        except multiprocessing.TimeoutError:
+            return
         finally:
             _FORKED = None
         self._found.update(zip(todo, found))
