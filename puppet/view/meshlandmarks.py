@@ -133,7 +133,7 @@ def find_landmarks(face: Face, name: str, *, size: int = SIZE, keep: str | Path 
         folder.mkdir(parents=True, exist_ok=True)
         frames, tried = _find_face(shots, folder, name, say)
         rotation, lifts, facing, found = _views(shots, folder, name, frames)
-    return _combine(face, lifts, facing, found, tried + len(VIEWS) * len(frames), rotation, name)
+    return _combine(face, shots.normals, lifts, facing, found, tried + len(VIEWS) * len(frames), rotation, name)
 
 
 def found_face(mesh: Face, name: str, *, step: Callable[[str], None] | None = None) -> tuple[Face, FoundLandmarks]:
@@ -241,14 +241,14 @@ def _views(shots: Shots, folder: Path, name: str, frames: list[tuple[np.ndarray,
     return rotation, points, facing, np.array(found[views], dtype=bool)
 
 
-def _combine(face: Face, lifts: np.ndarray, facing: np.ndarray, found: np.ndarray, views: int,
+def _combine(face: Face, normals: np.ndarray, lifts: np.ndarray, facing: np.ndarray, found: np.ndarray, views: int,
              rotation: np.ndarray, name: str) -> FoundLandmarks:
     """Per landmark, the skin vertex its views agree on (module docstring, 3), and the FDPs."""
     if not found.any():
         raise DetectionError(f"no face found in {len(VIEWS)} rendered views of {name} turned to face the camera")
     vertices = np.asarray(face.vertices, float)
     skin = skin_vertices(vertices, face.triangles, lifts[found])
-    rows = _lip_rows(face, skin, rotation)
+    rows = _lip_rows(vertices, normals, skin, rotation)
     chosen = np.full(N_MESH, -1)
     spread = np.full(N_MESH, np.nan)
     for i in range(N_MESH):
@@ -290,14 +290,13 @@ control points fell on the vermilion border's). Each is taken from its own lip's
 (``_lip_rows``); the corners, where the rows meet, from the whole skin."""
 
 
-def _lip_rows(face: Face, skin: np.ndarray, rotation: np.ndarray) -> dict[str | None, tuple[np.ndarray, cKDTree]]:
+def _lip_rows(vertices: np.ndarray, normals: np.ndarray, skin: np.ndarray,
+              rotation: np.ndarray) -> dict[str | None, tuple[np.ndarray, cKDTree]]:
     """{"upper" / "lower": (the skin vertices that face forward and down / up, a tree of them),
     None: (the whole skin, a tree)}: where the lips meet, the upper lip's surface faces down and
     the lower's up; inside the mouth the surface faces back. (The face frame's axes:
-    ``rotation``'s rows, in the file.)"""
-    vertices = np.asarray(face.vertices, float)
-    normals = VertexNormals(np.asarray(face.triangles), len(vertices))(vertices)[skin]
-    forward, up = normals @ rotation[2] > 0, normals @ rotation[1]
+    ``rotation``'s rows, in the file; ``normals``: the mesh's unit vertex normals.)"""
+    forward, up = normals[skin] @ rotation[2] > 0, normals[skin] @ rotation[1]
     out = {None: (skin, cKDTree(vertices[skin]))}
     for name, keep in (("upper", forward & (up < 0)), ("lower", forward & (up > 0))):
         if keep.any():
