@@ -651,9 +651,10 @@ def _fit_lines(face, result, examples) -> list[str]:
 
 
 def _fold_limits_line(rig) -> str:
-    """What a rig's fold limits hold (``puppet.runtime.foldlimits``)."""
+    """What a rig's fold limits and smoothing hold (``puppet.runtime.foldlimits``, ``creasesmoothing``)."""
+    smoothed = f", {len(rig.smoothed)} smoothed where they crease" if len(rig.smoothed) else ""
     return (f"fold limits: {len(rig.fap_reach)} FAPs capped, {len(rig.fap_follow)} lip pairs following each other, "
-            f"{len(rig.guarded)} vertices guarded where the expressions and visemes fold")
+            f"{len(rig.guarded)} vertices guarded where the expressions and visemes fold{smoothed}")
 
 
 def _count(n: int, noun: str) -> str:

@@ -189,7 +189,8 @@ def test_a_bare_default_face_rigs_with_few_folds_and_creases(default, bare_defau
     it reaches now, near the default face's own ``build_rig`` without limits (4 folds, 151 creased
     edges; the shipped rig's limits take them to none), and with fold limits as ``puppet rig`` finds
     them: no fold (the two that the limits left are the rig's ``guarded``, which the fold guard
-    holds) and 58 creases (main had 51 and 709), asserted so they cannot grow back."""
+    holds) and 54 creases (main had 51 and 709), asserted so they cannot grow back. Its mesh is as
+    coarse as the default face's, so nothing is smoothed (``puppet.runtime.creasesmoothing``)."""
     from puppet.face.default import load_default_rig
     from puppet.runtime.posecheck import pose_flaws
     from puppet.runtime.foldlimits import fold_limited
@@ -200,6 +201,7 @@ def test_a_bare_default_face_rigs_with_few_folds_and_creases(default, bare_defau
     assert sum(f.creases for f in found.values()) <= 210
     limited_rig = fold_limited(bare_default, rig)  # as `puppet rig`
     assert len(limited_rig.guarded) > 0
+    assert len(limited_rig.smoothed) == 0  # as coarse as the reference: its creases are the motion's
     limited = pose_flaws(Runtime(bare_default, limited_rig), reference)
     assert sum(f.folds for f in limited.values()) == 0
     assert sum(f.creases for f in limited.values()) <= 60

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from puppet.runtime.creases import MARGIN, CreaseBound, Hinges, creases
+from puppet.runtime.creases import MARGIN, CreaseReference, Hinges
 
 
 def sheet(n: int = 6) -> tuple[np.ndarray, np.ndarray]:
@@ -61,12 +61,12 @@ def test_a_reference_pose_bounds_the_same_pose_and_catches_a_sharper_one():
     vertices, triangles = sheet(6)
     hinges = Hinges.of(triangles)
     hinge = hinges.hinge_lengths(vertices, triangles)
-    bound = CreaseBound.of(hinges, vertices, bent(vertices, 0.4), triangles, eye_separation=1.0)
-    allowed = bound.at(hinges.midpoints(vertices), hinge)
-    assert not creases(hinges, vertices, bent(vertices, 0.4), triangles, allowed).any()
-    sharper = creases(hinges, vertices, bent(vertices, 0.4 + 2 * MARGIN), triangles, allowed)
+    reference = CreaseReference.of(vertices, triangles, eye_separation=1.0)
+    nearest = reference.nearest(hinges.midpoints(vertices))
+    allowed = reference.allowed(bent(vertices, 0.4), nearest, hinge)
+    assert not (np.abs(hinges.bend(vertices, bent(vertices, 0.4), triangles)) > allowed).any()
+    sharper = np.abs(hinges.bend(vertices, bent(vertices, 0.4 + 2 * MARGIN), triangles)) > allowed
     on_line = (np.abs(vertices[hinges.edges, 0]) < 1e-12).all(axis=1)
     assert sharper[on_line].all() and not sharper[~on_line].any()
-    flat = CreaseBound.of(hinges, vertices, vertices, triangles, eye_separation=1.0)
-    allowed = flat.at(hinges.midpoints(vertices), hinge)
-    assert creases(hinges, vertices, bent(vertices, 0.4), triangles, allowed).sum() == 6
+    allowed = reference.allowed(vertices, nearest, hinge)
+    assert (np.abs(hinges.bend(vertices, bent(vertices, 0.4), triangles)) > allowed).sum() == 6

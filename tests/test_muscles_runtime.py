@@ -21,6 +21,7 @@ from puppet.live.retake import retake
 from puppet.live.session import LiveSession
 from puppet.runtime.musclesolver import EdgeConstraints, control_point_displacements, folded_triangles
 from puppet.runtime.runtime import MUSCLE_MODES, Runtime
+from puppet.runtime.skinsmoothing import skin_triangles
 
 JOYSTICK = "sim://joystick?protocol=ascii&rate=200&channels=6"
 SMILE_MAPPING = """\
@@ -33,12 +34,6 @@ targets:
   - {muscle: zygomatic_major_l, source: box.ch1}
   - {muscle: zygomatic_major_r, source: box.ch2}
 """
-
-
-def _skin_triangles(face) -> np.ndarray:
-    skin = np.zeros(len(face.vertices), bool)
-    skin[face.parts["skin"]] = True
-    return face.triangles[skin[face.triangles].all(axis=1)]
 
 
 def _moved(runtime, point: str, **pose) -> np.ndarray:
@@ -117,7 +112,7 @@ def test_an_unknown_muscle_or_mode_is_named(runtime):
 
 @pytest.mark.parametrize("mode, folds", [("control", False), ("improved", False), ("classic", True)])
 def test_contraction_10_folds_only_the_classic_skin(runtime, face, mode, folds):
-    triangles = _skin_triangles(face)
+    triangles = skin_triangles(face)
     for name in ("zygomatic_major_l", "zygomatic_major_r"):
         folded = folded_triangles(face.vertices, runtime.deform_faps(muscles={name: 10.0}, mode=mode), triangles)
         assert folded.any() == folds, (name, int(folded.sum()))
@@ -126,7 +121,7 @@ def test_contraction_10_folds_only_the_classic_skin(runtime, face, mode, folds):
 @pytest.mark.parametrize("mode", ["control", "improved"])
 @pytest.mark.parametrize("name", MUSCLE_NAMES)
 def test_no_muscle_folds_the_skin_at_contraction_10(runtime, face, name, mode):
-    folded = folded_triangles(face.vertices, runtime.deform_faps(muscles={name: 10.0}, mode=mode), _skin_triangles(face))
+    folded = folded_triangles(face.vertices, runtime.deform_faps(muscles={name: 10.0}, mode=mode), skin_triangles(face))
     assert not folded.any(), int(folded.sum())
 
 
@@ -137,13 +132,13 @@ def test_normal_contractions_fold_nothing(runtime, face, pose):
     """A few muscles squeeze a triangle at contraction 1 (the risorius' at the lip corner, the
     orbicularis oculi's at the outer eye corner), all of them at 0.5 the lip corners'; the fold
     guard takes those back, so the face shows no fold."""
-    assert not folded_triangles(face.vertices, runtime.deform_faps(muscles=pose), _skin_triangles(face)).any()
+    assert not folded_triangles(face.vertices, runtime.deform_faps(muscles=pose), skin_triangles(face)).any()
 
 
 def test_the_fold_guard_costs_nothing_at_ordinary_contraction(runtime, face):
     calm = runtime.deform_faps(muscles={"zygomatic_major_l": 1.0})
     assert not runtime._fold_guard.squeezed(calm[runtime._guard_vertices])  # so the guard left this frame as DFFD made it
-    assert not folded_triangles(face.vertices, calm, _skin_triangles(face)).any()
+    assert not folded_triangles(face.vertices, calm, skin_triangles(face)).any()
 
 
 @pytest.mark.parametrize("name", MUSCLE_NAMES)

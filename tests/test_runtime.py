@@ -168,22 +168,23 @@ def test_rig_file_round_trip(runtime, tmp_path):
         assert a.name == b.name and np.array_equal(a.vertices, b.vertices)
 
 
-def test_a_rig_s_guarded_vertices_round_trip_and_are_checked(runtime, tmp_path):
-    """The vertices a rig's fold guard watches are saved as runs and read back; the shipped rig has
-    none and writes no key; an index past the face is refused by name."""
+@pytest.mark.parametrize("field", ["guarded", "smoothed"])
+def test_a_rig_s_vertex_lists_round_trip_and_are_checked(runtime, tmp_path, field):
+    """The vertices a rig's fold guard watches, and those it smooths, are saved as runs and read
+    back; the shipped rig has none and writes no key; an index past the face is refused by name."""
     import copy
 
     from puppet.face.rig import RigError, rig_to_dict
 
-    assert "guarded" not in rig_to_dict(runtime.rig)
+    assert field not in rig_to_dict(runtime.rig)
     rig = copy.copy(runtime.rig)
-    rig.guarded = np.array([5, 6, 7, 40, 41])
-    save_rig(rig, tmp_path / "guarded.rig")
-    assert load_rig(tmp_path / "guarded.rig").guarded.tolist() == [5, 6, 7, 40, 41]
+    setattr(rig, field, np.array([5, 6, 7, 40, 41]))
+    save_rig(rig, tmp_path / "listed.rig")
+    assert getattr(load_rig(tmp_path / "listed.rig"), field).tolist() == [5, 6, 7, 40, 41]
     data = rig_to_dict(rig)
-    data["guarded"] = [[0, rig.n_vertices]]
+    data[field] = [[0, rig.n_vertices]]
     (tmp_path / "bad.rig").write_text(json.dumps(data))
-    with pytest.raises(RigError, match=r"bad\.rig: guarded: vertex indices must lie in 0\.\."):
+    with pytest.raises(RigError, match=rf"bad\.rig: {field}: vertex indices must lie in 0\.\."):
         load_rig(tmp_path / "bad.rig")
 
 

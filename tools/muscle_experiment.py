@@ -59,6 +59,7 @@ from puppet.face.load import load_face
 from puppet.face.muscles import LinearMuscle, flat_grid
 from puppet.runtime.musclesolver import EdgeConstraints, MuscleModel, control_point_displacements, folded_triangles
 from puppet.runtime.runtime import Runtime
+from puppet.runtime.skinsmoothing import skin_triangles
 
 CONTRACTIONS = (0, 3, 5, 10)
 MODES = ("classic", "improved", "control-point, no guard", "control-point")
@@ -115,12 +116,6 @@ def every_muscle_table(face, runtime: Runtime, contractions=(1, 3, 5, 10)) -> st
                   for m in MODES for c in contractions]
         lines.append(f"| {name} | " + " | ".join(map(str, counts)) + " |")
     return "\n".join(lines)
-
-
-def skin_triangles(face) -> np.ndarray:
-    mask = np.zeros(len(face.vertices), bool)
-    mask[face.parts["skin"]] = True
-    return face.triangles[mask[face.triangles].all(axis=1)]
 
 
 def spike(rest: np.ndarray, deformed: np.ndarray, triangles: np.ndarray, muscle: LinearMuscle) -> tuple[float, float]:

@@ -13,8 +13,9 @@ shapes calibrated, in the same pose. A dihedral angle grows with the edge's leng
 curvature, so the reference is a bend *rate*: bend over the hinge (the distance between the two
 triangles' centroids), in eye separations of each face. An edge of another face is a crease
 when its bend exceeds its hinge times the largest rate among the ``NEIGHBOURS`` reference edges
-nearest to where it sits on the reference face, plus ``MARGIN``. Where it sits is for the caller
-to say (``puppet.face.motiontransfer``'s thin-plate warp through the shared feature points).
+nearest to where it sits on the reference face (``CreaseReference``), plus ``MARGIN``. Where it
+sits is for the caller to say (``puppet.face.motiontransfer``'s thin-plate warp through the shared
+feature points).
 """
 
 from __future__ import annotations
@@ -79,33 +80,40 @@ class Hinges:
 
     def bend(self, rest: np.ndarray, posed: np.ndarray, triangles: np.ndarray) -> np.ndarray:
         """The change of each edge's dihedral angle from ``rest`` to ``posed`` (E,), in (-pi, pi]."""
-        change = self.dihedral(posed, triangles) - self.dihedral(rest, triangles)
-        return np.angle(np.exp(1j * change))
+        return self.bend_from(self.dihedral(rest, triangles), posed, triangles)
+
+    def bend_from(self, rest_angles: np.ndarray, posed: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+        """``bend`` from the rest's dihedral angles, found once for many poses."""
+        return np.angle(np.exp(1j * (self.dihedral(posed, triangles) - rest_angles)))
 
 
 @dataclass(frozen=True)
-class CreaseBound:
-    """The reference face's bend rates in one pose, where its edges sit: bounds for another face's."""
+class CreaseReference:
+    """A reference face at rest whose bends bound another face's: its interior edges, their hinges
+    (eye separations) and where they sit (edge midpoints)."""
 
-    places: cKDTree  # reference edge midpoints, in eye separations
-    rates: np.ndarray  # |bend| / hinge per reference edge, radians per eye separation
+    hinges: Hinges
+    triangles: np.ndarray
+    angles: np.ndarray  # (R,) the reference edges' dihedral angles at rest
+    hinge: np.ndarray  # (R,) the reference edges' hinges, eye separations
+    places: cKDTree  # the reference edges' midpoints, mesh units
 
     @classmethod
-    def of(cls, hinges: Hinges, rest: np.ndarray, posed: np.ndarray, triangles: np.ndarray,
-           eye_separation: float) -> CreaseBound:
-        """The bound a reference mesh in pose ``posed`` sets (its ``eye_separation`` in mesh units)."""
-        hinge = hinges.hinge_lengths(rest, triangles) / eye_separation
-        rates = np.abs(hinges.bend(rest, posed, triangles)) / np.maximum(hinge, 1e-12)
-        return cls(cKDTree(hinges.midpoints(rest) / eye_separation), rates)
+    def of(cls, rest: np.ndarray, triangles: np.ndarray, eye_separation: float) -> CreaseReference:
+        """The reference a mesh at rest sets (its ``eye_separation`` in mesh units)."""
+        rest, triangles = np.asarray(rest, float), np.asarray(triangles)
+        hinges = Hinges.of(triangles)
+        return cls(hinges, triangles, hinges.dihedral(rest, triangles),
+                   hinges.hinge_lengths(rest, triangles) / eye_separation, cKDTree(hinges.midpoints(rest)))
 
-    def at(self, places: np.ndarray, hinge: np.ndarray) -> np.ndarray:
-        """The largest bend (E,) allowed to edges with these hinges (eye separations) at these
-        places on the reference face (mesh units of the reference)."""
+    def nearest(self, places: np.ndarray) -> np.ndarray:
+        """The ``NEIGHBOURS`` reference edges (E, NEIGHBOURS) nearest to each of these places on
+        the reference face (its mesh units): found once, used for every pose."""
         _, nearest = self.places.query(np.asarray(places, float), k=NEIGHBOURS)
-        return hinge * self.rates[np.atleast_2d(nearest.T).T].max(axis=1) + MARGIN
+        return np.atleast_2d(nearest.T).T
 
-
-def creases(hinges: Hinges, rest: np.ndarray, posed: np.ndarray, triangles: np.ndarray,
-            allowed: np.ndarray) -> np.ndarray:
-    """Boolean mask over ``hinges``' edges bending further than ``allowed`` (E,) radians."""
-    return np.abs(hinges.bend(rest, posed, triangles)) > allowed
+    def allowed(self, posed: np.ndarray, nearest: np.ndarray, hinge: np.ndarray) -> np.ndarray:
+        """The largest bend (E,) allowed to edges with these hinges (eye separations) whose
+        ``nearest`` reference edges bend as they do with the reference in pose ``posed``."""
+        rates = np.abs(self.hinges.bend_from(self.angles, posed, self.triangles)) / np.maximum(self.hinge, 1e-12)
+        return hinge * rates[nearest].max(axis=1) + MARGIN

@@ -124,11 +124,11 @@ class FapEngine:
         self._follow_a, self._follow_b = (np.array([pair[k] - 1 for pair, _ in pairs], dtype=np.int64) for k in (0, 1))
         self._follow_rows = np.array([follow.rows(*ranges) for _, ranges in pairs]).reshape(len(pairs), 4, 3)
 
-    def with_limits(self, runtime) -> FapEngine:
-        """This engine for ``runtime``, this one's runtime with other follow pairs and reach
-        (``Runtime.with_limits``): the FAPs' motions and the lids' closing shapes stay (neither
-        depends on the limits; the motions take 0.1 s to gather on a 27k-vertex face), the limits
-        are read anew."""
+    def on(self, runtime) -> FapEngine:
+        """This engine for ``runtime``: this one's runtime with other follow pairs and reach
+        (``Runtime.with_limits``) or other skin smoothing (``Runtime.with_smoothing``). The FAPs'
+        motions and the lids' closing shapes stay (they move control points, which neither changes;
+        the motions take 0.2 s to gather on a 27k-vertex face), the limits are read anew."""
         other = copy.copy(self)
         other.runtime, other.rig = runtime, runtime.rig
         other._read_reach()

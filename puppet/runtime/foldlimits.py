@@ -59,8 +59,10 @@ import dataclasses
 
 import numpy as np
 
+from puppet.face.default import default_face, load_default_rig
 from puppet.face.rig import Rig
 from puppet.fap.table import fap
+from puppet.runtime.creasesmoothing import crease_smoothed
 from puppet.runtime.fapcalibration import Calibration, calibrate, common_reach, fit_faps, fold_free_reach
 from puppet.runtime.fapengine import GAZE_FAPS, lid_shares
 from puppet.runtime.foldsearch import Bisection, FoldSearch
@@ -195,10 +197,14 @@ def fold_limited(face, rig: Rig, search: type[Bisection] = FoldSearch) -> Rig:
     face the six expressions folded 2,368 triangles without these limits and 102 with them; the
     triangles the expressions and visemes still fold within them (FAPs that fold nothing alone
     fold together) are the rig's ``guarded``, which the runtime's fold guard keeps from folding.
-    ``search``: as for ``fold_limits``."""
+    Before the limits are searched, the skin is smoothed where the poses crease
+    (``puppet.runtime.creasesmoothing``; the rig's ``smoothed``), so the limits hold for the face as
+    it moves. ``search``: as for ``fold_limits``."""
     out = copy.copy(rig)
-    out.fap_follow, out.fap_reach, out.guarded = {}, {}, np.zeros(0, dtype=np.int64)
-    runtime = Runtime(face, out)
+    none = np.zeros(0, dtype=np.int64)
+    out.fap_follow, out.fap_reach, out.guarded, out.smoothed = {}, {}, none, none
+    runtime = crease_smoothed(Runtime(face, out, guard=False), Runtime(default_face(), load_default_rig(), guard=False))
+    out.smoothed = runtime.rig.smoothed
     out.fap_follow, reach = fold_limits(runtime, search)
     out.fap_reach = {n: (low, np.inf) if n in GUARDED else (low, high) for n, (low, high) in reach.items()}
     out.guarded = folded_vertices(runtime.with_limits(out.fap_follow, out.fap_reach))

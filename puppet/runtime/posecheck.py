@@ -16,9 +16,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from puppet.face.motiontransfer import feature_warp
-from puppet.runtime.creases import CreaseBound, Hinges, creases
+from puppet.runtime.creases import CreaseReference, Hinges
 from puppet.runtime.musclesolver import folded_triangles
 from puppet.runtime.runtime import Runtime
+from puppet.runtime.skinsmoothing import skin_triangles
 
 EXPRESSIONS = ("joy", "sadness", "anger", "fear", "disgust", "surprise")
 POSES = ({name: {"expression": (k, 63, 0, 0)} for k, name in enumerate(EXPRESSIONS, start=1)}
@@ -33,16 +34,6 @@ class PoseFlaws:
     folds: int
     creases: int
     edges: int
-
-
-def skin_triangles(face) -> np.ndarray:
-    """The triangles whose three corners are on the skin part (every triangle if it has none)."""
-    tri = np.asarray(face.triangles)
-    if "skin" not in face.parts:
-        return tri
-    on = np.zeros(len(face.vertices), dtype=bool)
-    on[face.parts["skin"]] = True
-    return tri[on[tri].all(axis=1)]
 
 
 def eye_separation(face) -> float:
@@ -60,21 +51,46 @@ def folded_vertices(runtime: Runtime, poses: dict[str, dict] | None = None) -> n
     return np.unique(tri[folded])
 
 
+class PoseCheck:
+    """The poses of a face judged against the reference (the default face's runtime) in the same
+    poses: where each edge sits on the reference and what bend it is allowed in each pose are found
+    once, for every rig of the face that is checked (``puppet.runtime.creasesmoothing``).
+
+    ``fineness``: each edge's hinge over the mean hinge of the reference edges nearest its place
+    (both in eye separations): under 1 where this face's mesh is finer than the reference's.
+    ``allowed``: {pose name: the largest bend each edge may show in it}."""
+
+    def __init__(self, face, reference: Runtime, poses: dict[str, dict] | None = None) -> None:
+        ref = reference.face
+        self.poses = poses or POSES
+        self.triangles = skin_triangles(face)
+        self.hinges = Hinges.of(self.triangles)
+        self.rest = np.asarray(face.vertices, float)
+        self.rest_angles = self.hinges.dihedral(self.rest, self.triangles)
+        bound = CreaseReference.of(ref.vertices, skin_triangles(ref), eye_separation(ref))
+        places = feature_warp(ref.feature_points, face.feature_points)(self.hinges.midpoints(self.rest))
+        nearest = bound.nearest(places)
+        hinge = self.hinges.hinge_lengths(self.rest, self.triangles) / eye_separation(face)
+        self.fineness = hinge / bound.hinge[nearest].mean(axis=1)
+        self.allowed = {name: bound.allowed(reference.deform_faps(**pose), nearest, hinge)
+                        for name, pose in self.poses.items()}
+
+    def creased(self, name: str, posed: np.ndarray) -> np.ndarray:
+        """Boolean mask over ``hinges``' edges that pose ``name``, deformed to ``posed``, creases."""
+        return np.abs(self.hinges.bend_from(self.rest_angles, posed, self.triangles)) > self.allowed[name]
+
+    def flaws(self, runtime: Runtime) -> dict[str, PoseFlaws]:
+        """{pose name: its flaws} on ``runtime`` (a rig of this face)."""
+        triangles = runtime.face.triangles
+        out = {}
+        for name, pose in self.poses.items():
+            posed = runtime.deform_faps(**pose)
+            out[name] = PoseFlaws(int(folded_triangles(self.rest, posed, triangles).sum()),
+                                  int(self.creased(name, posed).sum()), len(self.hinges.edges))
+        return out
+
+
 def pose_flaws(runtime: Runtime, reference: Runtime, poses: dict[str, dict] | None = None) -> dict[str, PoseFlaws]:
     """{pose name: its flaws} on ``runtime``'s face, creases bounded by ``reference`` (the default
     face's runtime) in the same pose; ``poses`` defaults to ``POSES``."""
-    face, ref = runtime.face, reference.face
-    tri, ref_tri = skin_triangles(face), skin_triangles(ref)
-    hinges, ref_hinges = Hinges.of(tri), Hinges.of(ref_tri)
-    rest, ref_rest = np.asarray(face.vertices, float), np.asarray(ref.vertices, float)
-    es, ref_es = eye_separation(face), eye_separation(ref)
-    places = feature_warp(ref.feature_points, face.feature_points)(hinges.midpoints(rest)) / ref_es
-    hinge = hinges.hinge_lengths(rest, tri) / es
-    out = {}
-    for name, pose in (poses or POSES).items():
-        posed = runtime.deform_faps(**pose)
-        bound = CreaseBound.of(ref_hinges, ref_rest, reference.deform_faps(**pose), ref_tri, ref_es)
-        out[name] = PoseFlaws(int(folded_triangles(rest, posed, face.triangles).sum()),
-                              int(creases(hinges, rest, posed, tri, bound.at(places, hinge)).sum()),
-                              len(hinges.edges))
-    return out
+    return PoseCheck(runtime.face, reference, poses).flaws(runtime)

@@ -16,6 +16,9 @@ Per frame (``deform``):
    dropped, see ``_pruned``), so the skin costs a single sparse product written into the output
    (run over B's columns: ``_by_input``); in real-time mode each region applies
    its own coefficients and rebases them when a control point drifts farther than ``threshold``.
+   Where the rig lists ``smoothed`` vertices (a face rigged by transfer), their motion is then
+   averaged with their neighbours' (``puppet.runtime.skinsmoothing``): folded into B, or applied
+   after the regions in the real-time mode.
 5. On a pose (``deform_pose``, ``deform_faps``: FAPs, as a live face, a player or a fit deforms),
    the sliver guard (``puppet.runtime.sliverguard``) keeps the few triangles a closing lid turns
    over at the eye corners from folding (it checks them every frame and acts at a full blink), as
@@ -93,6 +96,7 @@ from puppet.runtime.fapengine import FapEngine, lid_shares
 from puppet.runtime.lastmade import LastMade
 from puppet.runtime.musclesolver import ControlPointMuscles, EdgeConstraints, MuscleModel
 from puppet.runtime.normals import VertexNormals
+from puppet.runtime.skinsmoothing import skin_triangles, smoothing_matrix
 from puppet.runtime.sliverguard import sliver_guard
 from puppet.runtime.spreading import spread_matrix
 
@@ -105,7 +109,7 @@ class Runtime:
 
     def __init__(self, face, rig: Rig | None = None, *, mode: str = "precomputed",
                  threshold: float | None = None, prune: float = 1e-3, dtype=np.float32,
-                 cache: bool = True) -> None:
+                 cache: bool = True, guard: bool = True) -> None:
         if mode not in MODES:
             raise ValueError(f"mode {mode!r}: expected one of {MODES}")
         self.face = face
@@ -125,7 +129,8 @@ class Runtime:
         self.muscle_names: tuple[str, ...] = tuple(m.name for m in self.rig.muscles)
         self._muscle_models: dict[str, MuscleModel] = {}
         self._slivers = None  # the probes that find the sliver guard's triangles deform without it
-        self._slivers = sliver_guard(self)
+        if guard:  # without: for checks of poses that close no lid (``puppet.runtime.creasesmoothing``)
+            self._slivers = sliver_guard(self)
 
     # -- set-up ---------------------------------------------------------------------------
 
@@ -230,10 +235,22 @@ class Runtime:
                                   shape=(n, len(region.vertices)))
             blocks.append(place @ folded)
         B = sum(blocks[1:], blocks[0]) if blocks else sp.csr_matrix((n, len(self._inputs)))
+        if len(self.rig.smoothed):
+            B = self._smoothing @ B
         B = _pruned(sp.csr_matrix(B), self.prune)
         B = sp.csr_matrix(B, dtype=self.dtype)
         B.sort_indices()
         return B
+
+    @functools.cached_property
+    def _smoothing(self) -> sp.csr_matrix:
+        """The rig's skin smoothing (``puppet.runtime.skinsmoothing.smoothing_matrix``)."""
+        return smoothing_matrix(skin_triangles(self.face), len(self.rest), self.rig.smoothed)
+
+    @functools.cached_property
+    def _smoothed_rows(self) -> sp.csr_matrix:
+        """The smoothing's rows for the smoothed vertices: what the real-time mode applies."""
+        return sp.csr_matrix(self._smoothing[self.rig.smoothed])
 
     def _init_rigid(self) -> None:
         self._rigid_vertices = {}
@@ -305,6 +322,9 @@ class Runtime:
                                      d.astype(self.dtype, copy=False).ravel(), out.ravel())
         else:
             self._deform_realtime(d, out)
+            if len(self.rig.smoothed):
+                rows = self.rig.smoothed
+                out[rows] = self.rest[rows] + self._smoothed_rows @ (out - self.rest)
             if share is not None:
                 columns, spread = self._muscle_spread
                 out += (spread @ share[columns]).astype(self.dtype, copy=False)
@@ -518,7 +538,7 @@ class Runtime:
     def with_limits(self, fap_follow: Mapping[tuple[int, int], tuple[float, ...]],
                     fap_reach: Mapping[int, tuple[float, float]] | None = None) -> Runtime:
         """This runtime on a copy of its rig with ``fap_follow`` (and ``fap_reach``, when given) in
-        place of the rig's: only the FAP engine reads the limits (``FapEngine.with_limits``), so
+        place of the rig's: only the FAP engine reads the limits (``FapEngine.on``), so
         the deformers, B and the sliver guard are shared and the copy costs no set-up (a new
         runtime of the ICT head, 27k vertices, takes 1-2 s). The fold-limit search tries a face
         under several follows, and ``foldlimits`` finds what the poses fold within the limits."""
@@ -529,7 +549,28 @@ class Runtime:
             other.rig.fap_reach = dict(fap_reach)
         other.rig.validate()
         if "faps" in self.__dict__:
-            other.faps = self.faps.with_limits(other)
+            other.faps = self.faps.on(other)
+        return other
+
+    def with_smoothing(self, smoothed: np.ndarray, *, guard: bool = True) -> Runtime:
+        """This runtime on a copy of its rig whose ``smoothed`` vertices are ``smoothed``: the
+        deformers (the Sibson coefficients, most of a runtime's set-up) are shared; B, the sliver
+        guard and everything made on first use are made again (``puppet.runtime.creasesmoothing``
+        smooths a face where it creased)."""
+        other = copy.copy(self)
+        other.__dict__ = {k: v for k, v in self.__dict__.items() if k not in _MADE_ON_USE}
+        other.rig = copy.copy(self.rig)
+        other.rig.smoothed = np.unique(np.asarray(smoothed, dtype=np.int64))
+        other.rig.validate()
+        if other.mode == "precomputed":
+            other.B = other._folded()
+            other._by_input = sp.csc_matrix(other.B)
+            other._by_input.sort_indices()
+        if "faps" in self.__dict__:
+            other.faps = self.faps.on(other)
+        other._slivers = None
+        if guard:
+            other._slivers = sliver_guard(other)
         return other
 
     def deform_pose(self, pose: Pose, *, out: np.ndarray | None = None, normals_out: np.ndarray | None = None,
@@ -671,6 +712,11 @@ class Runtime:
             deformer.rebase(queries, sites)
         except DffdError as exc:
             warnings.warn(f"real-time rebase skipped: {exc}", stacklevel=3)
+
+
+_MADE_ON_USE = frozenset(name for name, value in vars(Runtime).items() if isinstance(value, functools.cached_property))
+"""What a runtime makes on first use (its ``functools.cached_property`` names): a copy on another
+rig (``with_smoothing``) makes it again."""
 
 
 def _pruned(B: sp.csr_matrix, prune: float) -> sp.csr_matrix:
