@@ -613,13 +613,17 @@ def _calibrate_face(args: argparse.Namespace) -> int:
 
 def _arkit_route(face, result, examples, output: Path, shown: str) -> None:
     """The face's own ARKit route (``puppet.live.arkitroute``) in its folder, when it learnt from
-    ARKit-named examples, and how to use it."""
+    ARKit-named examples, and how to use it; else an earlier route there is removed."""
     import numpy as np
 
-    from puppet.live.arkitroute import arkit_document, write_face_route
+    from puppet.live.arkitroute import arkit_document, remove_face_route, write_face_route
 
     document = arkit_document(face, result, examples, face_label=f"face {face.name!r} as calibrated")
     if not document["faps"]:
+        removed = remove_face_route(output)
+        if removed:
+            print(f"  removed its earlier ARKit route ({', '.join(p.name for p in removed)}): fitted to the rig "
+                  "this calibration replaces, with no ARKit-named shape to fit it again")
         return
     write_face_route(document, output, f"face {face.name!r} ({shown})")
     route = Path(shown)

@@ -22,7 +22,7 @@ from puppet.cli import main
 from puppet.face.examples import load_examples
 from puppet.face.load import load_face
 from puppet.io.shipped import mappings_folder
-from puppet.live.arkitroute import shipped_vectors, write_face_route
+from puppet.live.arkitroute import remove_face_route, shipped_vectors, write_face_route
 from puppet.runtime.fapcalibration import relative_residual
 from puppet.runtime.runtime import Runtime
 
@@ -57,6 +57,15 @@ def test_a_face_route_has_its_own_vectors_and_the_default_face_s_for_the_rest(tm
     mapping = load_mapping(tmp_path / "arkit_csv.yaml")
     mapping.feed(Sample(1, "csv", {"JawOpen": 0.5}))
     assert mapping.pose().fap[3 - 1] == pytest.approx(160.5)
+
+
+def test_a_face_route_is_removed_whole_and_nothing_else(tmp_path):
+    own = {"description": "test", "faps": {"jawOpen": {"open_jaw": 321}}, "residual": {"jawOpen": 0.1}}
+    written = write_face_route(own, tmp_path, "face 'me' (me/)")
+    (tmp_path / "face.rig").write_text("{}")
+    assert remove_face_route(tmp_path) == written
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["face.rig"]
+    assert remove_face_route(tmp_path) == []
 
 
 @pytest.mark.slow

@@ -227,3 +227,13 @@ def write_face_route(document: dict, folder: str | os.PathLike, face: str) -> li
     (folder / SHIPPED_VECTORS).write_text(json.dumps(document, indent=1) + "\n")
     merged = {"faps": shipped_vectors()["faps"] | document["faps"], "residual": document["residual"]}
     return [folder / SHIPPED_VECTORS, *write_routes(merged, folder, face=face)]
+
+
+def remove_face_route(folder: str | os.PathLike) -> list[Path]:
+    """Remove a face route (``write_face_route``) from ``folder`` and return what was there: after
+    a calibration from shapes with no ARKit names, an earlier route's vectors were fitted to the
+    rig this one replaces, and would drive it wrong."""
+    there = [path for path in (Path(folder) / name for name in (SHIPPED_VECTORS, *ROUTES)) if path.is_file()]
+    for path in there:
+        path.unlink()
+    return there
