@@ -11,6 +11,7 @@ of each face, so a finer mesh is not blamed for its shorter edges.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -57,23 +58,28 @@ class PoseCheck:
     once, for every rig of the face that is checked (``puppet.runtime.creasesmoothing``).
 
     ``fineness``: each edge's hinge over the mean hinge of the reference edges nearest its place
-    (both in eye separations): under 1 where this face's mesh is finer than the reference's.
-    ``allowed``: {pose name: the largest bend each edge may show in it}."""
+    (both in eye separations): under 1 where this face's mesh is finer than the reference's."""
 
     def __init__(self, face, reference: Runtime, poses: dict[str, dict] | None = None) -> None:
         ref = reference.face
+        self.reference = reference
         self.poses = poses or POSES
         self.triangles = skin_triangles(face)
         self.hinges = Hinges.of(self.triangles)
         self.rest = np.asarray(face.vertices, float)
         self.rest_angles = self.hinges.dihedral(self.rest, self.triangles)
-        bound = CreaseReference.of(ref.vertices, skin_triangles(ref), eye_separation(ref))
+        self._bound = CreaseReference.of(ref.vertices, skin_triangles(ref), eye_separation(ref))
         places = feature_warp(ref.feature_points, face.feature_points)(self.hinges.midpoints(self.rest))
-        nearest = bound.nearest(places)
-        hinge = self.hinges.hinge_lengths(self.rest, self.triangles) / eye_separation(face)
-        self.fineness = hinge / bound.hinge[nearest].mean(axis=1)
-        self.allowed = {name: bound.allowed(reference.deform_faps(**pose), nearest, hinge)
-                        for name, pose in self.poses.items()}
+        self._nearest = self._bound.nearest(places)
+        self._hinge = self.hinges.hinge_lengths(self.rest, self.triangles) / eye_separation(face)
+        self.fineness = self._hinge / self._bound.hinge[self._nearest].mean(axis=1)
+
+    @functools.cached_property
+    def allowed(self) -> dict[str, np.ndarray]:
+        """{pose name: the largest bend each edge may show in it}, from the reference in that pose
+        (found on first use: ``fineness`` alone needs no pose)."""
+        return {name: self._bound.allowed(self.reference.deform_faps(**pose), self._nearest, self._hinge)
+                for name, pose in self.poses.items()}
 
     def creased(self, name: str, posed: np.ndarray) -> np.ndarray:
         """Boolean mask over ``hinges``' edges that pose ``name``, deformed to ``posed``, creases."""

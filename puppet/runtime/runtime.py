@@ -554,15 +554,15 @@ class Runtime:
 
     def with_smoothing(self, smoothed: np.ndarray, *, guard: bool = True) -> Runtime:
         """This runtime on a copy of its rig whose ``smoothed`` vertices are ``smoothed``: the
-        deformers (the Sibson coefficients, most of a runtime's set-up) are shared; B, the sliver
-        guard and everything made on first use are made again (``puppet.runtime.creasesmoothing``
-        smooths a face where it creased)."""
+        deformers (the Sibson coefficients, most of a runtime's set-up) are shared; B (when the
+        vertices change), the sliver guard (unless ``guard`` is False) and everything made on first
+        use are made again (``puppet.runtime.creasesmoothing`` smooths a face where it creased)."""
         other = copy.copy(self)
         other.__dict__ = {k: v for k, v in self.__dict__.items() if k not in _MADE_ON_USE}
         other.rig = copy.copy(self.rig)
         other.rig.smoothed = np.unique(np.asarray(smoothed, dtype=np.int64))
         other.rig.validate()
-        if other.mode == "precomputed":
+        if other.mode == "precomputed" and not np.array_equal(other.rig.smoothed, self.rig.smoothed):
             other.B = other._folded()
             other._by_input = sp.csc_matrix(other.B)
             other._by_input.sort_indices()
