@@ -84,7 +84,7 @@ class Hinges:
 
     def bend_from(self, rest_angles: np.ndarray, posed: np.ndarray, triangles: np.ndarray) -> np.ndarray:
         """``bend`` from the rest's dihedral angles, found once for many poses."""
-        return np.angle(np.exp(1j * (self.dihedral(posed, triangles) - rest_angles)))
+        return np.pi - np.remainder(np.pi - (self.dihedral(posed, triangles) - rest_angles), 2 * np.pi)
 
 
 @dataclass(frozen=True)

@@ -48,7 +48,8 @@ def crease_smoothed(runtime: Runtime, reference: Runtime) -> Runtime:
     check = PoseCheck(runtime.face, reference)
     if np.median(check.fineness) >= FINER:
         return runtime.with_smoothing(np.zeros(0, dtype=np.int64))
-    around = grown(_vertices(check, _creased_edges(runtime, check)), neighbours(check.triangles, len(runtime.rest)), RINGS)
+    adjacency = neighbours(check.triangles, len(runtime.rest))
+    around = grown(_vertices(check, _creased_edges(runtime, check)), adjacency, RINGS)
     return runtime.with_smoothing(np.flatnonzero(around & runtime.dffd_vertices & ~_placed(runtime)))
 
 

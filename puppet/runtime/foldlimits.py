@@ -203,7 +203,8 @@ def fold_limited(face, rig: Rig, search: type[Bisection] = FoldSearch) -> Rig:
     out = copy.copy(rig)
     none = np.zeros(0, dtype=np.int64)
     out.fap_follow, out.fap_reach, out.guarded, out.smoothed = {}, {}, none, none
-    runtime = crease_smoothed(Runtime(face, out, guard=False), Runtime(default_face(), load_default_rig(), guard=False))
+    reference = Runtime(default_face(), load_default_rig(), guard=False)
+    runtime = crease_smoothed(Runtime(face, out, guard=False), reference)
     out.smoothed = runtime.rig.smoothed
     out.fap_follow, reach = fold_limits(runtime, search)
     out.fap_reach = {n: (low, np.inf) if n in GUARDED else (low, high) for n, (low, high) in reach.items()}
