@@ -1,7 +1,8 @@
 """Skin smoothing (``puppet.runtime.skinsmoothing``) and where a rig gets it
 (``puppet.runtime.creasesmoothing``): it spreads a hinge over the rings around it, leaves every
 vertex it does not list as it was, and keeps rest and translations; the runtime folds it into B, in
-both modes; a face as coarse as the default face gets none, a finer one creases less with it."""
+both modes; a finer mesh of the default face creases less with it (a face as coarse as the default
+face gets none: ``test_autorig``)."""
 
 import copy
 

@@ -129,7 +129,7 @@ class Runtime:
         self.muscle_names: tuple[str, ...] = tuple(m.name for m in self.rig.muscles)
         self._muscle_models: dict[str, MuscleModel] = {}
         self._slivers = None  # the probes that find the sliver guard's triangles deform without it
-        if guard:  # without: for checks of poses that close no lid (``puppet.runtime.creasesmoothing``)
+        if guard:  # without: a runtime for checks that do without it (``puppet.runtime.creasesmoothing``)
             self._slivers = sliver_guard(self)
 
     # -- set-up ---------------------------------------------------------------------------
