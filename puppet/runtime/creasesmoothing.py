@@ -44,9 +44,10 @@ vertices smoothed, a face of the shape model (the default face's mesh, reshaped)
 def crease_smoothed(runtime: Runtime, reference: Runtime) -> Runtime:
     """A copy of ``runtime`` (``Runtime.with_smoothing``, with a sliver guard) whose rig's
     ``smoothed`` vertices are found as the module says. ``reference``: the default face's runtime,
-    which bounds the bends. Neither needs its sliver guard for the check (``Runtime(...,
-    guard=False)`` saves a second on the ICT head): the guard holds a few triangles at the eye
-    corners, beside the lid margins, which are never smoothed."""
+    which bounds the bends. Both may be built without their sliver guards (``Runtime(...,
+    guard=False)`` saves a second on the ICT head): the check only chooses where to smooth, and the
+    guard, which holds a few triangles at the eye corners, changes which edges crease there a little
+    (74 of the bare default face's 21-pose total); the copy returned has its guard again."""
     check = PoseCheck(runtime.face, reference)
     if np.median(check.fineness) >= FINER:
         return runtime.with_smoothing(np.zeros(0, dtype=np.int64))

@@ -56,13 +56,13 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import scipy.sparse as sp
 
 from puppet.face.rigid import IDENTITY
 from puppet.fap.table import clamp_ranges
 from puppet.runtime.lastmade import LastMade
 from puppet.runtime.lids import LID_FAPS
 from puppet.runtime.musclesolver import EdgeConstraints, folded_triangles
+from puppet.runtime.skinsmoothing import grown, neighbours
 
 PROBED = (19, 20)
 """close_t_l_eyelid, close_t_r_eyelid: the FAPs whose range end folds slivers that no limit may
@@ -177,7 +177,9 @@ class SliverGuard:
             listed = np.zeros(len(rest), dtype=bool)
             listed[guarded] = True
             folding |= listed[tri].all(axis=1)
-        reached = _grown(tri, len(rest), folding, RINGS)
+        corners = np.zeros(len(rest), dtype=bool)
+        corners[tri[folding].ravel()] = True
+        reached = grown(corners, neighbours(tri, len(rest)), RINGS)
         watched = tri[reached[tri].any(axis=1)]
         self.vertices, local = np.unique(watched, return_inverse=True)
         self.constraints = None
@@ -217,19 +219,6 @@ class SliverGuard:
     def _fixed(self, positions: np.ndarray) -> np.ndarray:
         """``positions`` of the watched vertices fixed, or none (0, 3) when nothing was about to fold."""
         return positions if self.constraints.guard(positions) else np.zeros((0, 3))
-
-
-def _grown(triangles: np.ndarray, n: int, mask: np.ndarray, rings: int) -> np.ndarray:
-    """Vertices of the masked triangles and of ``rings`` rings of triangles around them."""
-    corners = triangles.ravel()
-    incidence = sp.csr_matrix((np.ones(len(corners)), (corners, np.repeat(np.arange(len(triangles)), 3))),
-                              shape=(n, len(triangles)))
-    vertices = np.zeros(n, dtype=bool)
-    vertices[triangles[mask].ravel()] = True
-    for _ in range(rings):
-        touching = incidence.T @ vertices.astype(float) > 0
-        vertices[triangles[touching].ravel()] = True
-    return vertices
 
 
 def sliver_guard(runtime) -> SliverGuard:
