@@ -92,11 +92,11 @@ def test_the_ends_searched_ahead_on_every_core_are_the_ones_asked_one_by_one(unl
     search then finds each end when asked, with no warning shown either way."""
     import warnings
 
-    import puppet.runtime.foldsearch as foldsearch
+    import puppet.runtime.forked as forked
     from puppet.runtime.fapcalibration import fold_free_reach
 
-    monkeypatch.setattr(foldsearch, "WORKERS", 2)
-    monkeypatch.setattr(foldsearch, "AHEAD_TIMEOUT", timeout)
+    monkeypatch.setattr(forked, "WORKERS", 2)
+    monkeypatch.setattr(forked, "TIMEOUT", timeout)
     ahead = FoldSearch(unlimited)
     with warnings.catch_warnings():
         warnings.simplefilter("error")

@@ -34,7 +34,7 @@ FULL_RED = np.radians(15.0)
 
 def crease_colors(check: PoseCheck, name: str, posed: np.ndarray) -> np.ndarray:
     """Skin colour reddened at each vertex by how far its edges bend beyond their bound."""
-    over = np.abs(check.hinges.bend_from(check.rest_angles, posed, check.triangles)) - check.allowed[name]
+    over = check.excess(name, posed)
     heat = np.zeros(len(check.rest))
     for k in range(2):
         np.maximum.at(heat, check.hinges.edges[:, k], over)

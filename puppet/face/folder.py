@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
-from puppet.face.meshfile import read_obj
+from puppet.face.meshfile import obj_lines, read_obj
 from puppet.face.model import Face, FaceFileError, TexturedFace
 from puppet.face.rig import load_rig, save_rig
 
@@ -108,15 +108,15 @@ def _obj_text(face: Face, title: str) -> str:
     if textured:
         out.write(f"mtllib {FACE_MTL}\nusemtl face\n")
     if face.colors is not None:
-        np.savetxt(out, np.c_[face.vertices, face.colors], fmt="v %.17g %.17g %.17g %.4f %.4f %.4f")
+        out.write(obj_lines("v %.17g %.17g %.17g %.4f %.4f %.4f", np.c_[face.vertices, face.colors]))
     else:
-        np.savetxt(out, face.vertices, fmt="v %.17g %.17g %.17g")
+        out.write(obj_lines("v %.17g %.17g %.17g", face.vertices))
     t = np.asarray(face.triangles, dtype=np.int64) + 1
     if textured:
-        np.savetxt(out, face.uv, fmt="vt %.6f %.6f")
-        np.savetxt(out, np.repeat(t, 2, axis=1), fmt="f %d/%d %d/%d %d/%d")
+        out.write(obj_lines("vt %.6f %.6f", face.uv))
+        out.write(obj_lines("f %d/%d %d/%d %d/%d", np.repeat(t, 2, axis=1)))
     else:
-        np.savetxt(out, t, fmt="f %d %d %d")
+        out.write(obj_lines("f %d %d %d", t))
     return out.getvalue()
 
 

@@ -28,6 +28,7 @@ import os
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 from PIL import Image, UnidentifiedImageError
@@ -212,10 +213,15 @@ def write_bare_obj(path: str | os.PathLike, vertices: np.ndarray, triangles: np.
     """An OBJ of ``vertices`` (v lines, written to read back exactly) and ``triangles`` (f lines,
     0-based here, 1-based there) and nothing else: no groups, materials, uv or normals. Returns its path."""
     path = Path(path)
-    lines = [f"v {x:.17g} {y:.17g} {z:.17g}" for x, y, z in np.asarray(vertices, float).tolist()]
-    lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in np.asarray(triangles).tolist()]
-    path.write_text("\n".join(lines) + "\n")
+    path.write_text(obj_lines("v %.17g %.17g %.17g", vertices) + obj_lines("f %d %d %d", np.asarray(triangles) + 1))
     return path
+
+
+def obj_lines(fmt: str, rows: np.ndarray) -> str:
+    """One line per row of ``rows``, each ``fmt`` % the row, newline-ended: numpy's ``savetxt``
+    in one formatting step (it formats row by row: a third of the time to write ICT's face.obj)."""
+    rows = np.asarray(rows)
+    return ((fmt + "\n") * len(rows)) % tuple(rows.ravel().tolist())
 
 
 @dataclass
@@ -327,8 +333,7 @@ def read_obj(path: str | os.PathLike) -> ObjMesh:
     )
 
 
-@dataclass(frozen=True)
-class _Polygon:
+class _Polygon(NamedTuple):
     """An 'f' line as written: its OBJ indices (1-based or negative) and the counts they are
     relative to (the vertices and texture coordinates defined before it)."""
 

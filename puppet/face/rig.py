@@ -181,8 +181,9 @@ class Rig:
             raise RigError(f"control points: duplicate names {dup}")
         by_name = self._points_by_name()
         region_names = {r.name for r in self.regions}
+        positions_checked = _finite_positions(self.control_points)
         for p in self.control_points:
-            _validate_point(p, region_names, self.rigid_parts, self.n_vertices)
+            _validate_point(p, region_names, self.rigid_parts, self.n_vertices, positions_checked)
         owner = np.full(self.n_vertices, -1)
         for i, region in enumerate(self.regions):
             _validate_region(region, by_name, self.rigid_parts, owner, i, self.n_vertices)
@@ -230,11 +231,22 @@ class Rig:
             raise RigError(f"muscles: duplicate names {dup}")
 
 
-def _validate_point(p: ControlPoint, regions: set[str], parts: dict, n_vertices: int) -> None:
+def _finite_positions(points: list[ControlPoint]) -> bool:
+    """Whether every point's position is 3 finite numbers, checked at once (point by point, the
+    check was half of a validation: a rig is validated a dozen times as ``puppet rig`` makes it)."""
+    try:
+        positions = np.array([p.position for p in points], dtype=float)
+    except (ValueError, TypeError):
+        return False
+    return positions.shape == (len(points), 3) and bool(np.isfinite(positions).all())
+
+
+def _validate_point(p: ControlPoint, regions: set[str], parts: dict, n_vertices: int,
+                    position_checked: bool = False) -> None:
     where = f"control point {p.name!r}"
     if p.role not in ROLES:
         raise RigError(f"{where}: role {p.role!r}, expected one of {ROLES}")
-    if np.shape(p.position) != (3,) or not np.all(np.isfinite(p.position)):
+    if not position_checked and (np.shape(p.position) != (3,) or not np.all(np.isfinite(p.position))):
         raise RigError(f"{where}: position must be 3 finite numbers, got {p.position!r}")
     if p.weight <= 0:
         raise RigError(f"{where}: weight must be > 0 (only box corners weigh 0), got {p.weight}")

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from puppet.runtime.forked import forked_map
 from puppet.runtime.posecheck import PoseCheck
 from puppet.runtime.runtime import Runtime
 from puppet.runtime.skinsmoothing import grown, neighbours
@@ -57,11 +58,13 @@ def crease_smoothed(runtime: Runtime, reference: Runtime) -> Runtime:
 
 
 def _creased_edges(runtime: Runtime, check: PoseCheck) -> np.ndarray:
-    """Bool mask over ``check``'s edges of those any of its poses creases on ``runtime``."""
-    creased = np.zeros(len(check.hinges.edges), dtype=bool)
-    for name, pose in check.poses.items():
-        creased |= check.creased(name, runtime.deform_faps(**pose))
-    return creased
+    """Bool mask over ``check``'s edges of those any of its poses creases on ``runtime``, the poses
+    checked on every core (``puppet.runtime.forked``)."""
+    def creased(name: str) -> np.ndarray:
+        return check.creased(name, runtime.deform_faps(**check.poses[name]))
+
+    names = list(check.poses)
+    return np.logical_or.reduce(forked_map(creased, names) or [creased(name) for name in names])
 
 
 def _vertices(check: PoseCheck, edges: np.ndarray) -> np.ndarray:

@@ -31,8 +31,9 @@ sets up a new runtime: on the ICT head (26,719 vertices) 3,500 deformations and 
   limits try. A new follow is a new FAP engine on the same runtime (``Runtime.with_limits``).
 
 * **On every core.** The limits ask for every FAP's two ends whatever each finds, so
-  ``FoldSearch.ahead`` searches them all at once in processes forked from this one (they
-  inherit the runtime; nothing is sent but the ends and the values), one per core.
+  ``FoldSearch.ahead`` searches them all at once in processes forked from this one
+  (``puppet.runtime.forked``: they inherit the runtime; nothing is sent but the ends and the
+  values), one per core.
 
 On the ICT head the search takes 916 deformations and one runtime: 4-6 s here on one core, 3-4
 s on this machine's two (``puppet bench --only rig`` times it beside the plain search in one
@@ -50,15 +51,13 @@ from __future__ import annotations
 
 import bisect
 import math
-import multiprocessing
-import os
-import warnings
 from collections.abc import Callable
 
 import numpy as np
 
 from puppet.fap.table import N_FAPS
 from puppet.runtime.fapcalibration import bisected_reach
+from puppet.runtime.forked import forked_map
 from puppet.runtime.runtime import Runtime
 
 CLEAR = 0.5
@@ -67,12 +66,6 @@ leaves out: far beyond rounding, so its fold test is the whole face's to the las
 NEAR = 0.5
 """A triangle whose normal . rest normal falls below this share of |n0|^2 on a face tried is one
 the model follows on the stretches beside it."""
-WORKERS = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
-"""Processes ``FoldSearch.ahead`` searches in: the cores this process may run on."""
-AHEAD_TIMEOUT = 120.0
-"""Seconds ``FoldSearch.ahead`` waits for its processes (ICT's ends take 1-3 s) before searching here."""
-_FORKED: FoldSearch | None = None
-"""The search ``ahead``'s workers inherit when forked (set only while they run)."""
 
 
 class Bisection:
@@ -129,16 +122,11 @@ class FoldSearch(Bisection):
 
     def ahead(self, ask: Callable[[Callable], object]) -> None:
         """Search at once every end that ``ask(reach)`` will ask this search for and that is not
-        known yet, in ``WORKERS`` processes forked from this one (each inherits the runtime):
+        known yet, on every core (``puppet.runtime.forked``: each process inherits the runtime):
         ``ask`` is run first with a reach that only notes what it is asked for (the limits ask
         for every FAP's two ends whatever each finds). The values are the ones asked one by one
-        (``tests/test_foldsearch.py``); where a process cannot fork, nothing is done ahead.
-
-        Python 3.12+ warns that a process with threads may deadlock a forked child: here the
-        threads are numpy's BLAS pool (and, after ``meshlandmarks``' renders, the GL driver's),
-        which the children never use; they only run numpy on the arrays they inherit. The
-        warning is not shown, and a pool that has not answered within ``AHEAD_TIMEOUT`` is given
-        up: the ends are then searched here, one by one, as asked."""
+        (``tests/test_foldsearch.py``); where the processes cannot fork or do not answer in time,
+        nothing is done ahead: the ends are then searched here, one by one, as asked."""
         asked: dict[tuple, tuple[list[int], float, int]] = {}
 
         def note(numbers: list[int], end: float, steps: int) -> None:
@@ -146,21 +134,14 @@ class FoldSearch(Bisection):
 
         ask(note)
         todo = {key: args for key, args in asked.items() if key not in self._found}
-        if WORKERS < 2 or len(todo) < 2 or "fork" not in multiprocessing.get_all_start_methods():
-            return
-        global _FORKED
-        _FORKED = self
-        try:
-            with warnings.catch_warnings():
-                warnings.filterwarnings("ignore", r"This process .* is multi-threaded", DeprecationWarning)
-                pool = multiprocessing.get_context("fork").Pool(min(WORKERS, len(todo)))
-            with pool:
-                found = pool.map_async(_searched, list(todo.values()), chunksize=1).get(AHEAD_TIMEOUT)
-        except multiprocessing.TimeoutError:
-            return
-        finally:
-            _FORKED = None
-        self._found.update(zip(todo, found))
+
+        def search(args: tuple[list[int], float, int]) -> float | None:
+            numbers, end, steps = args
+            return _Trials(self, numbers, end).reach(steps)
+
+        found = forked_map(search, list(todo.values()))
+        if found is not None:
+            self._found.update(zip(todo, found))
 
     def _key(self, numbers: list[int], end: float, steps: int) -> tuple:
         """What a search's value depends on: its FAPs, end, steps and the follow of their pairs."""
@@ -285,12 +266,6 @@ class _Trials:
             c = np.einsum("ij,ij->i", np.cross(d1, d2), n0)
             self._stretches[key] = (a, b, c, touched)
         return self._stretches[key]
-
-
-def _searched(args: tuple[list[int], float, int]) -> float | None:
-    """One end searched in an ``ahead`` worker, on the search it inherited."""
-    numbers, end, steps = args
-    return _Trials(_FORKED, numbers, end).reach(steps)
 
 
 def _dots(corners: np.ndarray, rest_normals: np.ndarray) -> np.ndarray:

@@ -11,13 +11,13 @@ of each face, so a finer mesh is not blamed for its shorter edges.
 
 from __future__ import annotations
 
-import functools
 from dataclasses import dataclass
 
 import numpy as np
 
 from puppet.face.motiontransfer import feature_warp
 from puppet.runtime.creases import CreaseReference, Hinges
+from puppet.runtime.forked import forked_map
 from puppet.runtime.musclesolver import folded_triangles
 from puppet.runtime.runtime import Runtime
 from puppet.runtime.skinsmoothing import skin_triangles
@@ -44,12 +44,15 @@ def eye_separation(face) -> float:
 
 def folded_vertices(runtime: Runtime, poses: dict[str, dict] | None = None) -> np.ndarray:
     """The vertices (sorted) of the triangles that ``poses`` (``POSES`` by default) fold on the
-    runtime's face: what a rig's ``guarded`` lists (``puppet.runtime.foldlimits.fold_limited``)."""
+    runtime's face: what a rig's ``guarded`` lists (``puppet.runtime.foldlimits.fold_limited``).
+    The poses are deformed on every core (``puppet.runtime.forked``)."""
     rest, tri = np.asarray(runtime.face.vertices, float), np.asarray(runtime.face.triangles)
-    folded = np.zeros(len(tri), dtype=bool)
-    for pose in (poses or POSES).values():
-        folded |= folded_triangles(rest, runtime.deform_faps(**pose), tri)
-    return np.unique(tri[folded])
+
+    def folded(pose: dict) -> np.ndarray:
+        return folded_triangles(rest, runtime.deform_faps(**pose), tri)
+
+    posed = list((poses or POSES).values())
+    return np.unique(tri[np.logical_or.reduce(forked_map(folded, posed) or [folded(pose) for pose in posed])])
 
 
 class PoseCheck:
@@ -73,17 +76,25 @@ class PoseCheck:
         self._nearest = self._bound.nearest(places)
         self._hinge = self.hinges.hinge_lengths(self.rest, self.triangles) / eye_separation(face)
         self.fineness = self._hinge / self._bound.hinge[self._nearest].mean(axis=1)
+        self._allowed: dict[str, np.ndarray] = {}
 
-    @functools.cached_property
-    def allowed(self) -> dict[str, np.ndarray]:
-        """{pose name: the largest bend each edge may show in it}, from the reference in that pose
-        (found on first use: ``fineness`` alone needs no pose)."""
-        return {name: self._bound.allowed(self.reference.deform_faps(**pose), self._nearest, self._hinge)
-                for name, pose in self.poses.items()}
+    def allowed(self, name: str) -> np.ndarray:
+        """The largest bend each edge may show in pose ``name``, from the reference in that pose
+        (found on first use, pose by pose: ``fineness`` alone needs none, and a process forked to
+        check some poses finds only theirs)."""
+        if name not in self._allowed:
+            posed = self.reference.deform_faps(**self.poses[name])
+            self._allowed[name] = self._bound.allowed(posed, self._nearest, self._hinge)
+        return self._allowed[name]
+
+    def excess(self, name: str, posed: np.ndarray) -> np.ndarray:
+        """How far each of ``hinges``' edges bends beyond what it is allowed in pose ``name``,
+        deformed to ``posed`` (radians; positive where the pose creases it)."""
+        return np.abs(self.hinges.bend_from(self.rest_angles, posed, self.triangles)) - self.allowed(name)
 
     def creased(self, name: str, posed: np.ndarray) -> np.ndarray:
         """Boolean mask over ``hinges``' edges that pose ``name``, deformed to ``posed``, creases."""
-        return np.abs(self.hinges.bend_from(self.rest_angles, posed, self.triangles)) > self.allowed[name]
+        return self.excess(name, posed) > 0
 
     def flaws(self, runtime: Runtime) -> dict[str, PoseFlaws]:
         """{pose name: its flaws} on ``runtime`` (a rig of this face)."""
