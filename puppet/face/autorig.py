@@ -655,14 +655,18 @@ def _smoothstep(t: np.ndarray) -> np.ndarray:
 
 def _spread_out(v: np.ndarray, candidates: np.ndarray, taken: list[np.ndarray], spacing: float) -> list[int]:
     """Greedily pick candidate vertices, in order, at least ``spacing`` from each other and from
-    ``taken``: each pick rules out the candidates after it that lie closer (vectorised per pick)."""
+    ``taken``: each pick rules out the candidates after it that lie closer (those near it found
+    in a k-d tree)."""
     p = v[np.asarray(candidates, dtype=np.int64)]
     free = np.ones(len(p), dtype=bool)
     if len(taken):
         free &= (np.linalg.norm(p[:, None] - np.asarray(taken)[None], axis=2) >= spacing).all(axis=1)
+    tree = cKDTree(p) if len(p) else None
     chosen: list[int] = []
     for i in range(len(p)):
         if free[i]:
             chosen.append(int(candidates[i]))
-            free[i + 1:] &= np.linalg.norm(p[i + 1:] - p[i], axis=1) >= spacing
+            near = np.asarray(tree.query_ball_point(p[i], spacing * (1 + 1e-9)), dtype=np.int64)
+            near = near[near > i]
+            free[near[np.linalg.norm(p[near] - p[i], axis=1) < spacing]] = False
     return chosen

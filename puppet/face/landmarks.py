@@ -62,6 +62,7 @@ __all__ = ["LandmarkError", "apply_landmarks", "ibug_to_fdp", "read_landmarks"]
 
 GROUP_SIZES = {2: 14, 3: 14, 4: 6, 5: 4, 6: 4, 7: 1, 8: 10, 9: 15, 10: 10, 11: 6}
 GRID = 8  # the M x N blocks the face's feature-point box is cut into for the snapping search
+LEG_REACH = 4.0  # how far, in straight distances between its ends, a contour's leg is sought first
 SKIPPED = {"6.1", "6.2", "6.3", "6.4", "9.8", "9.9", "9.10", "9.11"}  # teeth and tongue points
 
 # iBUG 68 (0-based; "left" is the face's own left, +x) -> the FDP at the same place.
@@ -323,19 +324,27 @@ def _geodesic_path(skin: Skin, waypoints: list[int], closed: bool) -> np.ndarray
         taken = np.zeros(skin.graph.shape[0], dtype=bool)
         taken[path] = True
         taken[[a, b]] = False
-        path += _leg(skin.graph, a, b, taken) or _leg(skin.graph, a, b, np.zeros_like(taken))
+        path += _leg(skin, a, b, taken) or _leg(skin, a, b, np.zeros_like(taken))
     if closed:
         path = path[:-1]
     return np.array(path, dtype=np.int32)
 
 
-def _leg(graph: sp.csr_matrix, a: int, b: int, blocked: np.ndarray) -> list[int]:
+def _leg(skin: Skin, a: int, b: int, blocked: np.ndarray) -> list[int]:
     """The shortest path's vertices after ``a`` up to ``b`` avoiding the ``blocked`` vertices;
-    [] when there is none (a == b gives [])."""
+    [] when there is none (a == b gives []). The path is sought within ``LEG_REACH`` times the
+    straight distance from ``a`` first, then over the whole skin: the same path, found near."""
+    graph = skin.graph
     if blocked.any():
-        keep = sp.diags((~blocked).astype(float))
-        graph = (keep @ graph @ keep).tocsr()
-    _, pred = dijkstra(graph, directed=False, indices=a, return_predecessors=True)
+        rows = np.repeat(np.arange(graph.shape[0]), np.diff(graph.indptr))
+        graph = graph.copy()
+        graph.data[blocked[rows] | blocked[graph.indices]] = 0.0
+        graph.eliminate_zeros()
+    reach = LEG_REACH * np.linalg.norm(skin.positions[a] - skin.positions[b])
+    for limit in (reach, np.inf):
+        _, pred = dijkstra(graph, directed=False, indices=a, return_predecessors=True, limit=limit)
+        if a == b or pred[b] >= 0:
+            break
     leg, v = [], b
     while v != a:
         if v < 0:

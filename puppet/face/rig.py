@@ -303,8 +303,7 @@ def rig_to_dict(rig: Rig) -> dict:
     return {
         **rig_geometry_to_dict(rig),
         "muscles": muscles_to_json(rig.muscles),
-        "fap_motions": {str(number): {name: _floats(m, 5) for name, m in motions.items()}
-                        for number, motions in sorted(rig.fap_motions.items())},
+        "fap_motions": {str(number): _rounded_motions(motions) for number, motions in sorted(rig.fap_motions.items())},
         "fap_reach": {str(number): [_limit(low), _limit(high)] for number, (low, high) in sorted(rig.fap_reach.items())},
         "fap_follow": {f"{a},{b}": [float(low), float(high), _limit(m_low), _limit(m_high)]
                        for (a, b), (low, high, m_low, m_high) in sorted(rig.fap_follow.items())},
@@ -428,6 +427,15 @@ def _follow(low: float, high: float, m_low: float | None = None,
 
 def _floats(a: np.ndarray, digits: int = 7) -> list[float]:
     return [round(x, digits) for x in np.asarray(a, dtype=float).tolist()]
+
+
+def _rounded_motions(motions: dict[str, np.ndarray], digits: int = 5) -> dict[str, list[float]]:
+    """One FAP's motions {control point: (dx, dy, dz)} for JSON, rounded in one step (point by
+    point, a third of the time ``save_rig`` took on ICT's rig: 3,400 points, 68 FAPs). numpy
+    rounds the scaled value, so a value within an ulp of a last digit's half may round the other
+    way than Python's ``round``: 1e-5 MNS."""
+    rows = np.round(np.array(list(motions.values()), dtype=float), digits).tolist()
+    return dict(zip(motions, rows))
 
 
 def _point_to_dict(p: ControlPoint) -> dict:
