@@ -7,9 +7,11 @@ import json
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from puppet.bench.assets import shared_assets
-from puppet.face.autorig import _loop_path_via, build_rig
+from puppet.face.autorig import _loop_path_via, _spread_out, build_rig
 from puppet.face.landmarks import IBUG_FDP, LandmarkError, read_landmarks
 from puppet.face.load import load_face
 from puppet.face.meshfile import write_bare_obj
@@ -205,3 +207,46 @@ def test_a_bare_default_face_rigs_with_few_folds_and_creases(default, bare_defau
     limited = pose_flaws(Runtime(bare_default, limited_rig), reference)
     assert sum(f.folds for f in limited.values()) == 0
     assert sum(f.creases for f in limited.values()) <= 60
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.integers(0, 300), st.integers(0, 4), st.floats(0.01, 0.6))
+def test_the_skin_grid_picks_what_the_plain_greedy_pick_does(seed, n, n_taken, spacing):
+    """``_spread_out`` (a k-d tree finds the candidates near each pick) picks exactly the vertices
+    that checking every later candidate's distance picks: in order, each at least ``spacing`` from
+    the ones before and from ``taken``."""
+    rng = np.random.default_rng(seed)
+    v = rng.uniform(-1, 1, size=(n + 5, 3))
+    candidates = rng.permutation(n + 5)[:n]
+    taken = list(rng.uniform(-1, 1, size=(n_taken, 3)))
+    plain: list[int] = []
+    for c in candidates:
+        others = [v[k] for k in plain] + taken
+        if all(np.linalg.norm(v[c] - o) >= spacing for o in others):
+            plain.append(int(c))
+    assert _spread_out(v, candidates, taken, spacing) == plain
+
+
+def test_a_contour_leg_sought_near_its_ends_is_the_whole_skin_s_shortest_path(default):
+    """``landmarks._leg`` looks within a few straight distances of its ends first: the path it
+    finds is the one a search of the whole skin finds, with and without vertices blocked."""
+    from scipy.sparse.csgraph import dijkstra
+
+    from puppet.face.landmarks import _leg, _skin_graph
+
+    v, tri = np.asarray(default.vertices, float), np.asarray(default.triangles)
+    skin = _skin_graph(v, tri, np.ones(len(v), dtype=bool), np.zeros((0, 2), dtype=np.int64))
+    rng = np.random.default_rng(5)
+    for _ in range(12):
+        a, b = (int(k) for k in rng.choice(len(v), 2, replace=False))
+        blocked = rng.random(len(v)) < 0.05
+        blocked[[a, b]] = False
+        keep = (~blocked).astype(float)
+        graph = skin.graph.multiply(keep[:, None]).multiply(keep[None, :]).tocsr()
+        graph.eliminate_zeros()  # an explicit zero is an edge of no length to dijkstra
+        _, pred = dijkstra(graph, directed=False, indices=a, return_predecessors=True)
+        whole, k = [], b
+        while 0 <= k != a:
+            whole.append(int(k))
+            k = pred[k]
+        assert _leg(skin, a, b, blocked) == (whole[::-1] if k == a else [])

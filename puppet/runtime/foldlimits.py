@@ -104,7 +104,13 @@ def follow_ranges(search: Bisection, pairs=LIP_PAIRS,
     on a runtime without fold limits)."""
     free = search.with_follow({})
     numbers = sorted({n for pair in pairs for n in pair})
-    free.ahead(lambda reach: fold_free_reach(free.runtime, numbers=numbers, reach=reach))
+
+    def asks(reach) -> None:
+        fold_free_reach(free.runtime, numbers=numbers, reach=reach)
+        for pair in pairs:
+            common_reach(free.runtime, list(pair), reach=reach)
+
+    free.ahead(asks)
     alone = fold_free_reach(free.runtime, numbers=numbers, reach=free)
     unlimited = (-np.inf, np.inf)
     out = {}
