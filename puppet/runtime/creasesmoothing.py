@@ -63,8 +63,7 @@ def _creased_edges(runtime: Runtime, check: PoseCheck) -> np.ndarray:
     def creased(name: str) -> np.ndarray:
         return check.creased(name, runtime.deform_faps(**check.poses[name]))
 
-    names = list(check.poses)
-    return np.logical_or.reduce(forked_map(creased, names) or [creased(name) for name in names])
+    return np.logical_or.reduce(forked_map(creased, list(check.poses)))
 
 
 def _vertices(check: PoseCheck, edges: np.ndarray) -> np.ndarray:

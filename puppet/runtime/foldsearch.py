@@ -126,7 +126,7 @@ class FoldSearch(Bisection):
         ``ask`` is run first with a reach that only notes what it is asked for (the limits ask
         for every FAP's two ends whatever each finds). The values are the ones asked one by one
         (``tests/test_foldsearch.py``); where the processes cannot fork or do not answer in time,
-        nothing is done ahead: the ends are then searched here, one by one, as asked."""
+        the ends are searched here."""
         asked: dict[tuple, tuple[list[int], float, int]] = {}
 
         def note(numbers: list[int], end: float, steps: int) -> None:
@@ -139,9 +139,7 @@ class FoldSearch(Bisection):
             numbers, end, steps = args
             return _Trials(self, numbers, end).reach(steps)
 
-        found = forked_map(search, list(todo.values()))
-        if found is not None:
-            self._found.update(zip(todo, found))
+        self._found.update(zip(todo, forked_map(search, list(todo.values()))))
 
     def _key(self, numbers: list[int], end: float, steps: int) -> tuple:
         """What a search's value depends on: its FAPs, end, steps and the follow of their pairs."""

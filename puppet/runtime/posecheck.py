@@ -51,8 +51,7 @@ def folded_vertices(runtime: Runtime, poses: dict[str, dict] | None = None) -> n
     def folded(pose: dict) -> np.ndarray:
         return folded_triangles(rest, runtime.deform_faps(**pose), tri)
 
-    posed = list((poses or POSES).values())
-    return np.unique(tri[np.logical_or.reduce(forked_map(folded, posed) or [folded(pose) for pose in posed])])
+    return np.unique(tri[np.logical_or.reduce(forked_map(folded, list((poses or POSES).values())))])
 
 
 class PoseCheck:

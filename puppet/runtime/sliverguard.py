@@ -59,7 +59,6 @@ import numpy as np
 
 from puppet.face.rigid import IDENTITY
 from puppet.fap.table import clamp_ranges
-from puppet.runtime.forked import forked_map
 from puppet.runtime.lastmade import LastMade
 from puppet.runtime.lids import LID_FAPS
 from puppet.runtime.musclesolver import EdgeConstraints, folded_triangles
@@ -225,20 +224,16 @@ class SliverGuard:
 def sliver_guard(runtime) -> SliverGuard:
     """The guard for a runtime's face and rig, from the runtime's own deformation of each of
     ``PROBED`` at its range end (made before the runtime has a guard) and the rig's ``guarded``
-    triangles, with its corrective shapes (each lid's on a core of its own: ``puppet.runtime.forked``).
-    Movable: the DFFD skin vertices that are not feature points."""
+    triangles, with its corrective shapes. Movable: the DFFD skin vertices that are not feature
+    points."""
     high = clamp_ranges()[1]
     probes = [_lid_pose(runtime, number, high[number - 1])[0] for number in PROBED]
     movable = runtime.dffd_vertices.copy()
     movable[list(runtime.face.feature_vertices.values())] = False
     guard = SliverGuard(runtime.face.vertices, runtime.face.triangles, movable, probes, runtime.rig.guarded)
     if guard.constraints is not None:
-        lids = [number for number in PROBED if LID_FAPS[number][0] in runtime.rig.rigid_parts]
-
-        def corrective(number: int) -> Corrective | None:
-            return _corrective(runtime, guard, number, high[number - 1])
-
-        shapes = forked_map(corrective, lids) or [corrective(number) for number in lids]
+        shapes = [_corrective(runtime, guard, number, high[number - 1]) for number in PROBED
+                  if LID_FAPS[number][0] in runtime.rig.rigid_parts]
         guard.shapes = [shape for shape in shapes if shape is not None]
     return guard
 
