@@ -23,8 +23,10 @@ points ``puppet rig`` needs.
    the views that see its surface within ``MIN_FACING`` of head-on (the most frontal one when none
    does): of their vertices, the one nearest all their lifts (a medoid: it stays on the surface).
 4. **Feature points.** MediaPipe landmark -> FDP as ``face-from-photo`` reads them
-   (``puppet.photo.build.MEDIAPIPE_FDP``: eye corners and lids, brows, nose, lips, chin): the
-   {FDP id: vertex} landmark dict ``puppet.face.landmarks.apply_landmarks`` takes.
+   (``puppet.photo.build.MEDIAPIPE_FDP``: eye corners and lids, brows, nose, lips, chin), and
+   the default face's other feature points (jaw line, cheeks, ears, hairline) carried over by the
+   warp all the landmarks make (``puppet.photo.carriedpoints``): the {FDP id: vertex} landmark
+   dict ``puppet.face.landmarks.apply_landmarks`` takes.
 
 How sure: the views the face was found in, and the agreement between views, per feature point
 the median distance of its lifts from the chosen vertex, in % of the face's width (between
@@ -36,7 +38,6 @@ points found lie within 2-2.5% of the face width of the given ones (median;
 
 from __future__ import annotations
 
-import functools
 import itertools
 import tempfile
 from collections.abc import Callable
@@ -48,11 +49,11 @@ import numpy as np
 from PIL import Image
 from scipy.spatial import cKDTree
 
-from puppet.face.default import default_face
 from puppet.face.landmarks import FDP_NEEDED, apply_landmarks
 from puppet.face.meshparts import components
 from puppet.face.model import Face
-from puppet.photo.build import MEDIAPIPE_FDP, mediapipe_points
+from puppet.photo.build import MEDIAPIPE_FDP
+from puppet.photo.carriedpoints import FACE_SIDES, carried_points, mediapipe_reference
 from puppet.photo.detect import DetectionError, detect_faces
 from puppet.runtime.normals import VertexNormals
 from puppet.view.renderer import Camera, Renderer
@@ -66,7 +67,6 @@ FIND_SHARE = 0.85  # of the image the whole mesh spans in the search for the fac
 HEAD_SHARE = 0.15  # of a mesh's height (+y) its top is, framed too: the head of a standing figure
 SAME_FRAME = 30.0  # degrees: face frames closer than this are one
 MIN_FACING = 0.5  # cos of the angle between a lift's surface normal and the view: under it, seen too obliquely
-FACE_SIDES = (234, 454)  # MediaPipe's face-side points: their distance is the face width
 N_MESH = 468  # MediaPipe's mesh landmarks (478 with the irises, which are not used)
 
 
@@ -90,21 +90,22 @@ ORIENTATIONS = _orientations()
 class FoundLandmarks:
     """What was found on a mesh: the FDP landmarks and how sure they are."""
 
-    fdp: dict[str, int]  # FDP id -> vertex index (file order): ``--landmarks`` JSON
+    fdp: dict[str, int]  # FDP id -> vertex index (file order): ``--landmarks`` JSON; found and carried
     vertices: np.ndarray  # (468,) the vertex each MediaPipe landmark was snapped to, -1 where not seen
-    spread: dict[str, float]  # FDP id -> agreement between views, in face widths
+    spread: dict[str, float]  # FDP id -> agreement between views, in face widths (the points found)
     views_found: int  # views MediaPipe found the face in
     views: int  # views rendered (the search for the face's orientation included)
     rotation: np.ndarray  # (3, 3) file -> face frame, as the landmarks fitted it
     face_width: float  # mesh units
 
     def summary(self) -> str:
-        """One line: how many points, in how many views, and how well the views agree."""
+        """One line: how many points, in how many views, how well the views agree, how many carried."""
         spread = np.array(list(self.spread.values())) * 100
         worst = max(self.spread, key=self.spread.get)
-        return (f"found {len(self.fdp)} feature points in {self.views_found} of {len(VIEWS)} views "
+        return (f"found {len(self.spread)} feature points in {self.views_found} of {len(VIEWS)} views "
                 f"({self.views} rendered); views agree within {np.median(spread):.1f}% of the face width "
-                f"(median; worst {spread.max():.1f}% at FDP {worst})")
+                f"(median; worst {spread.max():.1f}% at FDP {worst}); {len(self.fdp) - len(self.spread)} "
+                "more carried from the default face")
 
     def errors(self, vertices: np.ndarray, given: dict[str, int]) -> dict[str, float]:
         """Per FDP found and in ``given`` ({FDP id: vertex}, landmarks known otherwise), the distance
@@ -185,7 +186,7 @@ def _fit(points: np.ndarray) -> tuple[float, np.ndarray, np.ndarray] | None:
     """(the residual, the rotation, the points) of the landmarks lifted in a view fitted to where
     MediaPipe finds them on the default face (``data/mediapipe_map.json``, face frame: similarity,
     RMS in face widths); None when fewer than half were lifted."""
-    model = _model_points()
+    model = mediapipe_reference()
     seen = np.isfinite(points[:N_MESH]).all(axis=1)
     if seen.sum() < N_MESH // 2:
         return None
@@ -195,13 +196,6 @@ def _fit(points: np.ndarray) -> tuple[float, np.ndarray, np.ndarray] | None:
     scale = (turned * q).sum() / (turned ** 2).sum()
     rms = np.sqrt(((scale * turned - q) ** 2).sum(axis=1).mean())
     return float(rms / np.linalg.norm(model[FACE_SIDES[0]] - model[FACE_SIDES[1]])), rotation, points
-
-
-@functools.cache
-def _model_points() -> np.ndarray:
-    """MediaPipe's 468 landmarks on the default face, in the face frame."""
-    reference = default_face()
-    return mediapipe_points(reference).on(reference.vertices)
 
 
 def fit_rotation(points: np.ndarray, model: np.ndarray) -> np.ndarray:
@@ -277,6 +271,7 @@ def _combine(face: Face, normals: np.ndarray, lifts: np.ndarray, facing: np.ndar
     width = float(np.linalg.norm(np.subtract(*vertices[sides])) if (sides >= 0).all()
                   else np.ptp(vertices[list(fdp.values())] @ rotation[0]))  # else the feature points' span
     agree = {MEDIAPIPE_FDP[i]: float(spread[i] / width) for i in MEDIAPIPE_FDP if chosen[i] >= 0}
+    fdp |= carried_points(vertices, skin, chosen, list(fdp.values()))
     return FoundLandmarks(fdp=fdp, vertices=chosen, spread=agree, views_found=int(found.sum()),
                           views=views, rotation=rotation, face_width=width)
 

@@ -34,7 +34,8 @@ SIZE = 768  # pixels, the square front render
 SHARE = 0.6  # of the image the feature points span
 MOVED = 0.5  # pixels: a point moved less is left on its vertex
 HINT = ("drag any feature point that is off its place on the rendered mesh (labelled with its MPEG-4 id: "
-        "3.x eyes, 4.x brows, 8.x outer lips, 2.x inner lips and chin, 9.x nose)")
+        "3.x eyes, 4.x brows, 8.x outer lips, 2.x inner lips, chin and jaw, 9.x nose, 5.x cheeks, 10.x ears, "
+        "11.x hairline)")
 
 
 class MeshPickerServer(PickerServer):
