@@ -40,6 +40,7 @@ BACKENDS: dict[str, str] = {
     "replay": "devices.replay_device",
     "audio": "devices.audio_device",
     "wav": "devices.wav_device",
+    "api": "devices.api_device",
 }
 """URL scheme -> module of its built-in backend."""
 

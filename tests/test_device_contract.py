@@ -239,9 +239,23 @@ class AudioHarness(SoundHarness):
         return AudioDevice.from_url(Url.parse("audio://headset"), "mic", sd_module=FakeSoundDevice(mic))
 
 
+class ApiHarness(Harness):
+    """The control API's device has no hardware and no plug: a reading is pushed in by the server."""
+
+    scheme, readings, twin_url = "api", [{"smile": 0.8, "brow": -0.25}], "api://"
+
+    def device(self) -> Device:
+        self.dev = open_device("api://", "api")
+        return self.dev
+
+    def send(self) -> dict[str, float]:
+        self.dev.push({"smile": 0.5})
+        return {"smile": 0.5}
+
+
 HARNESSES = {"serial": SerialHarness, "sim": SimHarness, "hid": HidHarness, "can": CanHarness,
              "midi": MidiHarness, "osc": OscHarness, "replay": ReplayHarness, "wav": WavHarness,
-             "audio": AudioHarness}
+             "audio": AudioHarness, "api": ApiHarness}
 NEEDS_FOLDER = ("replay", "wav", "audio")
 
 
