@@ -10,6 +10,7 @@ script's expression holds, take a screenshot with the page's own transparency.
 from __future__ import annotations
 
 import base64
+import contextlib
 import io
 import itertools
 import json
@@ -24,11 +25,13 @@ from typing import Any
 import numpy as np
 from websockets.sync.client import connect
 
+from puppet.errors import PuppetError
+
 BROWSERS = ("chromium", "chromium-browser", "google-chrome")
 START_TIMEOUT = 30.0
 
 
-class BrowserError(RuntimeError):
+class BrowserError(PuppetError, RuntimeError):
     """No browser here, or it did not start or answer."""
 
 
@@ -58,8 +61,9 @@ class HeadlessChromium:
              "--enable-unsafe-swiftshader", "--ignore-gpu-blocklist", "--no-first-run", "--mute-audio",
              "about:blank"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         self._ids = itertools.count(1)
+        self._closing = contextlib.ExitStack()
         try:
-            self._socket = connect(self._page_socket(), max_size=2**26)
+            self._socket = self._closing.enter_context(connect(self._page_socket(), max_size=2**26))
             self.call("Page.enable")
             self.call("Emulation.setDeviceMetricsOverride", width=size[0], height=size[1],
                       deviceScaleFactor=1, mobile=False)
@@ -123,9 +127,7 @@ class HeadlessChromium:
         return np.asarray(Image.open(io.BytesIO(data)).convert("RGBA"))
 
     def close(self) -> None:
-        socket = getattr(self, "_socket", None)
-        if socket is not None:
-            socket.close()
+        self._closing.close()
         self._process.terminate()
         try:
             self._process.wait(10)

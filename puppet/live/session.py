@@ -299,6 +299,11 @@ class LiveSession:
     def recording(self) -> bool:
         return self._recorder is not None
 
+    @property
+    def take_folder(self) -> Path | None:
+        """The folder of the take being recorded (None when not recording)."""
+        return None if self._recorder is None else Path(self._recorder.folder)
+
     def start_recording(self, now_ns: int | None = None):
         """Start a take under ``record_root`` (its first frame is at ``now_ns``, default now)."""
         if self._recorder is not None:
@@ -367,7 +372,7 @@ def _ms_stats(values_ns: list[int]) -> dict:
     return {"median": statistics.median(ms), "p99": ms[min(len(ms) - 1, int(np.ceil(0.99 * len(ms))) - 1)]}
 
 
-def measure_latency(session: LiveSession, renderer, seconds: float = 3.0) -> dict:
+def measure_latency(session: LiveSession, renderer, seconds: float = 3.0, outputs=()) -> dict:
     """Run the live loop for ``seconds``, rendering every frame offscreen, and time it.
 
     Every Sample is measured from its timestamp to the first frame that shows it:
@@ -383,7 +388,9 @@ def measure_latency(session: LiveSession, renderer, seconds: float = 3.0) -> dic
     run, and all of its p99. Medians and 99th percentiles. The device's own transport (USB, the
     pty) comes before the Sample's timestamp and is not included. ``gl_renderer``, ``normals``
     (``cpu``, or ``draw`` where the renderer sums them) and ``rasteriser_cores`` (the cores a
-    software rasteriser's threads were given, one each; none on a GPU) say what drew.
+    software rasteriser's threads were given, one each; none on a GPU) say what drew. ``outputs``
+    (``puppet.view.liveoutput.LiveOutput``: the show server) get their turn before each frame and
+    the frame after it is drawn, as in the live window.
     """
     session.normals = not renderer.gpu_normals
     if renderer.camera is None:
@@ -396,10 +403,14 @@ def measure_latency(session: LiveSession, renderer, seconds: float = 3.0) -> dic
     end = start + int(seconds * 1e9)
     while time.monotonic_ns() < end:
         session.wait_for_input(0.1)
+        for output in outputs:
+            output.service()
         f = session.frame()
         ready = time.monotonic_ns()
         renderer.render(f.vertices, f.normals)
         done = time.monotonic_ns()
+        for output in outputs:
+            output.publish(f.vertices)
         frames += 1
         draw.append(done - ready)
         if f.sample_ns:

@@ -16,6 +16,8 @@ import math
 from importlib import resources
 from typing import Any
 
+from puppet.errors import PuppetError
+
 MAX_MESSAGE = 64 * 1024
 """The longest message a client may send, in bytes; the server closes a connection that sends a
 longer one (WebSocket close code 1009, "message too big")."""
@@ -31,7 +33,7 @@ TRIGGER_ACTIONS = ("press", "release", "fire")
 RECORD_ACTIONS = ("start", "stop")
 
 
-class ApiError(ValueError):
+class ApiError(PuppetError, ValueError):
     """A message the API refuses; the text is the reason sent back."""
 
 
@@ -63,7 +65,8 @@ def check(message: Any) -> dict[str, Any]:
     """``message`` if it is one the schema allows; ApiError naming the first thing wrong."""
     if not isinstance(message, dict):
         raise ApiError(f"a message is a JSON object, got {type(message).__name__}")
-    _check_id(message.get("id"))
+    if "id" in message:
+        _check_id(message["id"])
     kind = message.get("type")
     if kind not in TYPES:
         raise ApiError(f"type {kind!r:.80}: expected one of {', '.join(TYPES)}")
@@ -81,11 +84,9 @@ def check(message: Any) -> dict[str, Any]:
 
 
 def _check_id(value: Any) -> None:
-    if value is None:
-        return
     if isinstance(value, str) and len(value) <= MAX_NAME:
         return
-    if isinstance(value, int) and not isinstance(value, bool) and abs(value) <= MAX_ID:
+    if _number(value) and float(value).is_integer() and abs(value) <= MAX_ID:  # JSON's 1.0 is an integer
         return
     raise ApiError(f"id: an integer or a string of at most {MAX_NAME} characters, got {value!r:.80}")
 

@@ -40,6 +40,7 @@ from websockets.asyncio.server import ServerConnection, serve
 from websockets.exceptions import ConnectionClosed
 from websockets.http11 import Request, Response
 
+from puppet.errors import PuppetError
 from puppet.show import api
 from puppet.show.stage import Stage
 from puppet.show.wire import FrameEncoder, Quantiser, face_message
@@ -52,9 +53,14 @@ COMMAND_TIMEOUT = 2.0
 """Seconds a queued command may wait for the live loop before its client is told so."""
 DELAYS = 600
 """How many of the newest frame delays are kept (``delays_ms``)."""
+FEED_FPS = 60
+"""The most frames a second the feed sends, however fast the loop runs (a display shows no more)."""
+API_RATE, API_BURST = 200.0, 50
+"""Messages a second one API client is answered at, after a burst of ``API_BURST``: a client
+sending faster waits (its socket fills, TCP slows it), so no client can take the live loop's CPU."""
 
 
-class ShowError(RuntimeError):
+class ShowError(PuppetError, RuntimeError):
     """The server could not start (the port is taken, the address is not this machine's)."""
 
 
@@ -78,6 +84,7 @@ class ShowServer:
         self.counts = {"messages": 0, "refused": 0, "feed_bytes": 0, "frames_sent": 0}
         self._loop: asyncio.AbstractEventLoop | None = None
         self._frame = None  # asyncio.Event of the next frame, replaced when it comes
+        self._pending, self._taken_at = False, -1.0
         self._stopped = None
         self._thread: threading.Thread | None = None
 
@@ -108,7 +115,7 @@ class ShowServer:
             self._slot = frame
         if status is not None:
             self.status = {"type": "status", **status}
-        self._loop.call_soon_threadsafe(self._take_frame)
+        self._loop.call_soon_threadsafe(self._frame_due)
 
     def service(self) -> None:
         """Run the API commands waiting for the live loop (call between frames, on its thread)."""
@@ -161,7 +168,20 @@ class ShowServer:
             await self._stopped.wait()
             server.close()
 
+    def _frame_due(self) -> None:
+        """Take the newest frame now, or when ``FEED_FPS`` allows (once, however many come)."""
+        if self._pending:
+            return
+        wait = self._taken_at + 1.0 / FEED_FPS - time.monotonic()
+        if wait > 0:
+            self._pending = True
+            self._loop.call_later(wait, self._take_frame)
+        else:
+            self._take_frame()
+
     def _take_frame(self) -> None:
+        self._pending = False
+        self._taken_at = time.monotonic()
         with self._slot_lock:
             slot, self._slot = self._slot, None
         if slot is None:
@@ -220,8 +240,10 @@ class ShowServer:
 
     async def _api(self, ws: ServerConnection) -> None:
         subscription: asyncio.Task | None = None
+        bucket = TokenBucket(API_RATE, API_BURST)
         try:
             async for text in ws:
+                await asyncio.sleep(bucket.wait())
                 self.counts["messages"] += 1
                 reply, interval = await self._answer(text)
                 if interval is not None:
@@ -284,6 +306,20 @@ class ShowServer:
                     await ws.send(json.dumps({"type": "status", **self._status()}))
                     next_at = now + interval
                 await asyncio.sleep(min(interval, 0.05))
+
+
+class TokenBucket:
+    """``rate`` a second after a burst of ``burst``: ``wait()`` says how long to wait for the next."""
+
+    def __init__(self, rate: float, burst: int) -> None:
+        self.rate, self.burst = rate, burst
+        self._tokens, self._at = float(burst), time.monotonic()
+
+    def wait(self) -> float:
+        now = time.monotonic()
+        self._tokens = min(self.burst, self._tokens + (now - self._at) * self.rate) - 1.0
+        self._at = now
+        return max(0.0, -self._tokens / self.rate)
 
 
 def _page(connection: ServerConnection, name: str, kind: str) -> Response:

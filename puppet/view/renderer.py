@@ -756,29 +756,9 @@ class Renderer:
         margin: float = 1.15,
         fov: float = DEFAULT_FOV,
     ) -> Camera:
-        """Aim a perspective camera at ``vertices`` (e.g. the head) from a named view.
-
-        The camera looks at the centre of their bounding box along ``VIEW_DIRECTIONS[view]``
-        and backs off just far enough that every vertex projects inside the image shrunk by
-        ``margin`` (1.15: 15% breathing room).
-        """
-        points = np.asarray(vertices, dtype=float)
-        direction = np.asarray(VIEW_DIRECTIONS[view])
-        target = (points.min(axis=0) + points.max(axis=0)) / 2.0
-        probe = Camera(target + direction, target, np.array([0.0, 1.0, 0.0]), fov, 1.0, 2.0)
-        local = (points - target) @ probe.basis().T
-        tan_y = np.tan(np.radians(fov) / 2.0)
-        tan_x = tan_y * self.size[0] / self.size[1]
-        reach = np.maximum(np.abs(local[:, 0]) / tan_x, np.abs(local[:, 1]) / tan_y)
-        distance = float(np.max(local[:, 2] + margin * reach))
-        depth = float(np.ptp(local[:, 2])) + 1e-9
-        return self.look_at(
-            target + distance * direction,
-            target,
-            fov=fov,
-            near=max(distance - local[:, 2].max() - depth, distance / 100.0),
-            far=distance + 2.0 * depth,
-        )
+        """Aim the camera at ``vertices`` (e.g. the head) from a named view (``aim_camera``)."""
+        self.camera = aim_camera(vertices, self.size, view, margin, fov)
+        return self.camera
 
     def project(self, points: np.ndarray) -> np.ndarray:
         """Pixel coordinates (M, 2) as (column, row), row 0 at the top, of world ``points``."""
@@ -1036,6 +1016,33 @@ def render_face(
     with Renderer.for_face(face, width=width, height=height) as r:
         r.aim(vertices, view=view)
         return r.render(vertices)
+
+
+def aim_camera(
+    vertices: np.ndarray,
+    size: tuple[int, int],
+    view: str = "front",
+    margin: float = 1.15,
+    fov: float = DEFAULT_FOV,
+) -> Camera:
+    """A perspective camera for an image of ``size`` aimed at ``vertices`` (e.g. the head) from a named view.
+
+    The camera looks at the centre of their bounding box along ``VIEW_DIRECTIONS[view]``
+    and backs off just far enough that every vertex projects inside the image shrunk by
+    ``margin`` (1.15: 15% breathing room).
+    """
+    points = np.asarray(vertices, dtype=float)
+    direction = np.asarray(VIEW_DIRECTIONS[view])
+    target = (points.min(axis=0) + points.max(axis=0)) / 2.0
+    probe = Camera(target + direction, target, np.array([0.0, 1.0, 0.0]), fov, 1.0, 2.0)
+    local = (points - target) @ probe.basis().T
+    tan_y = np.tan(np.radians(fov) / 2.0)
+    tan_x = tan_y * size[0] / size[1]
+    reach = np.maximum(np.abs(local[:, 0]) / tan_x, np.abs(local[:, 1]) / tan_y)
+    distance = float(np.max(local[:, 2] + margin * reach))
+    depth = float(np.ptp(local[:, 2])) + 1e-9
+    return Camera(target + distance * direction, target, np.array([0.0, 1.0, 0.0]), float(fov),
+                  max(distance - local[:, 2].max() - depth, distance / 100.0), distance + 2.0 * depth)
 
 
 def camera_uniforms(camera: Camera, aspect: float) -> dict[str, np.ndarray]:

@@ -139,8 +139,8 @@ class Face {
     else for (let i = 0; i < codes.length; i++) this.codes[i] = (this.codes[i] + codes[i]) & 0xffff;
     const {origin, step} = this.face;
     const p = this.interleaved, nrm = this.normals, t = this.triangles;
-    for (let v = 0; v < this.n; v++) {
-      for (let k = 0; k < 3; k++) p[v * 6 + k] = origin[k] + this.codes[v * 3 + k] * step[k];
+    for (let k = 0; k < 3; k++) {  // the codes come a coordinate at a time: every x, every y, every z
+      for (let v = 0; v < this.n; v++) p[v * 6 + k] = origin[k] + this.codes[k * this.n + v] * step[k];
     }
     nrm.fill(0);
     for (let i = 0; i < t.length; i += 3) {
