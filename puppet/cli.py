@@ -231,6 +231,9 @@ def _live_arguments(live: argparse.ArgumentParser) -> None:
     live.add_argument("--arm", default="", metavar="A,B",
                       help="what a layered pass replaces: channels (box.ch0), FAP numbers or names, viseme, expression")
     live.add_argument("--serve", type=_address, default=None, metavar="HOST:PORT", help=SERVE_HELP)
+    live.add_argument("--osc-control", type=_address, default=None, metavar="HOST:PORT",
+                      help="with --serve: also take the control API as OSC messages on this UDP address "
+                           "(/puppet/set/CHANNEL, /puppet/trigger/NAME, /puppet/record/start|stop, /puppet/neutral)")
     live.add_argument("--no-window", action="store_true",
                       help="no window, only the --serve feed and API (e.g. on a machine with no display); Ctrl+C ends")
 
@@ -244,14 +247,14 @@ def _live(args: argparse.Namespace) -> int:
         raise TakeError("--layer-over needs --arm: what the pass replaces (e.g. --arm box.ch0)")
     if args.arm and not args.layer_over:
         raise TakeError("--arm needs --layer-over: the take the pass is recorded over")
-    if args.no_window and args.serve is None:
-        raise PuppetError("--no-window needs --serve HOST:PORT: without both, nothing would show the face")
+    if args.serve is None and (args.no_window or args.osc_control):
+        raise PuppetError(f"{'--no-window' if args.no_window else '--osc-control'} needs --serve HOST:PORT")
     outputs = None
     if args.serve is not None:
         from puppet.show.serving import serve_live
 
         def outputs(session):
-            return [serve_live(session, args.serve, args.view)]
+            return [serve_live(session, args.serve, args.view, args.osc_control)]
     run_live(args.mapping, record=args.record, fps=args.fps, size=args.size, view=args.view,
              devices=dict(args.device) or None, face=_face(args.face), layer_over=args.layer_over,
              arm=[a for a in args.arm.split(",") if a], record_root=args.takes, outputs=outputs,

@@ -14,12 +14,13 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from pythonosc.udp_client import SimpleUDPClient
 from websockets.exceptions import ConnectionClosed, InvalidStatus
 from websockets.sync.client import connect
 
 from puppet.face.load import load_face
 from puppet.io.fapfile import iter_fap
-from puppet.show import api
+from puppet.show import api, osccontrol
 from puppet.show.server import ShowServer
 from puppet.show.stage import LiveStage
 from puppet.show.wire import DELTA, KEY, TOP, FrameEncoder, Quantiser, decode
@@ -268,3 +269,54 @@ def _wait(condition, timeout: float = 5.0) -> bool:
     return False
 
 
+
+
+# -- OSC control ------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("address, arguments, message", [
+    ("/puppet/set/smile", [0.5], {"type": "set", "channels": {"smile": 0.5}}),
+    ("/puppet/set", ["smile", 1, "brow", 0.25], {"type": "set", "channels": {"smile": 1, "brow": 0.25}}),
+    ("/puppet/trigger/wave", [], {"type": "trigger", "name": "wave", "action": "fire"}),
+    ("/puppet/trigger/wave", [1], {"type": "trigger", "name": "wave", "action": "press"}),
+    ("/puppet/trigger/wave", [0.0], {"type": "trigger", "name": "wave", "action": "release"}),
+    ("/puppet/record/start", [], {"type": "record", "action": "start"}),
+    ("/puppet/record", [0], {"type": "record", "action": "stop"}),
+    ("/puppet/neutral", [], {"type": "neutral"}),
+])
+def test_osc_addresses_stand_for_api_messages(address, arguments, message):
+    assert osccontrol.api_message(address, arguments) == message
+
+
+@pytest.mark.parametrize("address, arguments, reason", [
+    ("/other/set", [1], "start with /puppet/"), ("/puppet/set/smile", ["lots"], "one number"),
+    ("/puppet/set", ["smile"], "pairs"), ("/puppet/trigger/wave", ["wiggle"], "action"),
+    ("/puppet/record/pause", [], "action"), ("/puppet/fly", [], "expected /puppet/set"),
+])
+def test_osc_messages_that_stand_for_nothing_say_why(address, arguments, reason):
+    with pytest.raises(api.ApiError, match=reason):
+        osccontrol.api_message(address, arguments)
+
+
+def test_a_lighting_desk_starts_a_take_over_osc(tmp_path, face):
+    mapping = tmp_path / "api.yaml"
+    mapping.write_text(API_MAPPING)
+    session = open_session(mapping, record="desk", record_root=tmp_path / "takes", face=face)
+    camera = aim_camera(head_points(face), (320, 320))
+    server = ShowServer(face, camera, port=0, stage=LiveStage(session), osc=("127.0.0.1", 0)).start()
+    loop = Loop(session, server)
+    try:
+        desk = SimpleUDPClient(*server.osc_address)
+        desk.send_message("/puppet/set/smile", 1.0)
+        desk.send_message("/puppet/record/start", [])
+        assert _wait(lambda: session.recording)
+        desk.send_message("/puppet/record", 0)
+        assert _wait(lambda: not session.recording)
+        desk.send_message("/puppet/fly", [])
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        sock.sendto(b"\xff" * 13, server.osc_address)  # not OSC at all
+        assert _wait(lambda: server.osc.counts["refused"] == 2)
+        assert (tmp_path / "takes" / "desk_001" / "take.fap").exists()
+    finally:
+        loop.close()
+        server.close()
+        session.close()

@@ -6,7 +6,9 @@
   its script are served to anyone: they hold nothing, and read the token from the page's URL);
 * ``/feed?token=T``: a WebSocket that sends the face once, then every frame (``puppet.show.wire``),
   and reads back the page's echo of each frame it drew, to time the delay;
-* ``/api?token=T``: the WebSocket JSON control API (``puppet.show.api``).
+* ``/api?token=T``: the WebSocket JSON control API (``puppet.show.api``);
+
+and, when asked (``osc``), OSC control addresses on a UDP port (``puppet.show.osccontrol``).
 
 A socket opened without the token is refused (HTTP 403), as is one from a page of another origin.
 
@@ -42,6 +44,7 @@ from websockets.http11 import Request, Response
 
 from puppet.errors import PuppetError
 from puppet.show import api
+from puppet.show.osccontrol import OscControl
 from puppet.show.stage import Stage
 from puppet.show.wire import FrameEncoder, Quantiser, face_message
 from puppet.view.renderer import Camera
@@ -68,8 +71,11 @@ class ShowServer:
     """The page, feed and control API of one face; ``start()``, then ``publish`` every frame."""
 
     def __init__(self, face: Any, camera: Camera, *, host: str = "127.0.0.1", port: int = 8765,
-                 size: tuple[int, int] = (640, 640), stage: Stage | None = None, token: str | None = None) -> None:
+                 size: tuple[int, int] = (640, 640), stage: Stage | None = None, token: str | None = None,
+                 osc: tuple[str, int] | None = None) -> None:
         self.host, self.port = host, port
+        self.osc_address = osc
+        self.osc: OscControl | None = None
         self.token = token or secrets.token_urlsafe(16)
         self.stage = stage or Stage()
         quantiser = Quantiser.around(np.asarray(face.vertices, dtype=float))
@@ -163,6 +169,16 @@ class ShowServer:
             return
         self.port = server.sockets[0].getsockname()[1]
         self._loop = asyncio.get_running_loop()
+        if self.osc_address is not None:
+            try:
+                transport, self.osc = await self._loop.create_datagram_endpoint(
+                    lambda: OscControl(self.answer), local_addr=self.osc_address)
+            except OSError as exc:
+                server.close()
+                started.set_result(f"OSC control on {self.osc_address[0]}:{self.osc_address[1]}: "
+                                   f"{exc.strerror or exc}")
+                return
+            self.osc_address = transport.get_extra_info("sockname")[:2]
         started.set_result(None)
         async with server:
             await self._stopped.wait()
@@ -257,12 +273,17 @@ class ShowServer:
 
     async def _answer(self, text: str | bytes) -> tuple[dict, float | None]:
         """The reply to one message, and a subscription's new interval (0: none; None: as it was)."""
-        ident = None
         try:
             message = api.parse(text)
-            ident = message.get("id")
-            kind = message["type"]
-            interval = None
+        except api.ApiError as exc:
+            self.counts["refused"] += 1
+            return {"id": None, "ok": False, "error": str(exc)}, None
+        return await self.answer(message)
+
+    async def answer(self, message: dict) -> tuple[dict, float | None]:
+        """The reply to one checked message (``api.check``), from the WebSocket API or OSC."""
+        ident, kind, interval = message.get("id"), message["type"], None
+        try:
             if kind == "status":
                 body = self._status()
             elif kind == "subscribe":

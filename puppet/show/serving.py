@@ -19,9 +19,11 @@ FEED_SIZE = (720, 720)
 """The size the feed's camera frames the head for; a page of another shape keeps its height."""
 
 
-def serve_live(session: Any, address: tuple[str, int], view: str = "front") -> ShowServer:
-    """The started server of a live session's face; its control API drives the session."""
-    return _started(session.runtime.face, address, view, LiveStage(session))
+def serve_live(session: Any, address: tuple[str, int], view: str = "front",
+               osc: tuple[str, int] | None = None) -> ShowServer:
+    """The started server of a live session's face; its control API drives the session (and
+    OSC control addresses on ``osc``, a UDP address, when given)."""
+    return _started(session.runtime.face, address, view, LiveStage(session), osc)
 
 
 def serve_playback(face: Any, address: tuple[str, int], view: str = "front") -> ShowServer:
@@ -29,10 +31,14 @@ def serve_playback(face: Any, address: tuple[str, int], view: str = "front") -> 
     return _started(face, address, view, Stage())
 
 
-def _started(face: Any, address: tuple[str, int], view: str, stage: Stage) -> ShowServer:
+def _started(face: Any, address: tuple[str, int], view: str, stage: Stage,
+             osc: tuple[str, int] | None = None) -> ShowServer:
     camera = aim_camera(head_points(face), FEED_SIZE, view)
-    server = ShowServer(face, camera, host=address[0], port=address[1], size=FEED_SIZE, stage=stage).start()
+    server = ShowServer(face, camera, host=address[0], port=address[1], size=FEED_SIZE, stage=stage, osc=osc).start()
     base = server.page_url.split("/?", 1)[0]
     print(f"program feed: {server.page_url}  (OBS: Browser Source with this URL)", file=sys.stderr)
     print(f"control API: {base.replace('http', 'ws', 1)}/api?token={server.token}", file=sys.stderr)
+    if server.osc_address is not None:
+        print(f"OSC control: udp {server.osc_address[0]}:{server.osc_address[1]} (/puppet/set, /puppet/trigger, "
+              "/puppet/record, /puppet/neutral)", file=sys.stderr)
     return server
