@@ -12,7 +12,9 @@ writes exactly the frames the live session wrote:
   the pose of the moment it went (other devices' new Samples still come through);
 * ``resume``: every device is back; ticks run at their own time again;
 * ``reset``: ticks before t are written, then every channel goes back to rest (neutral);
-* ``recentre``: ticks before t are written, then the bipolar channels take the logged centres.
+* ``recentre``: ticks before t are written, then the bipolar channels take the logged centres;
+* ``trigger``: ticks before t are written, then the named trigger is pressed, released or fired
+  (``Mapping.trigger``; a mapping without that trigger, re-mapping a take, lets it pass).
 
 Layered passes: with a ``Layer``, each frame is the base take's frame with the armed FAPs
 replaced by the pose, as animators layer one pass over another.
@@ -191,6 +193,10 @@ class TakeClock:
         elif entry.kind == "recentre":
             self._until(entry.t_ns)
             self.mapping.recentre(entry.data["centres"])
+        elif entry.kind == "trigger":
+            self._until(entry.t_ns)
+            if entry.data["name"] in self.mapping.trigger_names:
+                self.mapping.trigger(entry.data["name"], entry.data["action"], entry.t_ns)
         else:
             raise ValueError(f"unknown log event {entry.kind!r}")
 
