@@ -29,7 +29,7 @@ from puppet.live.takeclock import TakeClock
 from puppet.live.triggercheck import CLIP_KEYS, TRIGGER_KEYS
 from puppet.live.triggers import EASES, MODES, Trigger, TriggerSpec
 from puppet.runtime.runtime import Runtime
-from puppet.view.livewindow import LiveView, open_session
+from puppet.view.livewindow import LiveView, open_session, trigger_keys
 from puppet.view.overlay import KEYS
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -135,7 +135,8 @@ def test_triggers_add_to_the_targets_and_the_neutral_key_lets_go():
 
 
 def test_an_unknown_trigger_or_action_names_what_exists():
-    m = compile_mapping(doc(smile={"mode": "hold", "expression": "joy"}, wow={"mode": "oneshot", "viseme": 3}), "rig.yaml")
+    m = compile_mapping(doc(smile={"mode": "hold", "expression": "joy"}, wow={"mode": "oneshot", "viseme": 3}),
+                        "rig.yaml")
     assert m.trigger_names == ("smile", "wow")
     with pytest.raises(ValueError, match=r"^rig.yaml: no trigger 'smiel': expected one of smile, wow; "
                                          r"did you mean 'smile'\?$"):
@@ -248,23 +249,23 @@ triggers:
 
 @pytest.mark.parametrize("line, message", [
     ("  smile: {source: keys.1, mode: hodl, expression: joy}",
-     "rig.yaml:9: triggers.smile.mode: expected a trigger mode: one of hold, toggle, oneshot, got 'hodl'; "
-     "did you mean 'hold'?"),
+     ("rig.yaml:9: triggers.smile.mode: expected a trigger mode: one of hold, toggle, oneshot, got 'hodl'; "
+      "did you mean 'hold'?")),
     ("  smile: {source: keys.1, mode: hold, expression: jyo}",
-     "rig.yaml:9: triggers.smile.expression: expected an expression number 1-6 or name (joy, sadness, anger, fear, "
-     "disgust, surprise), got 'jyo'; did you mean 'joy'?"),
+     ("rig.yaml:9: triggers.smile.expression: expected an expression number 1-6 or name (joy, sadness, anger, fear, "
+      "disgust, surprise), got 'jyo'; did you mean 'joy'?")),
     ("  smile: {source: keys.3, mode: hold, expression: joy}",
-     "rig.yaml:9: triggers.smile.source: source 'keys.3' is not a channel of the mapping: expected one of the "
-     "channels; did you mean 'keys.2'? (add it under channels)"),
+     ("rig.yaml:9: triggers.smile.source: source 'keys.3' is not a channel of the mapping: expected one of the "
+      "channels; did you mean 'keys.2'? (add it under channels)")),
     ("  smile: {source: keys.1, mode: hold, expression: joy, relase: 0.3}",
-     "rig.yaml:9: triggers.smile.relase: unknown key 'relase' in trigger 'smile': expected one of "
-     + ", ".join(TRIGGER_KEYS) + "; did you mean 'release'?"),
+     ("rig.yaml:9: triggers.smile.relase: unknown key 'relase' in trigger 'smile': expected one of "
+      + ", ".join(TRIGGER_KEYS) + "; did you mean 'release'?")),
     ("  smile: {source: keys.1, mode: hold, faps: {opn_jaw: 300}}",
-     "rig.yaml:9: triggers.smile.faps.opn_jaw: expected a FAP name or number 3-68, got 'opn_jaw'; "
-     "did you mean 'open_jaw'?"),
+     ("rig.yaml:9: triggers.smile.faps.opn_jaw: expected a FAP name or number 3-68, got 'opn_jaw'; "
+      "did you mean 'open_jaw'?")),
     ("  smile: {source: keys.1, mode: oneshot, clip: {take: takes/nod_009}}",
-     "rig.yaml:9: triggers.smile.clip.take: expected a take folder or .fap file (relative to the mapping), "
-     "got 'takes/nod_009': takes/nod_009: no such take (expected a take folder or a .fap file)"),
+     ("rig.yaml:9: triggers.smile.clip.take: takes/nod_009: no such take (expected a take folder or a .fap file) "
+      "(a clip's take is found relative to the mapping file)")),
 ])
 def test_a_bad_trigger_is_one_line_naming_the_file_line_and_key(line, message, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
@@ -301,7 +302,7 @@ def test_a_keys_device_has_the_keys_the_window_does_not_keep():
 
 def test_the_guide_s_trigger_example_loads(tmp_path, shared_runtime):
     text = (ROOT / "docs" / "guide" / "mappings.md").read_text("utf-8")
-    example = re.search(r"## Triggers.*?```yaml\n(.*?)```", text, re.S).group(1)
+    example = re.search(r"## Triggers.*?```yaml\n(.*?)```", text, re.DOTALL).group(1)
     (tmp_path / "takes").mkdir()
     folder = _record(shared_runtime, tmp_path / "takes", keys_mapping(tmp_path), lambda s: _performance(s, 0.0))
     folder.rename(tmp_path / "takes" / "nod_001")
@@ -421,6 +422,7 @@ def test_key_1_in_the_live_window_holds_an_expression_and_the_cockpit_shows_it(t
     window = headless_window(size)
     session = open_session(keys_mapping(tmp_path), record_root=tmp_path)
     live = LiveView(session, window)
+    assert trigger_keys(session) == "1 smile"
 
     def steps(seconds):
         end = time.monotonic() + seconds

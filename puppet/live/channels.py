@@ -24,6 +24,10 @@ Visemes and expressions become the Pose's FAP 1 / FAP 2 fields: the strongest vi
 ``(select1, intensity1, select2, intensity2)``; any weaker ones are expanded into low-level FAPs
 and added to ``Pose.fap``, so the face changes continuously when the order of strengths changes.
 
+Triggers (``puppet.live.triggers``) put whole poses on presses of a channel or on calls by name
+(``trigger``): their expression and viseme strengths join the targets' in the FAP 1 / 2 ranking,
+their FAPs and muscles add; the envelopes run on the Samples' timestamps and the pose time.
+
 ``feed(sample)`` shapes the sample's channels at once (plain Python floats, no per-sample dict or
 YAML walking beyond the sample's own values); ``pose()`` combines the targets into a ``Pose``.
 

@@ -43,8 +43,11 @@ checked before a device opens; every problem is reported with the file, line, ke
 cannot say (min < centre < max, monotonic points, sources naming declared channels) is checked
 here.
 
-The checked channels and targets become a ``Mapping`` (``puppet.live.channels``), which shapes
-the channels and makes the Poses.
+An optional ``triggers:`` section puts poses on presses (held, latched or played once); its
+checks are ``puppet.live.triggercheck``'s, run by the same checker.
+
+The checked channels, targets and triggers become a ``Mapping`` (``puppet.live.channels``),
+which shapes the channels and makes the Poses.
 """
 
 from __future__ import annotations

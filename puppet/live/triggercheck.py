@@ -196,8 +196,8 @@ def _clip(check, where: tuple, value, file: str) -> Clip | None:
             fps = reader.header.fps
             frames = np.array(list(held_low_level(reader)))
     except (PuppetError, OSError) as exc:
-        check.error(where + ("take",), f"expected a take folder or .fap file (relative to the mapping), "
-                                       f"got {spec['take']!r}: {getattr(exc, 'strerror', None) or exc}")
+        reason = f"{path}: {exc.strerror}" if isinstance(exc, OSError) and exc.strerror else str(exc)
+        check.error(where + ("take",), f"{reason} (a clip's take is found relative to the mapping file)")
         return None
     length = (len(frames) - 1) / fps if len(frames) else 0.0
     end = length if end is None else end

@@ -116,7 +116,7 @@ class TriggerState:
 class Trigger:
     """One trigger's envelope: the straight phase segment since its last press or release."""
 
-    __slots__ = ("spec", "t_ns", "p0", "motion", "latched", "down", "shot_ns", "fap", "attack", "release")
+    __slots__ = ("attack", "down", "fap", "latched", "motion", "p0", "release", "shot_ns", "spec", "t_ns")
 
     def __init__(self, spec: TriggerSpec) -> None:
         self.spec = spec

@@ -264,7 +264,7 @@ class LiveView:
         self.session.normals = not self.renderer.gpu_normals
         self.window.fbo.viewport = (0, 0, *size)
 
-    def _draw_cockpit(self, states: dict[str, Any], pose_ns: int | None) -> None:
+    def _draw_cockpit(self, states: dict[str, Any], pose_ns: int | None = None) -> None:
         self.cockpit.tick(self.stats.fps, self.stats.latency_ms)
         if not self.cockpit.visible:  # hidden: nothing gathered, nothing drawn
             return
@@ -282,6 +282,16 @@ class LiveView:
         title = live_title(self.name, self.stats.fps, self.stats.latency_ms, states, recording)
         if title != self._title:
             self.window.title = self._title = title
+
+
+def trigger_keys(session: Any) -> str:
+    """The triggers on the session's ``keys://`` devices, as the terminal says them: ``1 joy, 7 pout``."""
+    keyed = []
+    for name, spec in session.mapping.triggers.specs.items():
+        device, _, key = (spec.source or "").partition(".")
+        if isinstance(session.devices.get(device), KeysDevice):
+            keyed.append(f"{key} {name}")
+    return ", ".join(keyed)
 
 
 def open_session(mapping_path: str | os.PathLike, *, record: str | None = None, fps: int = 30,
@@ -337,6 +347,9 @@ def run_live(mapping_path: str | os.PathLike, *, record: str | None = None, fps:
         raise
     print("keys: R record/stop, N neutral, C re-centre sticks, K calibrate, M channel monitor, H hide the overlay, "
           "Q/Esc quit", file=sys.stderr)
+    keyed = trigger_keys(session)
+    if keyed:
+        print(f"the mapping's keys: {keyed}", file=sys.stderr)
     print(f"takes go to {session.record_root.resolve()}", file=sys.stderr)
     live = LiveView(session, window, view)
     try:
