@@ -3,6 +3,7 @@ envelopes, a clip of a take, the live window's keys, a take rebuilt exactly, the
 
 from __future__ import annotations
 
+import itertools
 import json
 import re
 import time
@@ -456,3 +457,43 @@ def test_key_1_in_the_live_window_holds_an_expression_and_the_cockpit_shows_it(t
     finally:
         live.close()
         session.close()
+
+
+# -- the shipped mappings' triggers -----------------------------------------------------------------
+
+def test_a_pad_of_the_midi_pad_mapping_plays_its_expression_once_through_the_midi_adapter():
+    import mido
+
+    from devices.midi_device import MessagePort, MidiDevice
+    from puppet.io.shipped import shipped_mapping
+    from puppet.live.mappingfile import load_mapping
+
+    m = load_mapping(shipped_mapping("midi_pads"))
+    port = MessagePort()
+    with MidiDevice("pads", "LPD8", open_input=lambda name: port) as device:
+        port.send(mido.Message("note_on", note=36, velocity=90))
+        port.send(mido.Message("note_off", note=36))
+        for sample in itertools.islice(device.samples(timeout=2.0), 2):
+            m.feed(sample)
+    t = sample.t_ns
+    assert m.pose(t + S // 2).expression == (1, 63.0, 0, 0.0)     # joy: 0.1 s up, 0.8 s held
+    assert m.pose(t + 2 * S).expression == (0, 0.0, 0, 0.0)       # and gone after its release
+
+
+def test_what_a_key_drives_includes_its_triggers_for_a_layered_pass():
+    from puppet.io.shipped import shipped_mapping
+    from puppet.live.mappingfile import load_mapping
+
+    m = load_mapping(shipped_mapping("arduino_sliders_keys"))
+    assert m.drives("keys.1") == (set(), {"expression"})
+    slots, kinds = m.drives("keys.7")
+    assert slots == {16, 15, 5, 6} and kinds == set()   # the pout: push_t_lip, push_b_lip, stretch_l/r_cornerlip
+
+
+def test_a_take_re_mapped_without_the_triggers_lets_their_presses_pass(shared_runtime, tmp_path):
+    folder = _record(shared_runtime, tmp_path, keys_mapping(tmp_path), lambda session: _performance(session, 0.0))
+    plain = tmp_path / "plain.yaml"
+    plain.write_text(keys_mapping(tmp_path).read_text().split("triggers:")[0])
+    result = retake(folder, tmp_path / "plain.fap", mapping=plain)
+    values = read_fap(result.path)
+    assert result.frames > 10 and values.values[:, 2].max() == 500 and not values.expression[:, 1].any()
