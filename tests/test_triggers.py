@@ -497,3 +497,51 @@ def test_a_take_re_mapped_without_the_triggers_lets_their_presses_pass(shared_ru
     result = retake(folder, tmp_path / "plain.fap", mapping=plain)
     values = read_fap(result.path)
     assert result.frames > 10 and values.values[:, 2].max() == 500 and not values.expression[:, 1].any()
+
+
+def test_a_key_plays_its_trigger_while_another_device_is_away_and_the_take_agrees(shared_runtime, tmp_path):
+    from devices import State
+    from devices.pushed_device import PushedDevice
+
+    class Box(PushedDevice):
+        """A box that can be pulled out: its reads and reopens fail while ``away``."""
+
+        away = False
+
+        def _open(self) -> None:
+            if self.away:
+                raise OSError("unplugged")
+
+        def _read(self):
+            if self.away:
+                raise OSError("unplugged")
+            return super()._read()
+
+    mapping = tmp_path / "box.yaml"
+    mapping.write_text(keys_mapping(tmp_path).read_text().replace(
+        'devices:\n', 'devices:\n  box: {url: "api://"}\n').replace(
+        'channels:\n', 'channels:\n  box.jaw:\n').replace(
+        'targets:\n', 'targets:\n  - {fap: open_jaw, source: box.jaw, range: [0, 200]}\n'))
+    box = Box("box")
+    box.BACKOFF = (0.01, 0.05)
+    with LiveSession(mapping, face=shared_runtime, devices={"box": box}, record_root=tmp_path, fps=30) as session:
+        _frames(session, 0.1)
+        session.start_recording()
+        box.push({"jaw": 0.5})
+        _frames(session, 0.1)
+        box.away = True
+        assert box.wait_state(State.LOST, 2.0)
+        _frames(session, 0.05)
+        session.devices["keys"].push({"1": 1.0})
+        _frames(session, 0.3)
+        frame = session.frame()
+        assert frame.states["box"] is not State.OPEN and frame.pose.expression[:2] == (1, 63.0)
+        assert frame.pose.fap[2] == 100    # the box's jaw held where it was
+        box.away = False
+        assert box.wait_state(State.OPEN, 2.0)
+        _frames(session, 0.1)
+        folder = session.stop_recording()
+    take = open_take(folder)
+    assert {e.kind for e in take.entries() if isinstance(e, LogEvent)} >= {"hold", "resume"}
+    assert (read_fap(take.fap_path).expression[:, 1] == 63).any()
+    assert retake(take, tmp_path / "again.fap").identical

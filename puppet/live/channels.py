@@ -401,10 +401,12 @@ class Mapping:
             if watched and channel.name in watched:
                 self.triggers.input(channel.name, channel.pre, t_ns)
 
-    def pose(self, t_ns: int | None = None) -> Pose:
+    def pose(self, t_ns: int | None = None, trigger_ns: int | None = None) -> Pose:
         """The Pose for the channels as last fed; with ``t_ns``, smoothing and rate limits are
         carried on to that time with each input held (without changing the state), so the face
-        settles between the samples of devices that only report changes."""
+        settles between the samples of devices that only report changes. The triggers play at
+        ``trigger_ns`` (default ``t_ns``): a session holding the pose while a device is away
+        still plays them on its own clock."""
         if t_ns is None:
             for c in self._timed:
                 c.out = c.value
@@ -422,7 +424,7 @@ class Mapping:
         visemes: dict[int, float] = {}
         expressions: dict[int, float] = {}
         if self.triggers:
-            self.triggers.add(t_ns, fap, muscles, expressions, visemes)
+            self.triggers.add(t_ns if trigger_ns is None else trigger_ns, fap, muscles, expressions, visemes)
         for name, v in muscles.items():
             muscles[name] = 0.0 if v < 0.0 else 1.0 if v > 1.0 else v
         viseme = self._viseme(fap, visemes) if self._ranks_visemes else None
