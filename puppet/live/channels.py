@@ -24,6 +24,10 @@ Visemes and expressions become the Pose's FAP 1 / FAP 2 fields: the strongest vi
 ``(select1, intensity1, select2, intensity2)``; any weaker ones are expanded into low-level FAPs
 and added to ``Pose.fap``, so the face changes continuously when the order of strengths changes.
 
+Triggers (``puppet.live.triggers``) put whole poses on presses of a channel or on calls by name
+(``trigger``): their expression and viseme strengths join the targets' in the FAP 1 / 2 ranking,
+their FAPs and muscles add; the envelopes run on the Samples' timestamps and the pose time.
+
 ``feed(sample)`` shapes the sample's channels at once (plain Python floats, no per-sample dict or
 YAML walking beyond the sample's own values); ``pose()`` combines the targets into a ``Pose``.
 
@@ -45,6 +49,7 @@ from puppet.fap.pose import Pose
 from puppet.fap.table import N_FAPS, faps
 from puppet.fap.units import AU
 from puppet.live.filters import Exponential, OneEuro, RateLimit
+from puppet.live.triggers import Triggers, TriggerSpec, TriggerState
 
 COMBINE_MODES = ("sum", "max", "last")
 EXPRESSIONS = {"joy": 1, "sadness": 2, "anger": 3, "fear": 4, "disgust": 5, "surprise": 6}
@@ -329,10 +334,13 @@ class Mapping:
     """A checked, compiled mapping: ``feed`` Samples in, take ``pose()`` out.
 
     ``devices`` is {name: URL} (per-device options folded into the URL's query) for the session
-    to open; Samples whose ``device`` is one of these names are shaped, others are ignored."""
+    to open; Samples whose ``device`` is one of these names are shaped, others are ignored.
+    ``triggers`` (``puppet.live.triggers``) are pressed by their source channels as they are
+    fed, or by name (``trigger``), and add to every pose."""
 
     def __init__(self, file: str, devices: dict[str, str], channels: dict[str, ChannelSpec],
-                 targets: list[TargetSpec], description: str = "") -> None:
+                 targets: list[TargetSpec], description: str = "",
+                 triggers: list[TriggerSpec] | tuple[TriggerSpec, ...] = ()) -> None:
         self.file = file
         self.description = description
         self.devices = dict(devices)
@@ -357,8 +365,15 @@ class Mapping:
         self._muscles = tuple(t for t in compiled if t.kind == "muscle")
         self._visemes = tuple(t for t in compiled if t.kind == "viseme")
         self._expressions = tuple(t for t in compiled if t.kind == "expression")
-        self.muscle_names = tuple(dict.fromkeys(t.key for t in self._muscles))
-        self._shapes = high_level_faps() if self._visemes or self._expressions else None
+        self.triggers = Triggers(triggers, file)
+        self._watched = self.triggers.by_source
+        for spec in triggers:
+            if spec.source is not None:
+                self._channels[spec.source].targets.append(f"trigger {spec.name}")
+        self.muscle_names = tuple(dict.fromkeys([*(t.key for t in self._muscles), *self.triggers.muscle_names]))
+        self._ranks_visemes = bool(self._visemes or self.triggers.visemes)
+        self._ranks_expressions = bool(self._expressions or self.triggers.expressions)
+        self._shapes = high_level_faps() if self._ranks_visemes or self._ranks_expressions else None
 
     # -- the hot path --------------------------------------------------------------------------
 
@@ -368,6 +383,7 @@ class Mapping:
         if channels is None:
             return
         t_ns = sample.t_ns
+        watched = self._watched
         for name, raw in sample.values.items():
             channel = channels.get(name)
             if channel is None:
@@ -382,11 +398,15 @@ class Mapping:
                 continue
             self._seq += 1
             channel.update(raw, t_ns, self._seq)
+            if watched and channel.name in watched:
+                self.triggers.input(channel.name, channel.pre, t_ns)
 
-    def pose(self, t_ns: int | None = None) -> Pose:
+    def pose(self, t_ns: int | None = None, trigger_ns: int | None = None) -> Pose:
         """The Pose for the channels as last fed; with ``t_ns``, smoothing and rate limits are
         carried on to that time with each input held (without changing the state), so the face
-        settles between the samples of devices that only report changes."""
+        settles between the samples of devices that only report changes. The triggers play at
+        ``trigger_ns`` (default ``t_ns``): a session holding the pose while a device is away
+        still plays them on its own clock."""
         if t_ns is None:
             for c in self._timed:
                 c.out = c.value
@@ -401,30 +421,37 @@ class Mapping:
         muscles = dict.fromkeys(self.muscle_names, 0.0)
         for t in self._muscles:
             muscles[t.key] += t.evaluate()
+        visemes: dict[int, float] = {}
+        expressions: dict[int, float] = {}
+        if self.triggers:
+            self.triggers.add(t_ns if trigger_ns is None else trigger_ns, fap, muscles, expressions, visemes)
         for name, v in muscles.items():
             muscles[name] = 0.0 if v < 0.0 else 1.0 if v > 1.0 else v
-        viseme = self._viseme(fap) if self._visemes else None
-        expression = self._expression(fap) if self._expressions else None
+        viseme = self._viseme(fap, visemes) if self._ranks_visemes else None
+        expression = self._expression(fap, expressions) if self._ranks_expressions else None
         return Pose(fap, viseme, expression, muscles, t_ns)
 
-    def _strengths(self, targets) -> list[tuple[float, int]]:
-        """(strength 0..63, select) per distinct select, strongest first (ties: target order)."""
+    def _strengths(self, targets, extra: dict[int, float]) -> list[tuple[float, int]]:
+        """(strength 0..63, select) per distinct select, strongest first (ties: target order, then
+        the triggers'): the targets' values plus ``extra``, the triggers' strengths."""
         by_key: dict[int, float] = {}
         for t in targets:
             by_key[t.key] = by_key.get(t.key, 0.0) + t.evaluate()
+        for key, v in extra.items():
+            by_key[key] = by_key.get(key, 0.0) + v
         order = sorted(by_key.items(), key=lambda kv: -kv[1])
-        return [(min(v, 63.0), k) for k, v in order]
+        return [(min(v, 63.0), k) for k, v in order] or [(0.0, 0)]
 
-    def _viseme(self, fap: np.ndarray) -> tuple:
-        ranked = self._strengths(self._visemes)
+    def _viseme(self, fap: np.ndarray, extra: dict[int, float]) -> tuple:
+        ranked = self._strengths(self._visemes, extra)
         w, select = ranked[0]
         for weaker, other in ranked[1:]:
             if weaker > 0.0:
                 fap += self._shapes["visemes"][other] * (weaker / 63.0)
         return (select, 0, w) if w > 0.0 else (0, 0, 0.0)
 
-    def _expression(self, fap: np.ndarray) -> tuple:
-        ranked = self._strengths(self._expressions) + [(0.0, 0)]
+    def _expression(self, fap: np.ndarray, extra: dict[int, float]) -> tuple:
+        ranked = self._strengths(self._expressions, extra) + [(0.0, 0)]
         (i1, s1), (i2, s2) = ranked[0], ranked[1]
         for weaker, other in ranked[2:]:
             if weaker > 0.0:
@@ -466,7 +493,29 @@ class Mapping:
                 slots.update(t.slots)
                 if t.kind in ("viseme", "expression", "muscle"):
                     kinds.add(t.kind)
+        for trigger in self.triggers.by_source.get(channel, ()):
+            spec = trigger.spec
+            slots.update(number - 1 for number, _ in spec.faps)
+            if spec.clip is not None:
+                slots.update(int(i) for i in np.flatnonzero(np.any(spec.clip.frames != 0.0, axis=0)))
+            kinds.update(k for k in spec.kinds if k in ("viseme", "expression", "muscle"))
         return slots, kinds
+
+    # -- triggers ----------------------------------------------------------------------------
+
+    @property
+    def trigger_names(self) -> tuple[str, ...]:
+        """The mapping's triggers by name, in the file's order (what ``trigger`` takes)."""
+        return self.triggers.names
+
+    def trigger(self, name: str, action: str, t_ns: int) -> None:
+        """Press, release or fire (a press and a release at once) the trigger ``name`` at
+        ``t_ns``; a ValueError naming the triggers there are for an unknown name or action."""
+        self.triggers.act(name, action, t_ns)
+
+    def trigger_states(self, t_ns: int | None = None) -> list[TriggerState]:
+        """Every trigger's level at ``t_ns`` and whether it is latched on (for the cockpit)."""
+        return self.triggers.states(t_ns)
 
     def resting(self) -> dict[str, float]:
         """The last raw value of every bipolar channel that has one: where its stick rests when
@@ -480,16 +529,21 @@ class Mapping:
                 if name in self._channels and self._channels[name].recentre(raw)}
 
     def reset(self) -> None:
-        """Every channel back to rest (no sample seen, filters empty, buttons released)."""
+        """Every channel back to rest (no sample seen, filters empty, buttons released), and
+        every trigger (released, unlatched, its pose gone at once)."""
         for c in self._channels.values():
             c.reset()
+        self.triggers.reset()
         self._seq = 0
 
     def snapshot(self) -> dict:
-        """The state the fed Samples left (raw and shaped values, filters, buttons), JSON-able
+        """The state the fed Samples left (raw and shaped values, filters, buttons, triggers), JSON-able
         and exact: a take keeps it from its first frame, so replaying the take's log from it
         gives the same poses as the live session did."""
-        return {"seq": self._seq, "channels": {name: c.snapshot() for name, c in self._channels.items()}}
+        state = {"seq": self._seq, "channels": {name: c.snapshot() for name, c in self._channels.items()}}
+        if self.triggers:
+            state["triggers"] = self.triggers.snapshot()
+        return state
 
     def restore(self, snapshot: dict, recorded: Mapping | None = None) -> None:
         """Take up a ``snapshot`` made by ``recorded`` (default: this mapping): exactly for every
@@ -511,6 +565,7 @@ class Mapping:
                 readings.setdefault((data["t_ns"], device), {})[source] = data["raw"]
         for (t_ns, device), values in sorted(readings.items()):
             self.feed(Sample(t_ns, device, values))
+        self.triggers.restore(snapshot.get("triggers"), None if recorded is None else recorded.triggers)
 
     def __repr__(self) -> str:
         return (f"Mapping({self.file!r}: {len(self.devices)} devices, {len(self._channels)} channels, "

@@ -21,6 +21,10 @@ C re-centres the bipolar channels (sticks) where they rest now, undoing drift
 (``session.recentre()``, logged in the take); a full calibration of a channel's range is K, or
 ``puppet calibrate --mapping M.yaml``.
 
+Every other key -- the digits, the other letters, F1-F12 but F11 (full screen) -- is pressed and
+released on the session's ``keys://`` devices (``devices.keys_device``), so a mapping can hold,
+toggle or play a pose on it (its ``triggers``); the cockpit shows each trigger's level.
+
 No display: a one-line message on stderr and ``SystemExit(2)``, as ``puppet play``.
 """
 
@@ -35,6 +39,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+from devices.keys_device import KeysDevice, key_channels
 from puppet.io.shipped import mappings_folder
 from puppet.io.takes import TakeError, check_take_name, open_take
 from puppet.live.calibrate import CalibrationError, GuidedCalibration, calibration_channels, device_overrides
@@ -121,6 +126,7 @@ class LiveView:
         self._title = ""
         window.exit_key = None  # Escape is ours: the take is finished before the window goes
         window.key_event_func = self._on_key
+        self._key_names = key_channels(window.keys)  # key code -> keys:// channel
 
     def run(self) -> None:
         try:
@@ -141,7 +147,7 @@ class LiveView:
             if self.renderer is None or self.renderer.size != size:
                 self._make_renderer(size)
             self.renderer.draw(frame.vertices, frame.normals, framebuffer=window.fbo)
-            self._draw_cockpit(frame.states)
+            self._draw_cockpit(frame.states, frame.pose.t_ns)
         window.swap_buffers()  # handles the window's events too (keys)
         self._follow_take()
         self.stats.drawn(time.monotonic_ns(), frame.newest_sample_ns, frame.n_samples > 0)
@@ -181,6 +187,9 @@ class LiveView:
 
     def _on_key(self, key: Any, action: Any, modifiers: Any) -> None:
         keys = self.window.keys
+        name = self._key_names.get(key)
+        if name is not None and action in (keys.ACTION_PRESS, keys.ACTION_RELEASE):
+            self._push_key(name, 1.0 if action == keys.ACTION_PRESS else 0.0)
         if action != keys.ACTION_PRESS:
             return
         if key in (keys.Q, keys.ESCAPE):
@@ -207,6 +216,12 @@ class LiveView:
             self.cockpit.toggle()
         elif key == keys.K and self.calibration is None:
             self._start_calibration()
+
+    def _push_key(self, name: str, value: float) -> None:
+        """A key pressed (1) or released (0) on every ``keys://`` device of the session."""
+        for device in self.session.devices.values():
+            if isinstance(device, KeysDevice):
+                device.push({name: value})
 
     def _stop_recording(self) -> None:
         if self.session.recording:
@@ -268,7 +283,7 @@ class LiveView:
         self.session.normals = not self.renderer.gpu_normals
         self.window.fbo.viewport = (0, 0, *size)
 
-    def _draw_cockpit(self, states: dict[str, Any]) -> None:
+    def _draw_cockpit(self, states: dict[str, Any], pose_ns: int | None = None) -> None:
         self.cockpit.tick(self.stats.fps, self.stats.latency_ms)
         if not self.cockpit.visible:  # hidden: nothing gathered, nothing drawn
             return
@@ -278,13 +293,24 @@ class LiveView:
         channels = self.session.mapping.channels() if self.cockpit.monitor else ()
         notice = self.notice if time.monotonic() < self._notice_until else ""
         self.cockpit.draw(self.stats.fps, self.stats.latency_ms, device_lines(states, self.session.devices),
-                          recording, channels, notice, layer=self.session.layer_status())
+                          recording, channels, notice, layer=self.session.layer_status(),
+                          triggers=self.session.mapping.trigger_states(pose_ns))
 
     def _set_title(self, states: dict[str, Any]) -> None:
         recording = self.take.name if self.take is not None and self.session.recording else None
         title = live_title(self.name, self.stats.fps, self.stats.latency_ms, states, recording)
         if title != self._title:
             self.window.title = self._title = title
+
+
+def trigger_keys(session: Any) -> str:
+    """The triggers on the session's ``keys://`` devices, as the terminal says them: ``1 joy, 7 pout``."""
+    keyed = []
+    for name, spec in session.mapping.triggers.specs.items():
+        device, _, key = (spec.source or "").partition(".")
+        if isinstance(session.devices.get(device), KeysDevice):
+            keyed.append(f"{key} {name}")
+    return ", ".join(keyed)
 
 
 def open_session(mapping_path: str | os.PathLike, *, record: str | None = None, fps: int = 30,
@@ -352,6 +378,9 @@ def run_live(mapping_path: str | os.PathLike, *, record: str | None = None, fps:
     else:
         print("keys: R record/stop, N neutral, C re-centre sticks, K calibrate, M channel monitor, "
               "H hide the overlay, Q/Esc quit", file=sys.stderr)
+        keyed = trigger_keys(session)
+        if keyed:
+            print(f"the mapping's keys: {keyed}", file=sys.stderr)
         live = LiveView(session, shown, view, made)
     try:
         live.run()
