@@ -336,3 +336,22 @@ def test_a_lighting_desk_starts_a_take_over_osc(tmp_path, face):
         loop.close()
         server.close()
         session.close()
+
+
+def test_a_stream_of_mangled_messages_is_answered_one_by_one_and_the_loop_goes_on(show):
+    server, session = show
+    rng = np.random.default_rng(7)
+    seeds = ['{"type": "status", "id": 1}', '{"type": "set", "channels": {"smile": 0.8}}',
+             '{"type": "trigger", "name": "wow", "action": "press"}', '{"type": "takes"}', '{"type": "neutral"}']
+    frames = session.frames
+    with connect(f"ws://127.0.0.1:{server.port}/api?token={server.token}") as ws:
+        answers = []
+        for k in range(300):
+            text = list(seeds[k % len(seeds)])
+            for _ in range(rng.integers(0, 3)):
+                text[rng.integers(len(text))] = chr(rng.integers(0, 0x3000))
+            ws.send("".join(text[:rng.integers(len(text) // 2, len(text) + 1)]))
+            answers.append(json.loads(ws.recv(timeout=5)))
+    assert all(isinstance(a["ok"], bool) and (a["ok"] or a["error"]) for a in answers)
+    assert 0 < sum(a["ok"] for a in answers) < 300
+    assert _wait(lambda: session.frames > frames + 10)
