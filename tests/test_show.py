@@ -355,3 +355,34 @@ def test_a_stream_of_mangled_messages_is_answered_one_by_one_and_the_loop_goes_o
     assert all(isinstance(a["ok"], bool) and (a["ok"] or a["error"]) for a in answers)
     assert 0 < sum(a["ok"] for a in answers) < 300
     assert _wait(lambda: session.frames > frames + 10)
+
+
+def test_a_subscriber_hears_status_on_its_interval_and_at_once_when_a_take_starts(show):
+    server, _ = show
+    url = f"ws://127.0.0.1:{server.port}/api?token={server.token}"
+    with connect(url) as watcher, connect(url) as script:
+        watcher.send(json.dumps({"type": "subscribe", "interval": 1.0, "id": "w"}))
+        events = []
+        while len(events) < 1:
+            message = json.loads(watcher.recv(timeout=5))
+            if message.get("type") == "status":
+                events.append(message)
+        assert {"devices", "fps", "latency_ms", "recording", "frames", "triggers"} <= set(events[0]["status"])
+        _ask(script, type="record", action="start")
+        started = time.monotonic()
+        while True:  # the change is told before the next tick of the interval
+            message = json.loads(watcher.recv(timeout=5))
+            if message.get("type") == "status" and message["status"]["recording"]:
+                break
+        assert time.monotonic() - started < 0.9
+        _ask(script, type="record", action="stop")
+
+
+def test_the_guide_s_python_client_runs_against_a_live_rig(show, monkeypatch, capsys):
+    server, _ = show
+    guide = (Path(__file__).resolve().parents[1] / "docs" / "guide" / "show.md").read_text("utf-8")
+    example = guide.split("```python\n", 1)[1].split("```", 1)[0]
+    example = example.replace("8765", str(server.port)).replace("PASTE-THE-TOKEN", server.token)
+    exec(compile(example, "docs/guide/show.md", "exec"), {})
+    printed = capsys.readouterr().out
+    assert "'ok': True" in printed and "api_001" in printed
