@@ -3,6 +3,7 @@ WebSockets against a live session; the page itself in a real browser is in test_
 
 from __future__ import annotations
 
+import contextlib
 import json
 import socket
 import threading
@@ -149,13 +150,14 @@ def face():
     return load_face()
 
 
-@pytest.fixture
-def show(tmp_path, face):
-    mapping = tmp_path / "api.yaml"
+@contextlib.contextmanager
+def live_show(folder: Path, face, take: str = "api", osc: tuple[str, int] | None = None):
+    """(server, session): the API mapping's live session, served, its loop running."""
+    mapping = folder / "api.yaml"
     mapping.write_text(API_MAPPING)
-    session = open_session(mapping, record="api", record_root=tmp_path / "takes", face=face)
+    session = open_session(mapping, record=take, record_root=folder / "takes", face=face)
     camera = aim_camera(head_points(face), (320, 320))
-    server = ShowServer(face, camera, port=0, size=(320, 320), stage=LiveStage(session)).start()
+    server = ShowServer(face, camera, port=0, size=(320, 320), stage=LiveStage(session), osc=osc).start()
     loop = Loop(session, server)
     try:
         yield server, session
@@ -163,6 +165,12 @@ def show(tmp_path, face):
         loop.close()
         server.close()
         session.close()
+
+
+@pytest.fixture
+def show(tmp_path, face):
+    with live_show(tmp_path, face) as served:
+        yield served
 
 
 def _ask(ws, **message) -> dict:
@@ -314,13 +322,7 @@ def test_osc_messages_that_stand_for_nothing_say_why(address, arguments, reason)
 
 
 def test_a_lighting_desk_starts_a_take_over_osc(tmp_path, face):
-    mapping = tmp_path / "api.yaml"
-    mapping.write_text(API_MAPPING)
-    session = open_session(mapping, record="desk", record_root=tmp_path / "takes", face=face)
-    camera = aim_camera(head_points(face), (320, 320))
-    server = ShowServer(face, camera, port=0, stage=LiveStage(session), osc=("127.0.0.1", 0)).start()
-    loop = Loop(session, server)
-    try:
+    with live_show(tmp_path, face, "desk", osc=("127.0.0.1", 0)) as (server, session):
         desk = SimpleUDPClient(*server.osc_address)
         desk.send_message("/puppet/set/smile", 1.0)
         desk.send_message("/puppet/record/start", [])
@@ -332,10 +334,6 @@ def test_a_lighting_desk_starts_a_take_over_osc(tmp_path, face):
         sock.sendto(b"\xff" * 13, server.osc_address)  # not OSC at all
         assert _wait(lambda: server.osc.counts["refused"] == 2)
         assert (tmp_path / "takes" / "desk_001" / "take.fap").exists()
-    finally:
-        loop.close()
-        server.close()
-        session.close()
 
 
 def test_a_stream_of_mangled_messages_is_answered_one_by_one_and_the_loop_goes_on(show):
