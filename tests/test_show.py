@@ -274,7 +274,7 @@ def test_the_feed_sends_the_face_then_frames_and_hears_each_drawn(show, face):
     with connect(f"ws://127.0.0.1:{server.port}/feed?token={server.token}", max_size=None) as ws:
         first = json.loads(ws.recv(timeout=5))
         assert first["type"] == "face" and first["n_vertices"] == len(face.vertices)
-        assert "#version 300 es" in first["vertex_shader"]
+        assert all("#version 300 es" in text for pair in first["shaders"].values() for text in pair)
         kind, number, published, codes = decode(ws.recv(timeout=5), None)
         assert kind == KEY
         positions = Quantiser(np.array(first["origin"]), np.array(first["step"])).positions(codes)
