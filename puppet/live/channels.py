@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import bisect
 import math
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -45,6 +46,7 @@ from puppet.fap.pose import Pose
 from puppet.fap.table import N_FAPS, faps
 from puppet.fap.units import AU
 from puppet.live.filters import Exponential, OneEuro, RateLimit
+from puppet.live.idlelife import PART_FAPS, IdleLife, IdleSpec, random_seed
 
 COMBINE_MODES = ("sum", "max", "last")
 EXPRESSIONS = {"joy": 1, "sadness": 2, "anger": 3, "fear": 4, "disgust": 5, "surprise": 6}
@@ -261,7 +263,7 @@ class _Target:
     """One target compiled: its sources, the affine map from their domain onto the range, a clamp."""
 
     __slots__ = ("kind", "key", "slots", "sources", "mode", "gain", "x0", "scale", "low", "cmin", "cmax",
-                 "label", "last", "guard")
+                 "label", "last", "guard", "rest", "still")
 
     def __init__(self, spec: TargetSpec, sources: list[_Channel], bipolar: bool, guard: _Guard) -> None:
         self.kind, self.key = spec.kind, spec.key
@@ -295,7 +297,13 @@ class _Target:
             name = next(k for k, v in EXPRESSIONS.items() if v == spec.key)
         self.label = f"{spec.kind} {spec.key}" + (f" {name}" if name else "")
         rest = low - self.x0 * self.scale  # every source at 0: the value before any sample
-        self.last = self.cmin if rest < self.cmin else self.cmax if rest > self.cmax else rest
+        self.last = self.rest = self.cmin if rest < self.cmin else self.cmax if rest > self.cmax else rest
+        self.still = 1e-3 * (self.cmax - self.cmin)  # how far from rest still counts as at rest
+
+    def away(self) -> bool:
+        """Whether the last value left rest (by more than 0.1% of the range: a filter's tail does not)."""
+        d = self.last - self.rest
+        return (d if d >= 0.0 else -d) > self.still
 
     def evaluate(self) -> float:
         sources = self.sources
@@ -332,7 +340,7 @@ class Mapping:
     to open; Samples whose ``device`` is one of these names are shaped, others are ignored."""
 
     def __init__(self, file: str, devices: dict[str, str], channels: dict[str, ChannelSpec],
-                 targets: list[TargetSpec], description: str = "") -> None:
+                 targets: list[TargetSpec], description: str = "", idle: IdleSpec | None = IdleSpec()) -> None:
         self.file = file
         self.description = description
         self.devices = dict(devices)
@@ -359,6 +367,10 @@ class Mapping:
         self._expressions = tuple(t for t in compiled if t.kind == "expression")
         self.muscle_names = tuple(dict.fromkeys(t.key for t in self._muscles))
         self._shapes = high_level_faps() if self._visemes or self._expressions else None
+        self.idle_spec = idle
+        self.idle = None if idle is None or not idle.parts else IdleLife(
+            random_seed() if idle.seed is None else idle.seed, time.monotonic_ns(), idle.parts)
+        self._yield_to = {part: self._drivers(part) for part in PART_FAPS}
 
     # -- the hot path --------------------------------------------------------------------------
 
@@ -383,10 +395,14 @@ class Mapping:
             self._seq += 1
             channel.update(raw, t_ns, self._seq)
 
-    def pose(self, t_ns: int | None = None) -> Pose:
+    def pose(self, t_ns: int | None = None, *, idle_ns: int | None = None) -> Pose:
         """The Pose for the channels as last fed; with ``t_ns``, smoothing and rate limits are
         carried on to that time with each input held (without changing the state), so the face
-        settles between the samples of devices that only report changes."""
+        settles between the samples of devices that only report changes.
+
+        Idle life (``self.idle``) is added at ``idle_ns`` (default ``t_ns``; none without a
+        time), each part only where no target that writes its FAPs is away from rest now
+        (``idle_yields``): it yields at once, with no fade, and comes back the frame they rest."""
         if t_ns is None:
             for c in self._timed:
                 c.out = c.value
@@ -405,7 +421,28 @@ class Mapping:
             muscles[name] = 0.0 if v < 0.0 else 1.0 if v > 1.0 else v
         viseme = self._viseme(fap) if self._visemes else None
         expression = self._expression(fap) if self._expressions else None
+        at = t_ns if idle_ns is None else idle_ns
+        if self.idle is not None and at is not None:
+            self.idle.add_to(fap, at, self.idle_yields())
         return Pose(fap, viseme, expression, muscles, t_ns)
+
+    def _drivers(self, part: str) -> tuple[_Target, ...]:
+        """The targets that write a part's FAPs: FAP, head and eye targets on them, visemes and
+        expressions whose shapes move them, and (for the blink) the muscles that shut the eye."""
+        slots = {n - 1 for n in PART_FAPS[part]}
+        found = [t for t in self._faps if slots & set(t.slots)]
+        for targets, kind in ((self._visemes, "visemes"), (self._expressions, "expressions")):
+            for t in targets:
+                shape = self._shapes[kind].get(t.key)
+                if shape is not None and np.any(shape[sorted(slots)]):
+                    found.append(t)
+        if part == "blink":
+            found += [t for t in self._muscles if t.key.startswith("orbicularis_oculi")]
+        return tuple(found)
+
+    def idle_yields(self) -> tuple[str, ...]:
+        """The idle parts left to the channels at the last ``pose``: those a target away from rest drives."""
+        return tuple(part for part, targets in self._yield_to.items() if any(t.away() for t in targets))
 
     def _strengths(self, targets) -> list[tuple[float, int]]:
         """(strength 0..63, select) per distinct select, strongest first (ties: target order)."""
@@ -489,7 +526,8 @@ class Mapping:
         """The state the fed Samples left (raw and shaped values, filters, buttons), JSON-able
         and exact: a take keeps it from its first frame, so replaying the take's log from it
         gives the same poses as the live session did."""
-        return {"seq": self._seq, "channels": {name: c.snapshot() for name, c in self._channels.items()}}
+        return {"seq": self._seq, "channels": {name: c.snapshot() for name, c in self._channels.items()},
+                "idle": None if self.idle is None else self.idle.state()}
 
     def restore(self, snapshot: dict, recorded: Mapping | None = None) -> None:
         """Take up a ``snapshot`` made by ``recorded`` (default: this mapping): exactly for every
@@ -498,6 +536,7 @@ class Mapping:
         performer's hands were."""
         self.reset()
         self._seq = snapshot["seq"]
+        self._restore_idle(snapshot.get("idle"))
         specs = self._specs if recorded is None else recorded._specs
         readings: dict[tuple[int, str], dict[str, float]] = {}
         for name, data in snapshot["channels"].items():
@@ -511,6 +550,14 @@ class Mapping:
                 readings.setdefault((data["t_ns"], device), {})[source] = data["raw"]
         for (t_ns, device), values in sorted(readings.items()):
             self.feed(Sample(t_ns, device, values))
+
+    def _restore_idle(self, state: dict | None) -> None:
+        """The recorded idle life's seed and origin, with this mapping's parts (a take without
+        one, idle off or made before idle life, gets none: its frames had none)."""
+        if state is None or self.idle is None:
+            self.idle = None
+            return
+        self.idle = IdleLife(int(state["seed"]), int(state["origin_ns"]), self.idle.parts)
 
     def __repr__(self) -> str:
         return (f"Mapping({self.file!r}: {len(self.devices)} devices, {len(self._channels)} channels, "

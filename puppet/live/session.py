@@ -17,7 +17,9 @@ Holding the pose
     pose time is frozen at the last frame taken with every device open: the lost device's
     channels (no new samples) give exactly the values of that frame, so the face holds still
     instead of drifting on filter previews; other devices' new samples still come through at
-    their filtered values. When the device is back (OPEN) the clock runs again.
+    their filtered values. When the device is back (OPEN) the clock runs again. Idle life
+    (blinks, eyes, breath: ``puppet.live.idlelife``) runs on at ``now`` meanwhile: the performed
+    channels hold, the face does not freeze mid-blink.
 
 Recording
     ``start_recording()`` opens a ``TakeRecorder`` and a ``TakeClock`` (``puppet.live.takeclock``):
@@ -210,11 +212,12 @@ class LiveSession:
         if self._clock is not None and self._clock.due(now):
             self._apply(LogEvent(now, "frame"))
 
-        pose = self.mapping.pose(pose_ns)
+        pose = self.mapping.pose(pose_ns, idle_ns=now)
         if self.pose_error is None and self.mapping.held_values:
             self.pose_error = self.mapping.held_problem
             warnings.warn(self.pose_error, RuntimeWarning, stacklevel=2)
-        if samples or pose_ns != self._last_pose_ns or not self._have_mesh or self.layer is not None:
+        if (samples or pose_ns != self._last_pose_ns or not self._have_mesh or self.layer is not None
+                or self.mapping.idle is not None):
             shown = pose if self.layer is None else Pose(*self._layered(now, pose), pose.muscles)
             self.runtime.deform_pose(shown, out=self._vertices, normals_out=self._normals,
                                      normals=self._with_normals)

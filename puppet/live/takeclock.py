@@ -9,7 +9,8 @@ writes exactly the frames the live session wrote:
 * ``frame`` at t: every tick at or before t is written (the session logs one whenever a frame of
   the live loop wrote ticks after its last Sample);
 * ``hold`` at t: a device is away; ticks are evaluated at ``min(tick, t)``, so the take holds
-  the pose of the moment it went (other devices' new Samples still come through);
+  the pose of the moment it went (other devices' new Samples still come through); idle life
+  (``puppet.live.idlelife``) goes on at the tick's own time, as in the live session;
 * ``resume``: every device is back; ticks run at their own time again;
 * ``reset``: ticks before t are written, then every channel goes back to rest (neutral);
 * ``recentre``: ticks before t are written, then the bipolar channels take the logged centres.
@@ -196,10 +197,9 @@ class TakeClock:
 
     def _until(self, before_ns: int) -> None:
         """Write every tick strictly before ``before_ns`` not yet written."""
-        while (t := self.tick_ns(self.frames)) < before_ns:
-            if self.hold_ns is not None:
-                t = min(t, self.hold_ns)
-            pose = self.mapping.pose(t)
+        while (tick := self.tick_ns(self.frames)) < before_ns:
+            t = tick if self.hold_ns is None else min(tick, self.hold_ns)
+            pose = self.mapping.pose(t, idle_ns=tick)
             if self.encode_muscles is not None and any(pose.muscles.values()):
                 pose = dataclasses.replace(pose, fap=pose.fap + self.encode_muscles(pose.muscles))
             if self.layer is None:
