@@ -205,6 +205,19 @@ def test_idle_false_keeps_the_face_still_and_idle_parts_can_be_switched_off():
                                      "parts": ["blink", "eyes", "breath"]}
 
 
+def test_a_replay_takes_the_recorded_seed_and_origin_and_an_older_take_gets_no_idle_life():
+    recorded = parse_mapping(mapping_text("idle: {seed: 3}"), "m.yaml")
+    state = recorded.snapshot()
+    other = parse_mapping(mapping_text("idle: {seed: 99, breath: false}"), "other.yaml")
+    other.restore(state, recorded)
+    assert (other.idle.seed, other.idle.origin_ns, other.idle.parts) == (3, recorded.idle.origin_ns, ("blink", "eyes"))
+    del state["idle"]                                  # a take made before idle life
+    other.restore(state, recorded)
+    assert other.idle is None and not other.pose(recorded.idle.origin_ns + 100 * S).fap.any()
+    other.restore(recorded.snapshot(), recorded)
+    assert other.idle.seed == 3
+
+
 @pytest.mark.parametrize("idle, message", [
     ("idle: maybe", "m.yaml:.*idle: expected true, false or a mapping"),
     ("idle: {blnk: false}", "unknown key 'blnk' in idle life.*did you mean 'blink'"),

@@ -27,6 +27,10 @@ and added to ``Pose.fap``, so the face changes continuously when the order of st
 ``feed(sample)`` shapes the sample's channels at once (plain Python floats, no per-sample dict or
 YAML walking beyond the sample's own values); ``pose()`` combines the targets into a ``Pose``.
 
+Idle life (``puppet.live.idlelife``: blinks, eye saccades and drift, breath) is added to the FAPs
+of a timed ``pose``, part by part, while no target that writes the part's FAPs is away from its
+rest; its seed and origin are part of ``snapshot()``, so a take's replay makes the same motion.
+
 The channels and targets come checked from the mapping file (``puppet.live.mappingfile``), as
 ``ChannelSpec`` and ``TargetSpec``; nothing here reads YAML.
 """
@@ -554,10 +558,11 @@ class Mapping:
     def _restore_idle(self, state: dict | None) -> None:
         """The recorded idle life's seed and origin, with this mapping's parts (a take without
         one, idle off or made before idle life, gets none: its frames had none)."""
-        if state is None or self.idle is None:
+        spec = self.idle_spec
+        if state is None or spec is None or not spec.parts:
             self.idle = None
             return
-        self.idle = IdleLife(int(state["seed"]), int(state["origin_ns"]), self.idle.parts)
+        self.idle = IdleLife(int(state["seed"]), int(state["origin_ns"]), spec.parts)
 
     def __repr__(self) -> str:
         return (f"Mapping({self.file!r}: {len(self.devices)} devices, {len(self._channels)} channels, "

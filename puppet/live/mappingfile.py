@@ -30,6 +30,7 @@ and sends the shaped values to targets: FAPs (in FAPU units, as in a .fap file),
       - {muscle: zygomatic_major_l, source: box.ch0, gain: 0.5}
       - {head: yaw, source: pad.X, range: [-30, 30]}          # degrees, written as FAP 49 in AU
       - {expression: joy, source: [pad.A, box.ch0], combine: max}
+    idle: {blink: true, eyes: true, breath: false, seed: 7}  # idle life; default all on; false: off
 
 Per-device ``options`` are folded into the device URL's query, so ``Mapping.devices`` is just
 {name: URL}. Before its first sample a channel reads 0 (the face at rest). ``pose(t_ns)`` carries
