@@ -5,7 +5,6 @@ same FAPs, is off with ``idle: false``, and a take with it rebuilds to the ident
 from __future__ import annotations
 
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,7 +16,7 @@ from devices.base import Sample
 from puppet import MappingError
 from puppet.fap.pose import Pose
 from puppet.io.takes import open_take
-from puppet.live.idlelife import (BLINKS_PER_MIN, LID_LOWER, LID_UPPER, PART_FAPS, IdleLife)
+from puppet.live.idlelife import LID_LOWER, LID_UPPER, PART_FAPS, IdleLife
 from puppet.live.mappingfile import parse_mapping
 from puppet.live.retake import retake
 from puppet.live.session import LiveSession
@@ -75,7 +74,6 @@ def test_the_blink_rate_over_ten_minutes_is_a_resting_person_s(seed):
     assert 13 <= rate <= 21, rate
     gaps = np.diff(onsets) / FPS
     assert gaps.min() >= 0.5 and gaps.std() / gaps.mean() > 0.3   # irregular, not periodic
-    assert abs(BLINKS_PER_MIN - 17) < 1e-9
 
 
 def test_a_blink_closes_fast_opens_slowly_and_the_upper_lid_does_the_moving():
@@ -102,7 +100,7 @@ def test_a_blink_closes_fast_opens_slowly_and_the_upper_lid_does_the_moving():
 
 def test_the_eyes_make_small_saccades_together_and_the_breath_is_slow_and_small():
     life = IdleLife(11, 0)
-    t, out = frames(life, 120, fps=200)
+    _, out = frames(life, 120, fps=200)
     yaw_deg = out[:, 22] * 1e-5 * 180 / np.pi
     pitch_deg = out[:, 24] * 1e-5 * 180 / np.pi
     assert np.array_equal(out[:, 22], out[:, 23]) and np.array_equal(out[:, 24], out[:, 25])

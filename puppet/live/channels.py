@@ -50,7 +50,7 @@ from puppet.fap.pose import Pose
 from puppet.fap.table import N_FAPS, faps
 from puppet.fap.units import AU
 from puppet.live.filters import Exponential, OneEuro, RateLimit
-from puppet.live.idlelife import PART_FAPS, IdleLife, IdleSpec, random_seed
+from puppet.live.idlelife import ALL_ON, PART_FAPS, IdleLife, IdleSpec, random_seed
 
 COMBINE_MODES = ("sum", "max", "last")
 EXPRESSIONS = {"joy": 1, "sadness": 2, "anger": 3, "fear": 4, "disgust": 5, "surprise": 6}
@@ -344,7 +344,7 @@ class Mapping:
     to open; Samples whose ``device`` is one of these names are shaped, others are ignored."""
 
     def __init__(self, file: str, devices: dict[str, str], channels: dict[str, ChannelSpec],
-                 targets: list[TargetSpec], description: str = "", idle: IdleSpec | None = IdleSpec()) -> None:
+                 targets: list[TargetSpec], description: str = "", idle: IdleSpec | None = ALL_ON) -> None:
         self.file = file
         self.description = description
         self.devices = dict(devices)

@@ -93,6 +93,10 @@ class IdleSpec:
         return tuple(p for p in PARTS if getattr(self, p))
 
 
+ALL_ON = IdleSpec()
+"""A mapping without an ``idle`` key: every part, a seed drawn at load."""
+
+
 def random_seed() -> int:
     """A seed for a session whose mapping names none (kept in the take's metadata)."""
     return secrets.randbelow(2 ** 31)

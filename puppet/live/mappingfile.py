@@ -66,8 +66,8 @@ from puppet.errors import PuppetError
 from puppet.face.muscles import MUSCLE_NAMES
 from puppet.fap.table import N_FAPS, faps
 from puppet.live.channels import COMBINE_MODES, EXPRESSIONS, EYE_AXES, HEAD_AXES, ChannelSpec, Mapping, TargetSpec
+from puppet.live.idlelife import ALL_ON, IdleSpec
 from puppet.live.idlelife import PARTS as IDLE_PARTS
-from puppet.live.idlelife import IdleSpec
 
 # -- the format -------------------------------------------------------------------------------
 
@@ -445,13 +445,13 @@ class _Checker:
         devices = self.devices(data["devices"]) if "devices" in data else {}
         channels = self.channels(data["channels"]) if "channels" in data else {}
         targets = self.targets(data["targets"], channels) if "targets" in data else []
-        idle = self.idle(data["idle"]) if "idle" in data else IdleSpec()
+        idle = self.idle(data["idle"]) if "idle" in data else ALL_ON
         return devices, channels, targets, idle
 
     def idle(self, value) -> IdleSpec | None:
         """``idle: false`` (none), ``true`` (all parts), or ``{blink, eyes, breath: bool, seed: int}``."""
         if isinstance(value, bool):
-            return IdleSpec() if value else None
+            return ALL_ON if value else None
         if not isinstance(value, dict):
             self.expect(("idle",), "true, false or a mapping (blink, eyes, breath: true/false; seed: a whole "
                                    "number)", value)
