@@ -262,6 +262,33 @@ def test_a_take_with_idle_life_rebuilds_to_the_identical_fap(face, tmp_path):
     assert retake(take, tmp_path / "wire.fap", through_devices=True).identical
 
 
+def test_an_unplugged_device_holds_the_performed_jaw_while_the_face_goes_on_living(face, tmp_path):
+    from puppet.runtime.runtime import Runtime
+
+    mapping = tmp_path / "idle.yaml"
+    mapping.write_text(mapping_text())
+    with LiveSession(mapping, face=Runtime(face), devices={"box": open_device(JOYSTICK, "box")},
+                     record_root=tmp_path, fps=FPS) as session:
+        deadline = time.monotonic() + 5
+        while not (session.frame().states["box"] is State.OPEN and session.samples_fed > 20):
+            assert time.monotonic() < deadline
+            time.sleep(0.01)
+        box = session.devices["box"]
+        box.joystick.unplug()
+        assert box.wait_state(State.LOST, 5.0)
+        session.frame()
+        held = []
+        for _ in range(8):
+            time.sleep(0.03)
+            f = session.frame()
+            assert f.states["box"] in (State.LOST, State.OPENING) and f.n_samples == 0
+            held.append((f.pose.fap.copy(), f.vertices.copy()))
+    jaws = {fap[2] for fap, _ in held}
+    assert len(jaws) == 1                                               # the performed jaw holds
+    assert len({fap[22] for fap, _ in held}) == len(held)               # the eyes drift on
+    assert not np.array_equal(held[0][1], held[-1][1])                  # and the face shows it
+
+
 # -- what it looks like -------------------------------------------------------------------------
 
 def test_a_blink_peak_shuts_the_eyes_and_leaves_the_mouth(face, runtime, egl, tmp_path):
