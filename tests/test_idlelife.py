@@ -109,6 +109,9 @@ def test_the_eyes_make_small_saccades_together_and_the_breath_is_slow_and_small(
     jumps = np.flatnonzero(speed > 5.0)
     saccades = 1 + np.count_nonzero(np.diff(jumps) > 1)
     assert 120 / 3.2 <= saccades <= 120 / 0.9, saccades                   # one every 1-3 s
+    shut = out[:, 18] >= 0.99 * LID_UPPER
+    starts = jumps[np.r_[True, np.diff(jumps) > 1]]
+    assert shut[starts].mean() > 5 * shut.mean()                          # gaze shifts come with blinks
     pitch = out[:, 47]
     inhale = np.flatnonzero((pitch[1:] < pitch.min() * 0.5) & (pitch[:-1] >= pitch.min() * 0.5))
     per_min = len(inhale) / 2

@@ -24,10 +24,11 @@ at rest:
   their whole length with nothing folding (``puppet.runtime.lidclosure``: 0.5% of the opening left).
 
 Eyes (FAPs 23-26, both eyes together): at rest the eyes make small saccades, under 1 degree, and
-drift between them (the same facts). Gaze jumps every 1-3 s (uniform) to a point drawn in a disc
-of radius ``SACCADE_RADIUS_DEG`` around straight ahead (so every jump is under 1 degree), in
-``SACCADE_S`` (a small saccade's duration on the main sequence, about 20-30 ms), and drifts
-between jumps as two slow sines per axis of about ``DRIFT_DEG``.
+drift between them, and gaze shifts come with a blink more often than chance (the same facts).
+Gaze jumps every 1-3 s (uniform), and in ``BLINK_GAZE_SHIFT`` of the blinks while the lids are
+shut, to a point drawn in a disc of radius ``SACCADE_RADIUS_DEG`` around straight ahead (so every
+jump is under 1 degree), in ``SACCADE_S`` (a small saccade's duration on the main sequence,
+about 20-30 ms), and drifts between jumps as two slow sines per axis of about ``DRIFT_DEG``.
 
 Breath (FAP 48, head pitch, and FAPs 61/62, the nostrils): an adult at rest breathes 12-20 times
 a minute (the clinical resting range of the vital signs); the rate is drawn per seed in 12-16,
@@ -63,6 +64,7 @@ BLINK_HOLD_S = (0.020, 0.060)    # shut
 BLINK_OPEN_RATIO = (2.0, 3.0)    # opening / closing
 LID_UPPER, LID_LOWER = 800.0, 224.0   # IRISD at the peak: the lids meet (puppet.runtime.lidclosure)
 
+BLINK_GAZE_SHIFT = 0.4          # share of blinks the eyes jump in (while shut)
 SACCADE_EVERY_S = (1.0, 3.0)
 SACCADE_RADIUS_DEG = 0.5
 SACCADE_S = 0.025
@@ -115,11 +117,11 @@ def _ease1(u: float) -> float:
 class _Schedule:
     """A part's events, drawn in chunks of ``_CHUNK`` from its own stream as far ahead as asked."""
 
-    def __init__(self, seed: int, stream: int, draw, first: dict[str, np.ndarray] | None = None) -> None:
+    def __init__(self, seed: int, stream: int, draw) -> None:
         self._rng = np.random.default_rng([seed, stream])
         self._draw = draw          # rng, n -> (gaps s, columns {name: array})
         self.times = np.zeros(0)
-        self.columns: dict[str, np.ndarray] = dict(first or {})  # ``first``: a row before any event
+        self.columns: dict[str, np.ndarray] = {}
 
     def cover(self, until_s: float) -> None:
         """Draw until an event lies after ``until_s``."""
@@ -139,19 +141,63 @@ class _Schedule:
         return bisect.bisect_right(self.starts, s) - 1
 
 
+def _fixations(rng: np.random.Generator, n: int) -> dict[str, np.ndarray]:
+    """``n`` points drawn evenly in the disc of radius ``SACCADE_RADIUS_DEG`` (degrees)."""
+    r = SACCADE_RADIUS_DEG * np.sqrt(rng.uniform(0.0, 1.0, n))
+    a = rng.uniform(0.0, 2 * np.pi, n)
+    return {"yaw": r * np.cos(a), "pitch": r * np.sin(a)}
+
+
 def _draw_blinks(rng: np.random.Generator, n: int):
     gaps = np.maximum(rng.lognormal(math.log(BLINK_MEDIAN_S), BLINK_SIGMA, n), BLINK_MIN_GAP_S)
     close = rng.uniform(*BLINK_CLOSE_S, n)
     hold = rng.uniform(*BLINK_HOLD_S, n)
     opening = close * rng.uniform(*BLINK_OPEN_RATIO, n)
-    return gaps, {"close": close, "hold": hold, "open": opening}
+    shift = (rng.uniform(0.0, 1.0, n) < BLINK_GAZE_SHIFT).astype(float)
+    return gaps, {"close": close, "hold": hold, "open": opening, "shift": shift, **_fixations(rng, n)}
 
 
 def _draw_saccades(rng: np.random.Generator, n: int):
-    gaps = rng.uniform(*SACCADE_EVERY_S, n)
-    r = SACCADE_RADIUS_DEG * np.sqrt(rng.uniform(0.0, 1.0, n))
-    a = rng.uniform(0.0, 2 * np.pi, n)
-    return gaps, {"yaw": r * np.cos(a), "pitch": r * np.sin(a)}
+    return rng.uniform(*SACCADE_EVERY_S, n), _fixations(rng, n)
+
+
+class _Gaze:
+    """Where the eyes jump: the saccades' own times and, for a share of the blinks, the moment
+    the lids are shut, merged in time order (the same interface as ``_Schedule``; column rows
+    are fixations, row 0 straight ahead, row k + 1 where event k went). Rebuilt when asked
+    beyond what both streams have drawn; an event's fixation is drawn with it, so the merged
+    events up to any time are the same however far either stream was drawn."""
+
+    def __init__(self, blinks: _Schedule, saccades: _Schedule) -> None:
+        self._blinks, self._saccades = blinks, saccades
+        self.times = np.zeros(0)
+        self.columns: dict[str, np.ndarray] = {}
+        self.horizon = -1.0          # every event up to here is merged
+
+    def cover(self, until_s: float) -> None:
+        while self.horizon <= until_s or not self.times.size:
+            self._merge(max(until_s, self.horizon))
+
+    def _merge(self, until_s: float) -> None:
+        """Draw both streams past ``until_s`` and merge every event up to where both reach."""
+        b, sac = self._blinks, self._saccades
+        b.cover(until_s)
+        sac.cover(until_s)
+        self.horizon = min(b.times[-1], sac.times[-1])
+        shift = b.columns["shift"] > 0.0
+        times = np.concatenate([sac.times, b.times[shift] + b.columns["close"][shift]])
+        keep = times <= self.horizon
+        order = np.argsort(times[keep], kind="stable")
+        self.times = times[keep][order]
+        for key in ("yaw", "pitch"):
+            values = np.concatenate([sac.columns[key], b.columns[key][shift]])[keep][order]
+            self.columns[key] = np.concatenate([[0.0], values])
+        self.rows = {key: values.tolist() for key, values in self.columns.items()}
+        self.starts = self.times.tolist()
+
+    def at(self, s: float) -> int:
+        self.cover(s)
+        return bisect.bisect_right(self.starts, s) - 1
 
 
 class IdleLife:
@@ -161,8 +207,7 @@ class IdleLife:
         self.seed, self.origin_ns = int(seed), int(origin_ns)
         self.parts = tuple(p for p in PARTS if p in parts)
         self._blinks = _Schedule(self.seed, _STREAMS["blink"], _draw_blinks)
-        ahead = {"yaw": np.zeros(1), "pitch": np.zeros(1)}   # fixation 0: straight ahead
-        self._saccades = _Schedule(self.seed, _STREAMS["eyes"], _draw_saccades, ahead)
+        self._saccades = _Gaze(self._blinks, _Schedule(self.seed, _STREAMS["eyes"], _draw_saccades))
         rng = np.random.default_rng([self.seed, _STREAMS["breath"], 1])
         self._drift = (rng.uniform(*DRIFT_HZ, (2, 2)), rng.uniform(0, 2 * np.pi, (2, 2)))
         self._drift_rows = (self._drift[0].tolist(), self._drift[1].tolist())
@@ -198,7 +243,7 @@ class IdleLife:
         sched = self._saccades
         sched.cover(float(s.max(initial=0.0)))
         i = np.searchsorted(sched.times, s, side="right") - 1
-        k = i + 1                     # fixation k: straight ahead (0), then where saccade k-1 went
+        k = i + 1                     # fixation k: straight ahead (0), then where event k-1 went
         before = np.maximum(k - 1, 0)
         u = np.where(i >= 0, _ease(np.clip((s - sched.times[np.maximum(i, 0)]) / SACCADE_S, 0.0, 1.0)), 0.0)
         out = np.empty((2, s.size))
