@@ -41,6 +41,7 @@ BACKENDS: dict[str, str] = {
     "audio": "devices.audio_device",
     "wav": "devices.wav_device",
     "api": "devices.api_device",
+    "keys": "devices.keys_device",
 }
 """URL scheme -> module of its built-in backend."""
 

@@ -158,6 +158,12 @@ class Device(ABC):
                 f"{'one of ' + ', '.join(known) if known else 'no options'}{closest_hint(key, known)}")
 
     @classmethod
+    def unknown_channel(cls, url: Url, channel: str) -> str | None:
+        """Why ``channel`` cannot be a channel of this backend's device at ``url`` (None when it
+        can be, or when only the hardware knows: the default); a mapping naming it is refused."""
+        return None
+
+    @classmethod
     def check_options(cls, url: Url) -> None:
         """DeviceError naming the first option ``url`` has that this backend does not read."""
         for key in url.options:

@@ -30,7 +30,7 @@ ANTIALIAS_MODES = ("fxaa", "none")
 PHOTO_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".gif", ".tif", ".tiff", ".webp")
 """What ``puppet pick-landmarks`` opens as a photo; anything else is a face mesh."""
 LANDMARKS_FILE = "landmarks.json"  # what `puppet rig` writes into the face folder when it found the landmarks
-BENCH_SECTIONS = ("deform", "frames", "muscles", "inputs", "rig", "latency", "voice", "flood", "long_take")
+BENCH_SECTIONS = ("deform", "frames", "muscles", "inputs", "rig", "latency", "voice", "flood", "long_take", "show")
 """``puppet bench --only`` choices (``puppet.bench.run.SECTIONS``; the bench is imported only when run)."""
 FACE_HELP = "a face folder (puppet rig ... -o FOLDER/, puppet face-from-photo) (default: the embedded face)"
 MAX_SIDE = 8192
@@ -128,11 +128,26 @@ def _window_arguments(play: argparse.ArgumentParser) -> None:
     play.add_argument("--face", default=None, help=FACE_HELP)
 
 
+SERVE_HELP = ("also serve the face as a program feed for OBS or a browser (transparent background) and the "
+              "control API, on HOST:PORT (e.g. 127.0.0.1:8765; the URLs, with their token, are printed)")
+
+
+def _play_arguments(play: argparse.ArgumentParser) -> None:
+    _window_arguments(play)
+    play.add_argument("--serve", type=_address, default=None, metavar="HOST:PORT", help=SERVE_HELP)
+
+
 def _play(args: argparse.Namespace) -> int:
     """``puppet play``: a take in a window, in real time."""
     from puppet.view.window import play_take
 
-    play_take(args.take, size=args.size, view=args.view, face=_face(args.face))
+    outputs = None
+    if args.serve is not None:
+        from puppet.show.serving import serve_playback
+
+        def outputs(face):
+            return [serve_playback(face, args.serve, args.view)]
+    play_take(args.take, size=args.size, view=args.view, face=_face(args.face), outputs=outputs)
     return 0
 
 
@@ -215,6 +230,12 @@ def _live_arguments(live: argparse.ArgumentParser) -> None:
                       help="record passes over this take: it plays under you, and only --arm is replaced")
     live.add_argument("--arm", default="", metavar="A,B",
                       help="what a layered pass replaces: channels (box.ch0), FAP numbers or names, viseme, expression")
+    live.add_argument("--serve", type=_address, default=None, metavar="HOST:PORT", help=SERVE_HELP)
+    live.add_argument("--osc-control", type=_address, default=None, metavar="HOST:PORT",
+                      help="with --serve: also take the control API as OSC messages on this UDP address "
+                           "(/puppet/set/CHANNEL, /puppet/trigger/NAME, /puppet/record/start|stop, /puppet/neutral)")
+    live.add_argument("--no-window", action="store_true",
+                      help="no window, only the --serve feed and API (e.g. on a machine with no display); Ctrl+C ends")
 
 
 def _live(args: argparse.Namespace) -> int:
@@ -226,9 +247,18 @@ def _live(args: argparse.Namespace) -> int:
         raise TakeError("--layer-over needs --arm: what the pass replaces (e.g. --arm box.ch0)")
     if args.arm and not args.layer_over:
         raise TakeError("--arm needs --layer-over: the take the pass is recorded over")
+    if args.serve is None and (args.no_window or args.osc_control):
+        raise PuppetError(f"{'--no-window' if args.no_window else '--osc-control'} needs --serve HOST:PORT")
+    outputs = None
+    if args.serve is not None:
+        from puppet.show.serving import serve_live
+
+        def outputs(session):
+            return [serve_live(session, args.serve, args.view, args.osc_control)]
     run_live(args.mapping, record=args.record, fps=args.fps, size=args.size, view=args.view,
              devices=dict(args.device) or None, face=_face(args.face), layer_over=args.layer_over,
-             arm=[a for a in args.arm.split(",") if a], record_root=args.takes)
+             arm=[a for a in args.arm.split(",") if a], record_root=args.takes, outputs=outputs,
+             window=not args.no_window)
     return 0
 
 
@@ -728,6 +758,14 @@ def _seconds_or_rate(unit: str, least: float, most: float):
     return parse
 
 
+def _address(text: str) -> tuple[str, int]:
+    """An argparse type: HOST:PORT for a server to listen on."""
+    host, _, port = text.rpartition(":")
+    if not port.isdigit() or not 0 <= int(port) <= 65535:
+        raise argparse.ArgumentTypeError(f"expected HOST:PORT such as 127.0.0.1:8765, got {text!r}")
+    return host.strip("[]") or "127.0.0.1", int(port)
+
+
 def _size(text: str) -> tuple[int, int]:
     try:
         width, height = (int(v) for v in text.lower().split("x"))
@@ -773,7 +811,7 @@ def _no_arguments(parser: argparse.ArgumentParser) -> None:
 COMMANDS: dict[str, Command] = {
     "demo": Command("replay the shipped demo take on the default face to a video", _demo_arguments, _demo),
     "render": Command("render a .fap take to an MP4 video, or many takes on Dask", _render_arguments, _render),
-    "play": Command("play a take (a .fap or a take folder) in a window, in real time", _window_arguments, _play),
+    "play": Command("play a take (a .fap or a take folder) in a window, in real time", _play_arguments, _play),
     "replay": Command("play a take in a window; or replay its raw log through its devices' wires or another "
                       "mapping into a new .fap", _replay_arguments, _replay),
     "export": Command("export a take to glTF binary (.glb), animated by morph targets", _export_arguments, _export),

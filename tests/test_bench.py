@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from puppet.bench.deform import bench_face, performance
-from puppet.bench.run import run_bench
+from puppet.bench.run import SECTIONS, run_bench
 from puppet.face.load import load_face
 
 
@@ -30,7 +30,9 @@ def test_the_benchmark_take_is_smooth():
 def test_run_bench_prints_json(capsys, monkeypatch):
     monkeypatch.setattr("puppet.bench.run.bench_faces", lambda ict, subdivided=True: [(load_face(), None, "default")])
     monkeypatch.setattr("puppet.bench.run.bench_inputs", lambda seconds: [{"adapter": "x", "samples_s": 1.0}])
-    assert run_bench(frames=2, as_json=True, ict=False, flood_seconds=1.0, take_seconds=30.0) == 0
+    everything_but_the_show = tuple(s for s in SECTIONS if s != "show")  # measured on its own below
+    assert run_bench(frames=2, as_json=True, ict=False, flood_seconds=1.0, take_seconds=30.0,
+                     only=everything_but_the_show) == 0
     report = json.loads(capsys.readouterr().out)
     assert report["latency"]["samples"] > 0 and report["latency"]["sample_to_drawn_ms"]["median"] > 0 and report["long_take"]["frames"] == 30 * 30 + 1
     assert report["deform"][0]["face"] == "default"
@@ -49,6 +51,18 @@ def test_every_adapter_carries_samples_through_its_mapping():
         assert row["samples_s"] > 100 and row["paced_samples_s"] > 100, row["adapter"]
         assert row["bad_frames"] <= 2, row  # joining a stream mid-frame costs a frame per run, no more
         assert 0 < row["latency_median_ms"] <= row["latency_p99_ms"]
+
+
+@pytest.mark.slow
+def test_the_show_section_times_the_page_and_the_loop_with_and_without_clients(capsys):
+    assert run_bench(as_json=True, only=("show",), quick=True) == 0
+    show = json.loads(capsys.readouterr().out)["show"]
+    feed, crowd = show["feed"], show["clients"]
+    assert feed["feed_kb_s"] < feed["png_kb_s"] and feed["encode_ms"] < feed["png_encode_ms"]
+    if "error" not in feed:
+        assert feed["drawn"] > 0 and 0 < feed["delay_ms"]["median"] <= feed["delay_ms"]["p99"]
+    assert all(crowd[k]["fps"] > 0 for k in ("no_clients", "four_clients", "no_clients_again"))
+    assert crowd["api_answers_s"] > 0 and crowd["ratio"] > 0
 
 
 def test_only_the_sections_asked_for_are_measured_with_progress_on_stderr(capsys):

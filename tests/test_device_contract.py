@@ -253,9 +253,23 @@ class ApiHarness(Harness):
         return {"smile": 0.5}
 
 
+class KeysHarness(Harness):
+    """The live window's keys have no hardware and no plug: the window pushes each press and release."""
+
+    scheme, readings, twin_url = "keys", [{"1": 1.0}, {"1": 0.0, "f12": 1.0}], "keys://"
+
+    def device(self) -> Device:
+        self.dev = open_device("keys://", "keys")
+        return self.dev
+
+    def send(self) -> dict[str, float]:
+        self.dev.push({"a": 1.0})
+        return {"a": 1.0}
+
+
 HARNESSES = {"serial": SerialHarness, "sim": SimHarness, "hid": HidHarness, "can": CanHarness,
              "midi": MidiHarness, "osc": OscHarness, "replay": ReplayHarness, "wav": WavHarness,
-             "audio": AudioHarness, "api": ApiHarness}
+             "audio": AudioHarness, "api": ApiHarness, "keys": KeysHarness}
 NEEDS_FOLDER = ("replay", "wav", "audio")
 
 

@@ -184,11 +184,32 @@ def test_each_part_yields_to_whatever_writes_its_faps(target, part):
     assert m.idle_yields() == (part,)
 
 
+@pytest.mark.parametrize("trigger, parts", [
+    ("{mode: hold, faps: {close_t_l_eyelid: 600}, attack: 0.1, release: 0.2}", ("blink",)),
+    ("{mode: hold, expression: surprise, attack: 0.1, release: 0.2}", ("blink", "breath")),  # lids, nostrils
+    ("{mode: hold, faps: {yaw_l_eyeball: 20000}, attack: 0.1, release: 0.2}", ("eyes",)),
+    ("{mode: hold, faps: {head_pitch: 3000}, attack: 0.1, release: 0.2}", ("breath",)),
+])
+def test_a_trigger_that_moves_a_part_s_faps_takes_them_while_it_plays(trigger, parts):
+    m = parse_mapping(mapping_text("", f"triggers:\n  it: {trigger}"), "m.yaml")
+    m.idle = IdleLife(9, 0)
+    m.pose(S)
+    assert m.idle_yields() == ()
+    m.trigger("it", "press", S)
+    m.pose(S + S // 100)                 # 10 ms into the attack: already the trigger's
+    assert m.idle_yields() == parts
+    m.trigger("it", "release", 2 * S)
+    m.pose(2 * S + S // 10)              # still falling
+    assert m.idle_yields() == parts
+    m.pose(3 * S)                        # at rest: idle life again
+    assert m.idle_yields() == ()
+
+
 def test_a_held_pose_holds_the_channels_while_idle_life_goes_on():
     m = parse_mapping(mapping_text(), "m.yaml")
     m.idle = IdleLife(5, 0)
     m.feed(Sample(S, "box", {"ch0": 700}))
-    poses = [m.pose(S, idle_ns=S + k * S // 10) for k in range(30)]
+    poses = [m.pose(S, S + k * S // 10) for k in range(30)]
     assert len({p.fap[2] for p in poses}) == 1                  # the jaw holds
     assert len({p.fap[22] for p in poses}) > 1                  # the eyes drift on
 

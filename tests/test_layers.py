@@ -22,6 +22,7 @@ LAYERS = [
     ("puppet.photo",),
     ("puppet.live",),
     ("puppet.view",),
+    ("puppet.show",),
     ("puppet.bench",),
     ("puppet.cli", "puppet"),
 ]

@@ -97,7 +97,7 @@ def shaped(channel: dict, raws, step_ms=10) -> list[float]:
 # -- the shipped mappings, the schema and the checker -----------------------------------------
 
 SHIPPED = ["arduino_sliders.yaml", "gamepad_hid.yaml", "can_joystick.yaml", "midi_faders.yaml", "arkit_osc.yaml",
-           "voice.yaml", "arduino_sliders_voice.yaml",
+           "voice.yaml", "arduino_sliders_voice.yaml", "arduino_sliders_keys.yaml", "midi_pads.yaml",
            "arkit_csv.yaml"]
 
 

@@ -41,6 +41,12 @@ if ! command -v xvfb-run >/dev/null && [ "$(id -u)" = 0 ] && command -v apt-get 
   apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq xvfb xauth >/dev/null
 fi
 
+# Chromium: the program feed's page (`puppet live --serve`) is tested in a real browser, headless.
+if ! command -v chromium >/dev/null && [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
+  echo "setup: installing Chromium so the program feed's page can be tested in a real browser"
+  apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null
+fi
+
 # python-rtmidi (the midi extra) has no wheel for the newest Pythons; building it needs ALSA's headers.
 if "$PYTHON" -c 'import sys; sys.exit(sys.version_info < (3, 13))' && ! pkg-config --exists alsa 2>/dev/null; then
   if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then

@@ -2,8 +2,9 @@
 
 The sections are the deform and whole-frame tables and the muscle modes (``puppet.bench.deform``),
 the device adapters (``puppet.bench.inputs``) and the live pipeline: latency, a flood of input
-and a long take (``puppet.bench.pipeline``), and how long ``puppet rig`` takes, its fold-limit
-search before and after in one run (``puppet.bench.rigtime``).
+and a long take (``puppet.bench.pipeline``), how long ``puppet rig`` takes, its fold-limit
+search before and after in one run (``puppet.bench.rigtime``), and the show server's feed and
+clients (``puppet.bench.show``).
 """
 
 from __future__ import annotations
@@ -17,10 +18,11 @@ from puppet.bench import pipeline
 from puppet.bench.deform import bench_face, bench_faces, bench_frame_split, bench_muscles
 from puppet.bench.inputs import bench_inputs
 from puppet.bench.rigtime import bench_rig
+from puppet.bench.show import show
 from puppet.bench.voice import voice
 from puppet.runtime.runtime import MUSCLE_MODES, Runtime
 
-SECTIONS = ("deform", "frames", "muscles", "inputs", "rig", "latency", "voice", "flood", "long_take")
+SECTIONS = ("deform", "frames", "muscles", "inputs", "rig", "latency", "voice", "flood", "long_take", "show")
 """What ``puppet bench --only`` can pick, in the order they run and print."""
 
 
@@ -85,7 +87,9 @@ def _live_sections(runtime: Callable[[], Runtime], flood_seconds: float, take_se
     return {"latency": ("sim slider box -> drawn frame", lambda: pipeline.latency(runtime(), latency_seconds)),
             "voice": ("wav:// bursts -> drawn frame", lambda: voice(runtime())),
             "flood": (f"{flood_seconds:g} s of 10,000 readings/s", lambda: pipeline.flood(runtime(), flood_seconds)),
-            "long_take": (f"a {take_seconds:g} s take", lambda: pipeline.long_take(take_seconds))}
+            "long_take": (f"a {take_seconds:g} s take", lambda: pipeline.long_take(take_seconds)),
+            "show": ("program feed in Chromium, live loop with 0 / 4 clients",
+                     lambda: show(runtime(), min(latency_seconds, 10.0)))}
 
 
 def _print_report(report: dict) -> None:
@@ -139,12 +143,33 @@ def _print_live(report: dict) -> None:
               f"(baseline {flood['baseline_fps']:.1f}, ratio {flood['fps_ratio']:.2f}), {flood['samples_s']:,.0f} "
               f"samples/s taken, memory {flood['rss_start_mb']:.1f} -> {flood['rss_end_mb']:.1f} MiB, "
               f"longest backlog {flood['backlog_max']}, dropped {flood['dropped']}")
+    if "show" in report:
+        _print_show(report["show"])
     if "long_take" in report:
         take = report["long_take"]
         length = take["take_seconds"]
         print(f"long take {f'{length / 3600:g} h' if length >= 3600 else f'{length:g} s'} at an accelerated clock: {take['frames']:,} frames, "
               f"{take['samples']:,} samples in {take['wall_s']:.1f} s, memory growth {take['rss_growth_mb']:.2f} MiB, "
               f"take {take['take_mb']:.0f} MiB on disk")
+
+
+def _print_show(show: dict) -> None:
+    feed, crowd = show["feed"], show["clients"]
+    if "error" in feed:
+        print(f"program feed: not measured in a browser ({feed['error']})")
+    else:
+        delay = feed["delay_ms"]
+        print(f"program feed ({feed['vertices']:,} vertices, {feed['size']}, the demo take at 30 fps into headless "
+              f"Chromium): publish -> page drawn {delay['median']:.1f} ms median / {delay['p99']:.1f} p99 over "
+              f"{feed['drawn']} frames drawn of {feed['frames']}; {feed['feed_kb_s']:.0f} kB/s and "
+              f"{feed['encode_ms']:.2f} ms CPU a frame, against pictures with alpha: PNG {feed['png_kb_s']:.0f} kB/s "
+              f"({feed['png_encode_ms']:.0f} ms a frame), WebP q80 {feed['webp_kb_s']:.0f} kB/s "
+              f"({feed['webp_encode_ms']:.0f} ms)")
+    runs = {k: crowd[k]["sample_to_drawn_ms"]["median"] for k in ("no_clients", "four_clients", "no_clients_again")}
+    print(f"live loop with the show server (sample -> drawn, median, {crowd['seconds']:g} s each): no client "
+          f"{runs['no_clients']:.1f} ms, four clients {runs['four_clients']:.1f} ms, none again "
+          f"{runs['no_clients_again']:.1f} ms (ratio {crowd['ratio']:.2f}); the flooding client answered "
+          f"{crowd['api_answers_s']:.0f} messages/s, {crowd['api_refused']} refused")
 
 
 def _cores(cores: list[int]) -> str:

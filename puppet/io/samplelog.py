@@ -7,7 +7,9 @@ records, so that replaying the log reproduces its .fap exactly:
 ``{"t_ns": ..., "event": "hold", "states": {"box": "lost"}}`` (a device went away: the pose is
 held from ``t_ns``; the gap in the take), ``{"t_ns": ..., "event": "resume"}`` (every device is
 back), ``{"t_ns": ..., "event": "reset"}`` (the performer asked for the neutral pose) and
-``{"t_ns": ..., "event": "recentre", "centres": {"pad.X": 131.0}}`` (sticks re-centred).
+``{"t_ns": ..., "event": "recentre", "centres": {"pad.X": 131.0}}`` (sticks re-centred) and
+``{"t_ns": ..., "event": "trigger", "name": "smile", "action": "fire"}`` (a trigger pressed,
+released or fired by name, as the control API does).
 ``read_take_log`` yields both, in order. Every line is written and flushed as it comes.
 """
 
@@ -23,7 +25,7 @@ from typing import IO
 from devices.base import Sample
 from devices.samplelines import HEADER, SampleLogError, is_event, read_records, sample_from, sample_line
 
-EVENTS = ("frame", "hold", "resume", "reset", "recentre")
+EVENTS = ("frame", "hold", "resume", "reset", "recentre", "trigger")
 
 
 @dataclass(frozen=True)

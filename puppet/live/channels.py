@@ -24,6 +24,10 @@ Visemes and expressions become the Pose's FAP 1 / FAP 2 fields: the strongest vi
 ``(select1, intensity1, select2, intensity2)``; any weaker ones are expanded into low-level FAPs
 and added to ``Pose.fap``, so the face changes continuously when the order of strengths changes.
 
+Triggers (``puppet.live.triggers``) put whole poses on presses of a channel or on calls by name
+(``trigger``): their expression and viseme strengths join the targets' in the FAP 1 / 2 ranking,
+their FAPs and muscles add; the envelopes run on the Samples' timestamps and the pose time.
+
 ``feed(sample)`` shapes the sample's channels at once (plain Python floats, no per-sample dict or
 YAML walking beyond the sample's own values); ``pose()`` combines the targets into a ``Pose``.
 
@@ -51,6 +55,7 @@ from puppet.fap.table import N_FAPS, faps
 from puppet.fap.units import AU
 from puppet.live.filters import Exponential, OneEuro, RateLimit
 from puppet.live.idlelife import ALL_ON, PART_FAPS, IdleLife, IdleSpec, random_seed
+from puppet.live.triggers import Triggers, TriggerSpec, TriggerState
 
 COMBINE_MODES = ("sum", "max", "last")
 EXPRESSIONS = {"joy": 1, "sadness": 2, "anger": 3, "fear": 4, "disgust": 5, "surprise": 6}
@@ -341,10 +346,13 @@ class Mapping:
     """A checked, compiled mapping: ``feed`` Samples in, take ``pose()`` out.
 
     ``devices`` is {name: URL} (per-device options folded into the URL's query) for the session
-    to open; Samples whose ``device`` is one of these names are shaped, others are ignored."""
+    to open; Samples whose ``device`` is one of these names are shaped, others are ignored.
+    ``triggers`` (``puppet.live.triggers``) are pressed by their source channels as they are
+    fed, or by name (``trigger``), and add to every pose."""
 
     def __init__(self, file: str, devices: dict[str, str], channels: dict[str, ChannelSpec],
-                 targets: list[TargetSpec], description: str = "", idle: IdleSpec | None = ALL_ON) -> None:
+                 targets: list[TargetSpec], description: str = "",
+                 triggers: list[TriggerSpec] | tuple[TriggerSpec, ...] = (), idle: IdleSpec | None = ALL_ON) -> None:
         self.file = file
         self.description = description
         self.devices = dict(devices)
@@ -369,12 +377,20 @@ class Mapping:
         self._muscles = tuple(t for t in compiled if t.kind == "muscle")
         self._visemes = tuple(t for t in compiled if t.kind == "viseme")
         self._expressions = tuple(t for t in compiled if t.kind == "expression")
-        self.muscle_names = tuple(dict.fromkeys(t.key for t in self._muscles))
-        self._shapes = high_level_faps() if self._visemes or self._expressions else None
+        self.triggers = Triggers(triggers, file)
+        self._watched = self.triggers.by_source
+        for spec in triggers:
+            if spec.source is not None:
+                self._channels[spec.source].targets.append(f"trigger {spec.name}")
+        self.muscle_names = tuple(dict.fromkeys([*(t.key for t in self._muscles), *self.triggers.muscle_names]))
+        self._ranks_visemes = bool(self._visemes or self.triggers.visemes)
+        self._ranks_expressions = bool(self._expressions or self.triggers.expressions)
+        self._shapes = high_level_faps() if self._ranks_visemes or self._ranks_expressions else None
         self.idle_spec = idle
         self.idle = None if idle is None or not idle.parts else IdleLife(
             random_seed() if idle.seed is None else idle.seed, time.monotonic_ns(), idle.parts)
         self._yield_to = {part: self._drivers(part) for part in PART_FAPS}
+        self._yielded: tuple[str, ...] = ()
 
     # -- the hot path --------------------------------------------------------------------------
 
@@ -384,6 +400,7 @@ class Mapping:
         if channels is None:
             return
         t_ns = sample.t_ns
+        watched = self._watched
         for name, raw in sample.values.items():
             channel = channels.get(name)
             if channel is None:
@@ -398,14 +415,18 @@ class Mapping:
                 continue
             self._seq += 1
             channel.update(raw, t_ns, self._seq)
+            if watched and channel.name in watched:
+                self.triggers.input(channel.name, channel.pre, t_ns)
 
-    def pose(self, t_ns: int | None = None, *, idle_ns: int | None = None) -> Pose:
+    def pose(self, t_ns: int | None = None, trigger_ns: int | None = None) -> Pose:
         """The Pose for the channels as last fed; with ``t_ns``, smoothing and rate limits are
         carried on to that time with each input held (without changing the state), so the face
-        settles between the samples of devices that only report changes.
+        settles between the samples of devices that only report changes. The triggers and idle
+        life play at ``trigger_ns`` (default ``t_ns``): a session holding the pose while a device
+        is away still plays them on its own clock.
 
-        Idle life (``self.idle``) is added at ``idle_ns`` (default ``t_ns``; none without a
-        time), each part only where no target that writes its FAPs is away from rest now
+        Idle life (``self.idle``; none without a time) is added part by part, only where no
+        target or trigger that writes the part's FAPs is away from rest at that time
         (``idle_yields``): it yields at once, with no fade, and comes back the frame they rest."""
         if t_ns is None:
             for c in self._timed:
@@ -421,51 +442,74 @@ class Mapping:
         muscles = dict.fromkeys(self.muscle_names, 0.0)
         for t in self._muscles:
             muscles[t.key] += t.evaluate()
+        visemes: dict[int, float] = {}
+        expressions: dict[int, float] = {}
+        if self.triggers:
+            self.triggers.add(t_ns if trigger_ns is None else trigger_ns, fap, muscles, expressions, visemes)
         for name, v in muscles.items():
             muscles[name] = 0.0 if v < 0.0 else 1.0 if v > 1.0 else v
-        viseme = self._viseme(fap) if self._visemes else None
-        expression = self._expression(fap) if self._expressions else None
-        at = t_ns if idle_ns is None else idle_ns
+        viseme = self._viseme(fap, visemes) if self._ranks_visemes else None
+        expression = self._expression(fap, expressions) if self._ranks_expressions else None
+        at = t_ns if trigger_ns is None else trigger_ns
         if self.idle is not None and at is not None:
-            self.idle.add_to(fap, at, self.idle_yields())
+            self._yielded = self._yields(at)
+            self.idle.add_to(fap, at, self._yielded)
         return Pose(fap, viseme, expression, muscles, t_ns)
 
-    def _drivers(self, part: str) -> tuple[_Target, ...]:
-        """The targets that write a part's FAPs: FAP, head and eye targets on them, visemes and
-        expressions whose shapes move them, and (for the blink) the muscles that shut the eye."""
-        slots = {n - 1 for n in PART_FAPS[part]}
-        found = [t for t in self._faps if slots & set(t.slots)]
-        for targets, kind in ((self._visemes, "visemes"), (self._expressions, "expressions")):
-            for t in targets:
-                shape = self._shapes[kind].get(t.key)
-                if shape is not None and np.any(shape[sorted(slots)]):
-                    found.append(t)
-        if part == "blink":
-            found += [t for t in self._muscles if t.key.startswith("orbicularis_oculi")]
-        return tuple(found)
+    def _drivers(self, part: str) -> tuple[tuple[_Target, ...], tuple]:
+        """What writes a part's FAPs: the targets (FAP, head and eye targets on them, visemes and
+        expressions whose shapes move them, and for the blink the muscles that shut the eye)
+        and the triggers (FAPs, expressions, visemes or clips that move them, those muscles)."""
+        slots = sorted({n - 1 for n in PART_FAPS[part]})
+        shapes = self._shapes or {}
+
+        def moves(kind: str, key) -> bool:
+            shape = shapes.get(kind, {}).get(key)
+            return shape is not None and bool(np.any(shape[slots]))
+
+        eyelids = part == "blink"
+        found = [t for t in self._faps if set(slots) & set(t.slots)]
+        found += [t for t in self._visemes if moves("visemes", t.key)]
+        found += [t for t in self._expressions if moves("expressions", t.key)]
+        found += [t for t in self._muscles if eyelids and t.key.startswith("orbicularis_oculi")]
+        triggers = [tr for tr in self.triggers.all.values()
+                    if (tr.fap is not None and np.any(tr.fap[slots]))
+                    or (tr.spec.expression and moves("expressions", tr.spec.expression))
+                    or (tr.spec.viseme and moves("visemes", tr.spec.viseme))
+                    or (tr.spec.clip is not None and np.any(tr.spec.clip.frames[:, slots]))
+                    or (eyelids and any(m.startswith("orbicularis_oculi") for m, _ in tr.spec.muscles))]
+        return tuple(found), tuple(triggers)
+
+    def _yields(self, t_ns: int) -> tuple[str, ...]:
+        """The idle parts a target away from rest, or a trigger playing at ``t_ns``, drives."""
+        return tuple(part for part, (targets, triggers) in self._yield_to.items()
+                     if any(t.away() for t in targets) or any(tr.level(t_ns) > 0.0 for tr in triggers))
 
     def idle_yields(self) -> tuple[str, ...]:
-        """The idle parts left to the channels at the last ``pose``: those a target away from rest drives."""
-        return tuple(part for part, targets in self._yield_to.items() if any(t.away() for t in targets))
+        """The idle parts left to the channels and triggers at the last timed ``pose``."""
+        return self._yielded
 
-    def _strengths(self, targets) -> list[tuple[float, int]]:
-        """(strength 0..63, select) per distinct select, strongest first (ties: target order)."""
+    def _strengths(self, targets, extra: dict[int, float]) -> list[tuple[float, int]]:
+        """(strength 0..63, select) per distinct select, strongest first (ties: target order, then
+        the triggers'): the targets' values plus ``extra``, the triggers' strengths."""
         by_key: dict[int, float] = {}
         for t in targets:
             by_key[t.key] = by_key.get(t.key, 0.0) + t.evaluate()
+        for key, v in extra.items():
+            by_key[key] = by_key.get(key, 0.0) + v
         order = sorted(by_key.items(), key=lambda kv: -kv[1])
-        return [(min(v, 63.0), k) for k, v in order]
+        return [(min(v, 63.0), k) for k, v in order] or [(0.0, 0)]
 
-    def _viseme(self, fap: np.ndarray) -> tuple:
-        ranked = self._strengths(self._visemes)
+    def _viseme(self, fap: np.ndarray, extra: dict[int, float]) -> tuple:
+        ranked = self._strengths(self._visemes, extra)
         w, select = ranked[0]
         for weaker, other in ranked[1:]:
             if weaker > 0.0:
                 fap += self._shapes["visemes"][other] * (weaker / 63.0)
         return (select, 0, w) if w > 0.0 else (0, 0, 0.0)
 
-    def _expression(self, fap: np.ndarray) -> tuple:
-        ranked = self._strengths(self._expressions) + [(0.0, 0)]
+    def _expression(self, fap: np.ndarray, extra: dict[int, float]) -> tuple:
+        ranked = self._strengths(self._expressions, extra) + [(0.0, 0)]
         (i1, s1), (i2, s2) = ranked[0], ranked[1]
         for weaker, other in ranked[2:]:
             if weaker > 0.0:
@@ -507,7 +551,29 @@ class Mapping:
                 slots.update(t.slots)
                 if t.kind in ("viseme", "expression", "muscle"):
                     kinds.add(t.kind)
+        for trigger in self.triggers.by_source.get(channel, ()):
+            spec = trigger.spec
+            slots.update(number - 1 for number, _ in spec.faps)
+            if spec.clip is not None:
+                slots.update(int(i) for i in np.flatnonzero(np.any(spec.clip.frames != 0.0, axis=0)))
+            kinds.update(k for k in spec.kinds if k in ("viseme", "expression", "muscle"))
         return slots, kinds
+
+    # -- triggers ----------------------------------------------------------------------------
+
+    @property
+    def trigger_names(self) -> tuple[str, ...]:
+        """The mapping's triggers by name, in the file's order (what ``trigger`` takes)."""
+        return self.triggers.names
+
+    def trigger(self, name: str, action: str, t_ns: int) -> None:
+        """Press, release or fire (a press and a release at once) the trigger ``name`` at
+        ``t_ns``; a ValueError naming the triggers there are for an unknown name or action."""
+        self.triggers.act(name, action, t_ns)
+
+    def trigger_states(self, t_ns: int | None = None) -> list[TriggerState]:
+        """Every trigger's level at ``t_ns`` and whether it is latched on (for the cockpit)."""
+        return self.triggers.states(t_ns)
 
     def resting(self) -> dict[str, float]:
         """The last raw value of every bipolar channel that has one: where its stick rests when
@@ -521,17 +587,22 @@ class Mapping:
                 if name in self._channels and self._channels[name].recentre(raw)}
 
     def reset(self) -> None:
-        """Every channel back to rest (no sample seen, filters empty, buttons released)."""
+        """Every channel back to rest (no sample seen, filters empty, buttons released), and
+        every trigger (released, unlatched, its pose gone at once)."""
         for c in self._channels.values():
             c.reset()
+        self.triggers.reset()
         self._seq = 0
 
     def snapshot(self) -> dict:
-        """The state the fed Samples left (raw and shaped values, filters, buttons), JSON-able
+        """The state the fed Samples left (raw and shaped values, filters, buttons, triggers), JSON-able
         and exact: a take keeps it from its first frame, so replaying the take's log from it
         gives the same poses as the live session did."""
-        return {"seq": self._seq, "channels": {name: c.snapshot() for name, c in self._channels.items()},
-                "idle": None if self.idle is None else self.idle.state()}
+        state = {"seq": self._seq, "channels": {name: c.snapshot() for name, c in self._channels.items()},
+                 "idle": None if self.idle is None else self.idle.state()}
+        if self.triggers:
+            state["triggers"] = self.triggers.snapshot()
+        return state
 
     def restore(self, snapshot: dict, recorded: Mapping | None = None) -> None:
         """Take up a ``snapshot`` made by ``recorded`` (default: this mapping): exactly for every
@@ -554,6 +625,7 @@ class Mapping:
                 readings.setdefault((data["t_ns"], device), {})[source] = data["raw"]
         for (t_ns, device), values in sorted(readings.items()):
             self.feed(Sample(t_ns, device, values))
+        self.triggers.restore(snapshot.get("triggers"), None if recorded is None else recorded.triggers)
 
     def _restore_idle(self, state: dict | None) -> None:
         """The recorded idle life's seed and origin, with this mapping's parts (a take without

@@ -44,8 +44,11 @@ checked before a device opens; every problem is reported with the file, line, ke
 cannot say (min < centre < max, monotonic points, sources naming declared channels) is checked
 here.
 
-The checked channels and targets become a ``Mapping`` (``puppet.live.channels``), which shapes
-the channels and makes the Poses.
+An optional ``triggers:`` section puts poses on presses (held, latched or played once); its
+checks are ``puppet.live.triggercheck``'s, run by the same checker.
+
+The checked channels, targets and triggers become a ``Mapping`` (``puppet.live.channels``),
+which shapes the channels and makes the Poses.
 """
 
 from __future__ import annotations
@@ -68,10 +71,11 @@ from puppet.fap.table import N_FAPS, faps
 from puppet.live.channels import COMBINE_MODES, EXPRESSIONS, EYE_AXES, HEAD_AXES, ChannelSpec, Mapping, TargetSpec
 from puppet.live.idlelife import ALL_ON, IdleSpec
 from puppet.live.idlelife import PARTS as IDLE_PARTS
+from puppet.live.triggercheck import check_triggers
 
 # -- the format -------------------------------------------------------------------------------
 
-ROOT_KEYS = ("devices", "channels", "targets", "description", "idle")
+ROOT_KEYS = ("devices", "channels", "targets", "description", "triggers", "idle")
 IDLE_KEYS = IDLE_PARTS + ("seed",)
 DEVICE_KEYS = ("url", "options", "description")
 CHANNEL_KEYS = ("range", "min", "centre", "max", "invert", "dead_zone", "curve", "smoothing",
@@ -556,10 +560,24 @@ class _Checker:
                 self.error(where, f"device {m.group(1)!r} is not defined: expected one of the devices "
                                   f"({', '.join(map(str, self.declared_devices))})"
                                   f"{_closest(m.group(1), self.declared_devices)}")
+            elif problem := self.channel_problem(m.group(1), m.group(2)):
+                self.error(where, problem)
             parsed = self.channel(where, name, m.group(1), m.group(2), {} if spec is None else spec)
             if parsed is not None:
                 out[name] = parsed
         return out
+
+    def channel_problem(self, device: str, channel: str) -> str | None:
+        """Why the declared ``device`` has no ``channel`` (``Device.unknown_channel``: a keys://
+        device's channels are keys); None when it may have it, or its URL is wrong (said there)."""
+        spec = self.declared_devices.get(device)
+        url = spec.get("url") if isinstance(spec, dict) else None
+        try:
+            parsed = Url.parse(url) if isinstance(url, str) else None
+            backend = device_class(parsed.scheme, url) if parsed is not None else None
+        except DeviceError:
+            return None
+        return None if backend is None else backend.unknown_channel(parsed, channel)
 
     def channel(self, where: tuple, name: str, device: str, channel: str, spec) -> ChannelSpec | None:
         spec = self.mapping(where, spec, CHANNEL_KEYS, f"channel {name!r}")
@@ -842,10 +860,13 @@ def compile_mapping(data, file: str = "<mapping>", *, lines: dict | None = None,
     checker = _Checker(data, lines)
     checker.problems.extend(duplicates)
     result = checker.root(data)
+    triggers = []
+    if result is not None and "triggers" in data:
+        triggers = check_triggers(checker, data["triggers"], result[1], file)
     if checker.problems:
         checker.problems.sort(key=lambda p: (p.line or 0))
         raise MappingError(file, checker.problems)
     devices, channels, targets, idle = result
-    return Mapping(file, devices, channels, targets, data.get("description", ""), idle)
+    return Mapping(file, devices, channels, targets, data.get("description", ""), triggers, idle)
 
 

@@ -17,9 +17,10 @@ Holding the pose
     pose time is frozen at the last frame taken with every device open: the lost device's
     channels (no new samples) give exactly the values of that frame, so the face holds still
     instead of drifting on filter previews; other devices' new samples still come through at
-    their filtered values. When the device is back (OPEN) the clock runs again. Idle life
-    (blinks, eyes, breath: ``puppet.live.idlelife``) runs on at ``now`` meanwhile: the performed
-    channels hold, the face does not freeze mid-blink.
+    their filtered values, and the triggers play on at ``now`` (a key pressed while the slider
+    box is away still smiles), and so does idle life (blinks, eyes, breath:
+    ``puppet.live.idlelife``): the performed channels hold, the face does not freeze mid-blink.
+    When the device is back (OPEN) the clock runs again.
 
 Recording
     ``start_recording()`` opens a ``TakeRecorder`` and a ``TakeClock`` (``puppet.live.takeclock``):
@@ -28,7 +29,8 @@ Recording
     whatever the loop rate, and a slow loop still writes the poses the performer made. Every
     Sample goes to the take's raw log, and so does every other thing that decides a frame --
     a device lost (``hold``: the gap in the take) or back (``resume``), the neutral key
-    (``reset``), a loop frame that wrote ticks (``frame``) -- together with the mapping's state
+    (``reset``), a trigger fired by name (``trigger``, see ``LiveSession.trigger``), a loop frame
+    that wrote ticks (``frame``) -- together with the mapping's state
     at t0 in the take's metadata, so that ``puppet.live.retake`` rebuilds the .fap exactly.
     ``layer=`` (a ``takeclock.Layer``) records a pass over an earlier take: the face shows and
     the take gets the base take's frames with the armed FAPs replaced by the live pose.
@@ -52,6 +54,7 @@ being ready, and to the frame drawn and read back (``renderer.render``).
 
 from __future__ import annotations
 
+import collections
 import heapq
 import os
 import statistics
@@ -146,6 +149,7 @@ class LiveSession:
         self._have_mesh = False
         self._reset_at: int | None = None   # the neutral key, applied at the next frame
         self._recentre_at: int | None = None  # the recalibrate key, likewise
+        self._triggered: collections.deque[LogEvent] = collections.deque()  # by name (``trigger``), for the next frame
         self.newest_sample_ns: int | None = None
         self.samples_fed = 0
         self.frames = 0
@@ -204,20 +208,23 @@ class LiveSession:
             samples = batches[0]
         else:
             samples = list(heapq.merge(*batches, key=lambda s: s.t_ns))
+        triggered = [self._triggered.popleft() for _ in range(len(self._triggered))]
+        for entry in heapq.merge(samples, triggered, key=lambda e: e.t_ns) if triggered else samples:
+            self._apply(entry)
         for sample in samples:
-            self._apply(sample)
             if self.newest_sample_ns is None or sample.t_ns > self.newest_sample_ns:
                 self.newest_sample_ns = sample.t_ns
         self.samples_fed += len(samples)
         if self._clock is not None and self._clock.due(now):
             self._apply(LogEvent(now, "frame"))
 
-        pose = self.mapping.pose(pose_ns, idle_ns=now)
+        pose = self.mapping.pose(pose_ns, now)
         if self.pose_error is None and self.mapping.held_values:
             self.pose_error = self.mapping.held_problem
             warnings.warn(self.pose_error, RuntimeWarning, stacklevel=2)
-        if (samples or pose_ns != self._last_pose_ns or not self._have_mesh or self.layer is not None
-                or self.mapping.idle is not None):
+        # triggers and idle life play on while the pose is held
+        playing = triggered or self.mapping.triggers or self.mapping.idle is not None
+        if samples or playing or pose_ns != self._last_pose_ns or not self._have_mesh or self.layer is not None:
             shown = pose if self.layer is None else Pose(*self._layered(now, pose), pose.muscles)
             self.runtime.deform_pose(shown, out=self._vertices, normals_out=self._normals,
                                      normals=self._with_normals)
@@ -247,6 +254,16 @@ class LiveSession:
         of), at the next frame; the take logs the new centres."""
         self._recentre_at = time.monotonic_ns() if now_ns is None else int(now_ns)
 
+    def trigger(self, name: str, action: str, now_ns: int | None = None) -> None:
+        """Press, release or fire (a press and a release at once: a oneshot plays, a toggle
+        flips) the mapping's trigger ``name`` at ``now_ns`` (default now), at the next frame, in
+        time order with the Samples, and logged in the take so a replay does it too. Safe to
+        call from another thread (the control API's). An unknown name or action is a
+        ValueError naming the triggers there are (``mapping.trigger_names``)."""
+        self.mapping.triggers.check(name, action)
+        t = time.monotonic_ns() if now_ns is None else int(now_ns)
+        self._triggered.append(LogEvent(t, "trigger", {"name": name, "action": action}))
+
     def _apply(self, entry: Sample | LogEvent) -> None:
         """One Sample or event: into the take (its log and its clock) while recording. A write
         that fails (disk full, the folder gone) ends the take, marked incomplete, and the live
@@ -269,6 +286,8 @@ class LiveSession:
             self.mapping.reset()
         elif entry.kind == "recentre":
             self.mapping.recentre(entry.data["centres"])
+        elif entry.kind == "trigger" and entry.data["name"] in self.mapping.trigger_names:
+            self.mapping.trigger(entry.data["name"], entry.data["action"], entry.t_ns)
 
     def _end_take(self, why: str) -> None:
         """End the take now, marked incomplete with ``why`` (``record_error``)."""
@@ -301,6 +320,11 @@ class LiveSession:
     @property
     def recording(self) -> bool:
         return self._recorder is not None
+
+    @property
+    def take_folder(self) -> Path | None:
+        """The folder of the take being recorded (None when not recording)."""
+        return None if self._recorder is None else Path(self._recorder.folder)
 
     def start_recording(self, now_ns: int | None = None):
         """Start a take under ``record_root`` (its first frame is at ``now_ns``, default now)."""
@@ -370,7 +394,7 @@ def _ms_stats(values_ns: list[int]) -> dict:
     return {"median": statistics.median(ms), "p99": ms[min(len(ms) - 1, int(np.ceil(0.99 * len(ms))) - 1)]}
 
 
-def measure_latency(session: LiveSession, renderer, seconds: float = 3.0) -> dict:
+def measure_latency(session: LiveSession, renderer, seconds: float = 3.0, outputs=()) -> dict:
     """Run the live loop for ``seconds``, rendering every frame offscreen, and time it.
 
     Every Sample is measured from its timestamp to the first frame that shows it:
@@ -386,7 +410,9 @@ def measure_latency(session: LiveSession, renderer, seconds: float = 3.0) -> dic
     run, and all of its p99. Medians and 99th percentiles. The device's own transport (USB, the
     pty) comes before the Sample's timestamp and is not included. ``gl_renderer``, ``normals``
     (``cpu``, or ``draw`` where the renderer sums them) and ``rasteriser_cores`` (the cores a
-    software rasteriser's threads were given, one each; none on a GPU) say what drew.
+    software rasteriser's threads were given, one each; none on a GPU) say what drew. ``outputs``
+    (``puppet.view.liveoutput.LiveOutput``: the show server) get their turn before each frame and
+    the frame after it is drawn, as in the live window.
     """
     session.normals = not renderer.gpu_normals
     if renderer.camera is None:
@@ -399,10 +425,14 @@ def measure_latency(session: LiveSession, renderer, seconds: float = 3.0) -> dic
     end = start + int(seconds * 1e9)
     while time.monotonic_ns() < end:
         session.wait_for_input(0.1)
+        for output in outputs:
+            output.service()
         f = session.frame()
         ready = time.monotonic_ns()
         renderer.render(f.vertices, f.normals)
         done = time.monotonic_ns()
+        for output in outputs:
+            output.publish(f.vertices)
         frames += 1
         draw.append(done - ready)
         if f.sample_ns:

@@ -9,11 +9,13 @@ writes exactly the frames the live session wrote:
 * ``frame`` at t: every tick at or before t is written (the session logs one whenever a frame of
   the live loop wrote ticks after its last Sample);
 * ``hold`` at t: a device is away; ticks are evaluated at ``min(tick, t)``, so the take holds
-  the pose of the moment it went (other devices' new Samples still come through); idle life
-  (``puppet.live.idlelife``) goes on at the tick's own time, as in the live session;
+  the pose of the moment it went (other devices' new Samples still come through, and the
+  triggers and idle life (``puppet.live.idlelife``) play on at the tick);
 * ``resume``: every device is back; ticks run at their own time again;
 * ``reset``: ticks before t are written, then every channel goes back to rest (neutral);
-* ``recentre``: ticks before t are written, then the bipolar channels take the logged centres.
+* ``recentre``: ticks before t are written, then the bipolar channels take the logged centres;
+* ``trigger``: ticks before t are written, then the named trigger is pressed, released or fired
+  (``Mapping.trigger``; a mapping without that trigger, re-mapping a take, lets it pass).
 
 Layered passes: with a ``Layer``, each frame is the base take's frame with the armed FAPs
 replaced by the pose, as animators layer one pass over another.
@@ -192,6 +194,10 @@ class TakeClock:
         elif entry.kind == "recentre":
             self._until(entry.t_ns)
             self.mapping.recentre(entry.data["centres"])
+        elif entry.kind == "trigger":
+            self._until(entry.t_ns)
+            if entry.data["name"] in self.mapping.trigger_names:
+                self.mapping.trigger(entry.data["name"], entry.data["action"], entry.t_ns)
         else:
             raise ValueError(f"unknown log event {entry.kind!r}")
 
@@ -199,7 +205,7 @@ class TakeClock:
         """Write every tick strictly before ``before_ns`` not yet written."""
         while (tick := self.tick_ns(self.frames)) < before_ns:
             t = tick if self.hold_ns is None else min(tick, self.hold_ns)
-            pose = self.mapping.pose(t, idle_ns=tick)
+            pose = self.mapping.pose(t, tick)
             if self.encode_muscles is not None and any(pose.muscles.values()):
                 pose = dataclasses.replace(pose, fap=pose.fap + self.encode_muscles(pose.muscles))
             if self.layer is None:

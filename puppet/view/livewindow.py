@@ -21,6 +21,10 @@ C re-centres the bipolar channels (sticks) where they rest now, undoing drift
 (``session.recentre()``, logged in the take); a full calibration of a channel's range is K, or
 ``puppet calibrate --mapping M.yaml``.
 
+Every other key -- the digits, the other letters, F1-F12 but F11 (full screen) -- is pressed and
+released on the session's ``keys://`` devices (``devices.keys_device``), so a mapping can hold,
+toggle or play a pose on it (its ``triggers``); the cockpit shows each trigger's level.
+
 No display: a one-line message on stderr and ``SystemExit(2)``, as ``puppet play``.
 """
 
@@ -31,13 +35,16 @@ import statistics
 import sys
 import time
 from collections import deque
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+from devices.keys_device import KeysDevice, key_channels
 from puppet.io.shipped import mappings_folder
 from puppet.io.takes import TakeError, check_take_name, open_take
 from puppet.live.calibrate import CalibrationError, GuidedCalibration, calibration_channels, device_overrides
 from puppet.live.mappingfile import load_mapping
+from puppet.view.liveoutput import HeadlessLive, LiveOutput, close_outputs, live_status, publish
 from puppet.view.overlay import Cockpit, device_lines
 from puppet.view.renderer import Renderer
 from puppet.view.rendertake import VIEWS, aim_at_head
@@ -101,8 +108,9 @@ class LiveView:
     ``step()`` is one turn of the loop (tests call it directly on a headless window).
     """
 
-    def __init__(self, session: Any, window: Any, view: str = "front") -> None:
+    def __init__(self, session: Any, window: Any, view: str = "front", outputs: Sequence[LiveOutput] = ()) -> None:
         self.session = session
+        self.outputs = list(outputs)
         self.window = window
         self.view = view
         self.name = Path(session.mapping_path).stem
@@ -118,6 +126,7 @@ class LiveView:
         self._title = ""
         window.exit_key = None  # Escape is ours: the take is finished before the window goes
         window.key_event_func = self._on_key
+        self._key_names = key_channels(window.keys)  # key code -> keys:// channel
 
     def run(self) -> None:
         try:
@@ -129,6 +138,8 @@ class LiveView:
     def step(self) -> None:
         window = self.window
         size = tuple(window.buffer_size)
+        for output in self.outputs:
+            output.service()
         frame = self.session.frame()
         if self.calibration is not None:
             self._calibrating()
@@ -136,18 +147,33 @@ class LiveView:
             if self.renderer is None or self.renderer.size != size:
                 self._make_renderer(size)
             self.renderer.draw(frame.vertices, frame.normals, framebuffer=window.fbo)
-            self._draw_cockpit(frame.states)
+            self._draw_cockpit(frame.states, frame.pose.t_ns)
         window.swap_buffers()  # handles the window's events too (keys)
-        if self.take is not None and not self.session.recording:  # the take stopped on its own
-            print(f"take not complete: {self.session.record_error}", file=sys.stderr)
-            self.take = None
+        self._follow_take()
         self.stats.drawn(time.monotonic_ns(), frame.newest_sample_ns, frame.n_samples > 0)
+        publish(self.outputs, frame, live_status(self.session, self.stats))
         self._set_title(frame.states)
+
+    def _follow_take(self) -> None:
+        """A take started or stopped by other means than the R key (the control API), or one
+        that stopped on its own (``record_error``): said on the terminal and in the cockpit."""
+        session = self.session
+        if self.take is None and session.recording:
+            self.take, self._take_started = session.take_folder, time.monotonic()
+            print(f"recording {self.take.resolve()}", file=sys.stderr)
+        elif self.take is not None and not session.recording:
+            if session.record_error:
+                print(f"take not complete: {session.record_error}", file=sys.stderr)
+            else:
+                self.takes.append(self.take)
+                print(f"take saved: {saved_line(self.take)}", file=sys.stderr)
+            self.take = None
 
     def close(self) -> None:
         try:
             self._stop_recording()
         finally:
+            close_outputs(self.outputs)
             if self.renderer is not None:
                 self.renderer.release()
                 self.renderer = None
@@ -161,6 +187,9 @@ class LiveView:
 
     def _on_key(self, key: Any, action: Any, modifiers: Any) -> None:
         keys = self.window.keys
+        name = self._key_names.get(key)
+        if name is not None and action in (keys.ACTION_PRESS, keys.ACTION_RELEASE):
+            self._push_key(name, 1.0 if action == keys.ACTION_PRESS else 0.0)
         if action != keys.ACTION_PRESS:
             return
         if key in (keys.Q, keys.ESCAPE):
@@ -171,12 +200,11 @@ class LiveView:
                 self._stop_recording()
             else:
                 try:
-                    self.take = Path(self.session.start_recording())
+                    self.session.start_recording()
                 except TakeError as error:  # an unwritable folder: say so, keep performing
                     print(f"not recording: {error}", file=sys.stderr)
                 else:
-                    self._take_started = time.monotonic()
-                    print(f"recording {self.take.resolve()}", file=sys.stderr)
+                    self._follow_take()
         elif key == keys.N:
             self.session.neutral()
         elif key == keys.C:
@@ -188,6 +216,12 @@ class LiveView:
             self.cockpit.toggle()
         elif key == keys.K and self.calibration is None:
             self._start_calibration()
+
+    def _push_key(self, name: str, value: float) -> None:
+        """A key pressed (1) or released (0) on every ``keys://`` device of the session."""
+        for device in self.session.devices.values():
+            if isinstance(device, KeysDevice):
+                device.push({name: value})
 
     def _stop_recording(self) -> None:
         if self.session.recording:
@@ -249,7 +283,7 @@ class LiveView:
         self.session.normals = not self.renderer.gpu_normals
         self.window.fbo.viewport = (0, 0, *size)
 
-    def _draw_cockpit(self, states: dict[str, Any]) -> None:
+    def _draw_cockpit(self, states: dict[str, Any], pose_ns: int | None = None) -> None:
         self.cockpit.tick(self.stats.fps, self.stats.latency_ms)
         if not self.cockpit.visible:  # hidden: nothing gathered, nothing drawn
             return
@@ -259,13 +293,24 @@ class LiveView:
         channels = self.session.mapping.channels() if self.cockpit.monitor else ()
         notice = self.notice if time.monotonic() < self._notice_until else ""
         self.cockpit.draw(self.stats.fps, self.stats.latency_ms, device_lines(states, self.session.devices),
-                          recording, channels, notice, layer=self.session.layer_status())
+                          recording, channels, notice, layer=self.session.layer_status(),
+                          triggers=self.session.mapping.trigger_states(pose_ns))
 
     def _set_title(self, states: dict[str, Any]) -> None:
         recording = self.take.name if self.take is not None and self.session.recording else None
         title = live_title(self.name, self.stats.fps, self.stats.latency_ms, states, recording)
         if title != self._title:
             self.window.title = self._title = title
+
+
+def trigger_keys(session: Any) -> str:
+    """The triggers on the session's ``keys://`` devices, as the terminal says them: ``1 joy, 7 pout``."""
+    keyed = []
+    for name, spec in session.mapping.triggers.specs.items():
+        device, _, key = (spec.source or "").partition(".")
+        if isinstance(session.devices.get(device), KeysDevice):
+            keyed.append(f"{key} {name}")
+    return ", ".join(keyed)
 
 
 def open_session(mapping_path: str | os.PathLike, *, record: str | None = None, fps: int = 30,
@@ -291,14 +336,17 @@ def run_live(mapping_path: str | os.PathLike, *, record: str | None = None, fps:
              size: tuple[int, int] = (960, 720), view: str = "front",
              devices: dict[str, str] | None = None,
              record_root: str | os.PathLike | None = None, face: Any = None,
-             layer_over: str | os.PathLike | None = None, arm: list[str] = ()) -> None:
+             layer_over: str | os.PathLike | None = None, arm: list[str] = (),
+             outputs: Callable[[Any], Sequence[LiveOutput]] | None = None, window: bool = True) -> None:
     """Run the mapping's devices onto the face in a window until Q / Escape or closing it.
 
     ``devices`` overrides device URLs by name (e.g. ``{"box": "sim://joystick?..."}``); takes go
     under ``record_root`` (default ``takes/``); ``face`` is the face to perform (default the
     embedded one; ``load_face`` of a face folder or mesh); ``layer_over`` and ``arm`` record layered passes
-    over an earlier take (``puppet.live.takeclock.Layer``). The mapping is checked first, then the
-    display, then the session opens (devices, face, base take), and only then the window: a bad
+    over an earlier take (``puppet.live.takeclock.Layer``). ``outputs`` makes, from the open
+    session, what else each frame goes to (``LiveOutput``s: the show server); ``window`` False
+    runs the loop for them alone, with no window, until Ctrl+C (``HeadlessLive``). The mapping is
+    checked first, then the display, then the session opens (devices, face, base take), and only then the window: a bad
     input is one error, never a window that closes again. Without a usable display this prints
     ``puppet live: <why>`` on stderr and raises ``SystemExit(2)``.
     """
@@ -306,23 +354,34 @@ def run_live(mapping_path: str | os.PathLike, *, record: str | None = None, fps:
         raise ValueError(f"view {view!r}: expected one of {VIEWS}")
     device_overrides(mapping_path, load_mapping(mapping_path).devices, devices or {})
     check_take_name(record or "take")
-    try:
-        check_display()
-    except NoDisplayError as error:
-        _exit(str(error))
+    if window:
+        try:
+            check_display()
+        except NoDisplayError as error:
+            _exit(str(error))
     session = open_session(mapping_path, record=record, fps=fps, devices=devices,
                            record_root=record_root, face=face, layer_over=layer_over, arm=arm)
+    made: list[LiveOutput] = []
     try:
-        window = open_window(Path(mapping_path).stem, size)
+        made = list(outputs(session)) if outputs is not None else []
+        shown = open_window(Path(mapping_path).stem, size) if window else None
     except BaseException as error:
+        close_outputs(made)
         session.close()
         if isinstance(error, WindowError):
             _exit(str(error))
         raise
-    print("keys: R record/stop, N neutral, C re-centre sticks, K calibrate, M channel monitor, H hide the overlay, "
-          "Q/Esc quit", file=sys.stderr)
     print(f"takes go to {session.record_root.resolve()}", file=sys.stderr)
-    live = LiveView(session, window, view)
+    if shown is None:
+        print("no window: Ctrl+C ends (a take being recorded is finished first)", file=sys.stderr)
+        live = HeadlessLive(session, made, LiveStats())
+    else:
+        print("keys: R record/stop, N neutral, C re-centre sticks, K calibrate, M channel monitor, "
+              "H hide the overlay, Q/Esc quit", file=sys.stderr)
+        keyed = trigger_keys(session)
+        if keyed:
+            print(f"the mapping's keys: {keyed}", file=sys.stderr)
+        live = LiveView(session, shown, view, made)
     try:
         live.run()
     except KeyboardInterrupt:  # Ctrl+C closes like Q (run's finally finishes the take)

@@ -8,6 +8,8 @@ is rendered into the window's framebuffer:
 * **devices**: each one's state, and while it is LOST the reason its adapter gave (port missing,
   permission denied, unplugged); an audio input also gets a level meter (dBFS, the noise gate's
   threshold marked by the bar's colour) and its overrun and underrun counts;
+* **triggers**: each of the mapping's triggers with its key or channel and its level, lit while
+  it is on (``puppet.live.triggers``);
 * **REC**: the take's name and how long it has been recording; for a layered pass, the base take
   playing under it (its frame) and what is armed;
 * a **notice** line: the steps of a calibration run from the window (K), then its result;
@@ -85,12 +87,12 @@ class Cockpit:
 
     def draw(self, fps: float, latency_ms: float | None, devices: Iterable[DeviceLine],
              recording: tuple[str, float] | None, channels: Iterable[Any], notice: str = "",
-             layer: str | None = None) -> None:
+             layer: str | None = None, triggers: Iterable[Any] = ()) -> None:
         """Draw the cockpit over the current framebuffer (nothing when hidden: the caller skips
         gathering what it shows too). ``recording``: (take name, seconds) while a take runs;
         ``channels``: ``Mapping.channels()``; ``notice``: a line for the performer (the window's
         calibration steps, its result); ``layer``: a layered pass's base take and what is armed
-        (``LiveSession.layer_status``)."""
+        (``LiveSession.layer_status``); ``triggers``: ``Mapping.trigger_states``."""
         if not self.visible:
             return
         imgui = self.imgui
@@ -102,6 +104,7 @@ class Cockpit:
         self._last = now
         imgui.new_frame()
         self._status(fps, latency_ms, list(devices), recording, notice, layer)
+        self._triggers(list(triggers))
         if self.monitor:
             self._monitor(list(channels))
         imgui.render()
@@ -149,6 +152,23 @@ class Cockpit:
             imgui.text_disabled(f"{key:>5} {what}")
         imgui.end()
 
+    def _triggers(self, triggers: list[Any]) -> None:
+        """The triggers' panel: a bar of each one's level (lit while on), its key or channel."""
+        if not triggers:
+            return
+        imgui = self.imgui
+        imgui.set_next_window_pos((8, self.window.size[1] - 8), imgui.Cond_.first_use_ever, (0.0, 1.0))
+        imgui.set_next_window_bg_alpha(0.7)
+        imgui.begin("triggers", None, imgui.WindowFlags_.always_auto_resize | imgui.WindowFlags_.no_focus_on_appearing)
+        for trigger in triggers:
+            lit = (1.0, 0.75, 0.2, 1.0) if trigger.active else (0.45, 0.45, 0.45, 1.0)
+            imgui.push_style_color(imgui.Col_.plot_histogram, lit)
+            imgui.progress_bar(trigger.level / trigger.strength, (120, 0), trigger_label(trigger))
+            imgui.pop_style_color()
+            imgui.same_line()
+            imgui.text_disabled(trigger.source or "by name")
+        imgui.end()
+
     def _meter(self, device: DeviceLine) -> None:
         """An audio input's level bar (green above its gate, grey below) and its xruns."""
         imgui = self.imgui
@@ -180,6 +200,11 @@ class Cockpit:
                 imgui.same_line()
                 imgui.text_disabled(targets_label(channel.targets))
         imgui.end()
+
+
+def trigger_label(trigger: Any) -> str:
+    """A trigger as its bar says it: name, mode, and ``on`` while a toggle is latched."""
+    return f"{trigger.name} ({trigger.mode}{', on' if trigger.latched else ''})"
 
 
 def targets_label(targets: tuple[str, ...], width: int = 26) -> str:

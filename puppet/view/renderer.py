@@ -92,6 +92,10 @@ _LIGHT_COLORS = np.array(
 _SKY_COLOR = (0.11, 0.12, 0.14)
 _GROUND_COLOR = (0.05, 0.04, 0.035)
 
+LIGHT_UNIFORMS = {"sky_color": np.array(_SKY_COLOR), "ground_color": np.array(_GROUND_COLOR),
+                  "light_color": _LIGHT_COLORS}
+"""The mesh shaders' uniforms that never change: the hemisphere ambient and the lights' colours."""
+
 # The mesh shaders are one source compiled in variants. ``TEXTURED`` mixes a texture over the
 # vertex albedo; without it no texture is sampled and the uv + weight varying is gone.
 # ``PER_VERTEX`` lights each vertex in the vertex shader (``SHADING_MODES``): an untextured
@@ -298,7 +302,8 @@ out vec4 f_color;
 void main() {
     ivec2 p = ivec2(gl_FragCoord.xy);
     ivec2 last = textureSize(scene, 0) - 1;  // neighbours past the border repeat it
-    vec3 rgb_m = texelFetch(scene, p, 0).rgb;
+    vec4 rgba_m = texelFetch(scene, p, 0);  // alpha: 0 where a transparent backdrop shows
+    vec3 rgb_m = rgba_m.rgb;
     float nw = dot(texelFetch(scene, clamp(p + ivec2(-1, -1), ivec2(0), last), 0).rgb, LUMA);
     float ne = dot(texelFetch(scene, clamp(p + ivec2(1, -1), ivec2(0), last), 0).rgb, LUMA);
     float sw = dot(texelFetch(scene, clamp(p + ivec2(-1, 1), ivec2(0), last), 0).rgb, LUMA);
@@ -307,7 +312,7 @@ void main() {
     float luma_min = min(m, min(min(nw, ne), min(sw, se)));
     float luma_max = max(m, max(max(nw, ne), max(sw, se)));
     if (luma_max - luma_min < max(EDGE_THRESHOLD_MIN, luma_max * EDGE_THRESHOLD)) {
-        f_color = vec4(rgb_m, 1.0);
+        f_color = rgba_m;
         return;
     }
     vec2 px = 1.0 / vec2(last + 1);
@@ -315,12 +320,11 @@ void main() {
     vec2 dir = vec2(-((nw + ne) - (sw + se)), (nw + sw) - (ne + se));
     float reduce = max((nw + ne + sw + se) * 0.25 * REDUCE_MUL, REDUCE_MIN);
     dir = clamp(dir / (min(abs(dir.x), abs(dir.y)) + reduce), -SPAN_MAX, SPAN_MAX) * px;
-    vec3 rgb_a = 0.5 * (texture(scene, uv + dir * (1.0 / 3.0 - 0.5)).rgb
-                      + texture(scene, uv + dir * (2.0 / 3.0 - 0.5)).rgb);
-    vec3 rgb_b = 0.5 * rgb_a + 0.25 * (texture(scene, uv - 0.5 * dir).rgb
-                                     + texture(scene, uv + 0.5 * dir).rgb);
-    float luma_b = dot(rgb_b, LUMA);
-    f_color = vec4((luma_b < luma_min || luma_b > luma_max) ? rgb_a : rgb_b, 1.0);
+    vec4 rgba_a = 0.5 * (texture(scene, uv + dir * (1.0 / 3.0 - 0.5))
+                       + texture(scene, uv + dir * (2.0 / 3.0 - 0.5)));
+    vec4 rgba_b = 0.5 * rgba_a + 0.25 * (texture(scene, uv - 0.5 * dir) + texture(scene, uv + 0.5 * dir));
+    float luma_b = dot(rgba_b.rgb, LUMA);
+    f_color = (luma_b < luma_min || luma_b > luma_max) ? rgba_a : rgba_b;
 }
 """
 
@@ -573,6 +577,7 @@ class Renderer:
         cull: bool = True,
         gpu_normals: bool | None = None,
         detail: PartDetail | None = None,
+        transparent: bool = False,
     ) -> None:
         """Upload topology, albedo (sRGB 0-1, per vertex) and specular strengths (0-1).
 
@@ -587,11 +592,14 @@ class Renderer:
         ``cull`` False draws back faces too (a mesh seen from inside), always shaded per pixel.
         ``detail`` (``PartDetail``, of these triangles) draws inner parts seen small from fewer
         triangles, chosen whenever the camera changes; None draws every triangle.
+        ``transparent`` draws the face alone on a transparent backdrop (alpha 0 where no surface
+        is: a program feed keyed over other video); ``read`` returns RGBA then.
         On a software rasteriser its threads get a core each (``rasterthreads.spread``;
         ``rasteriser_cores``: {thread id: core} of those pinned).
         """
         self.n_vertices = int(n_vertices)
         self.cull = cull
+        self.transparent = transparent
         self.size = (int(width), int(height))
         self._owns_ctx = ctx is None
         self.ctx = ctx or moderngl.create_context(standalone=True, backend=backend)
@@ -684,7 +692,7 @@ class Renderer:
             vertex_shader=_BACKGROUND_VERTEX_SHADER, fragment_shader=_FXAA_FRAGMENT_SHADER
         )
         self._dynamic = self.ctx.buffer(reserve=self._staging.nbytes, dynamic=True)
-        self._static = self.ctx.buffer(_material_data(self.n_vertices, colors, materials))
+        self._static = self.ctx.buffer(material_data(self.n_vertices, colors, materials))
         self._indices = self.ctx.buffer(np.ascontiguousarray(triangles, dtype="u4"))
         self._rings: tuple[moderngl.Buffer, ...] = ()
         if self.gpu_normals:
@@ -701,9 +709,8 @@ class Renderer:
         )
         self._background = self.ctx.vertex_array(self._background_program, [])
         self._fxaa = self.ctx.vertex_array(self._fxaa_program, [])
-        self._set_uniform("sky_color", np.array(_SKY_COLOR))
-        self._set_uniform("ground_color", np.array(_GROUND_COLOR))
-        self._set_uniform("light_color", _LIGHT_COLORS)
+        for name, value in LIGHT_UNIFORMS.items():
+            self._set_uniform(name, value)
         self._make_targets(samples)
 
     def __enter__(self) -> Renderer:
@@ -749,29 +756,9 @@ class Renderer:
         margin: float = 1.15,
         fov: float = DEFAULT_FOV,
     ) -> Camera:
-        """Aim a perspective camera at ``vertices`` (e.g. the head) from a named view.
-
-        The camera looks at the centre of their bounding box along ``VIEW_DIRECTIONS[view]``
-        and backs off just far enough that every vertex projects inside the image shrunk by
-        ``margin`` (1.15: 15% breathing room).
-        """
-        points = np.asarray(vertices, dtype=float)
-        direction = np.asarray(VIEW_DIRECTIONS[view])
-        target = (points.min(axis=0) + points.max(axis=0)) / 2.0
-        probe = Camera(target + direction, target, np.array([0.0, 1.0, 0.0]), fov, 1.0, 2.0)
-        local = (points - target) @ probe.basis().T
-        tan_y = np.tan(np.radians(fov) / 2.0)
-        tan_x = tan_y * self.size[0] / self.size[1]
-        reach = np.maximum(np.abs(local[:, 0]) / tan_x, np.abs(local[:, 1]) / tan_y)
-        distance = float(np.max(local[:, 2] + margin * reach))
-        depth = float(np.ptp(local[:, 2])) + 1e-9
-        return self.look_at(
-            target + distance * direction,
-            target,
-            fov=fov,
-            near=max(distance - local[:, 2].max() - depth, distance / 100.0),
-            far=distance + 2.0 * depth,
-        )
+        """Aim the camera at ``vertices`` (e.g. the head) from a named view (``aim_camera``)."""
+        self.camera = aim_camera(vertices, self.size, view, margin, fov)
+        return self.camera
 
     def project(self, points: np.ndarray) -> np.ndarray:
         """Pixel coordinates (M, 2) as (column, row), row 0 at the top, of world ``points``."""
@@ -809,15 +796,17 @@ class Renderer:
         return self.read()
 
     def read(self) -> np.ndarray:
-        """The last frame drawn offscreen, as (height, width, 3) uint8 sRGB, top row first.
+        """The last frame drawn offscreen, as (height, width, 3) uint8 sRGB, top row first
+        ((height, width, 4) with alpha when ``transparent``).
 
         It waits for the drawing first without holding the GIL (``wait_for_gl``), so other
         threads (the devices' readers) run meanwhile."""
         with self._current():
             wait_for_gl(self.ctx)
-            data = self._output.read(components=3, alignment=1)
+            components = 4 if self.transparent else 3
+            data = self._output.read(components=components, alignment=1)
         width, height = self.size
-        return np.frombuffer(data, dtype=np.uint8).reshape(height, width, 3)[::-1].copy()
+        return np.frombuffer(data, dtype=np.uint8).reshape(height, width, components)[::-1].copy()
 
     def finish(self) -> None:
         """Wait until the GL has executed everything issued so far (``wait_for_gl``)."""
@@ -863,7 +852,7 @@ class Renderer:
         backdrop = self.ctx.renderbuffer(self.size, components=4)
         self._backdrop = self.ctx.framebuffer(color_attachments=[backdrop])
         self._backdrop.use()
-        self._background.render(moderngl.TRIANGLES, vertices=3)
+        self._paint_backdrop(self._backdrop)
         self._targets: list = [self._output, color, depth, self._backdrop, backdrop]
         self._multi = self._scene = None
         if samples > 1:
@@ -938,9 +927,8 @@ class Renderer:
         if self.camera is self._uniform_camera:
             return
         self._uniform_camera = self.camera
-        self._set_uniform("view_projection", self._view_projection().T)
-        self._set_uniform("eye", self.camera.eye)
-        self._set_uniform("light_direction", _LIGHT_DIRECTIONS_CAMERA @ self.camera.basis())
+        for name, value in camera_uniforms(self.camera, self.size[0] / self.size[1]).items():
+            self._set_uniform(name, value)
         self._choose_detail()
 
     def _choose_detail(self) -> None:
@@ -965,7 +953,7 @@ class Renderer:
             target.use()
             target.clear(depth=1.0)
             self.ctx.disable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
-            self._background.render(moderngl.TRIANGLES, vertices=3)
+            self._paint_backdrop(target)
         else:
             self.ctx.copy_framebuffer(target, self._backdrop)
             target.color_mask = (False, False, False, False)
@@ -980,6 +968,13 @@ class Renderer:
             buffer.bind_to_storage_buffer(binding)
         draw_triangles(self._mesh)
         self.ctx.disable(moderngl.CULL_FACE)
+
+    def _paint_backdrop(self, target: moderngl.Framebuffer) -> None:
+        """The studio gradient, or nothing at all (alpha 0) when ``transparent``."""
+        if self.transparent:
+            target.clear(0.0, 0.0, 0.0, 0.0)
+        else:
+            self._background.render(moderngl.TRIANGLES, vertices=3)
 
     def _upload(self, vertices: np.ndarray, normals: np.ndarray | None) -> None:
         """Write positions and normals (positions alone where the draw sums the normals) into
@@ -1021,6 +1016,51 @@ def render_face(
     with Renderer.for_face(face, width=width, height=height) as r:
         r.aim(vertices, view=view)
         return r.render(vertices)
+
+
+def aim_camera(
+    vertices: np.ndarray,
+    size: tuple[int, int],
+    view: str = "front",
+    margin: float = 1.15,
+    fov: float = DEFAULT_FOV,
+) -> Camera:
+    """A perspective camera for an image of ``size`` aimed at ``vertices`` (e.g. the head) from a named view.
+
+    The camera looks at the centre of their bounding box along ``VIEW_DIRECTIONS[view]``
+    and backs off just far enough that every vertex projects inside the image shrunk by
+    ``margin`` (1.15: 15% breathing room).
+    """
+    points = np.asarray(vertices, dtype=float)
+    direction = np.asarray(VIEW_DIRECTIONS[view])
+    target = (points.min(axis=0) + points.max(axis=0)) / 2.0
+    probe = Camera(target + direction, target, np.array([0.0, 1.0, 0.0]), fov, 1.0, 2.0)
+    local = (points - target) @ probe.basis().T
+    tan_y = np.tan(np.radians(fov) / 2.0)
+    tan_x = tan_y * size[0] / size[1]
+    reach = np.maximum(np.abs(local[:, 0]) / tan_x, np.abs(local[:, 1]) / tan_y)
+    distance = float(np.max(local[:, 2] + margin * reach))
+    depth = float(np.ptp(local[:, 2])) + 1e-9
+    return Camera(target + distance * direction, target, np.array([0.0, 1.0, 0.0]), float(fov),
+                  max(distance - local[:, 2].max() - depth, distance / 100.0), distance + 2.0 * depth)
+
+
+def camera_uniforms(camera: Camera, aspect: float) -> dict[str, np.ndarray]:
+    """The mesh shaders' uniforms that follow the camera, for an image of ``aspect`` (width /
+    height): the view-projection (column-major, as GL takes it), the eye and the directions of
+    the lights, which are attached to the camera."""
+    view_projection = camera.projection_matrix(aspect) @ camera.view_matrix()
+    return {"view_projection": view_projection.T, "eye": camera.eye,
+            "light_direction": _LIGHT_DIRECTIONS_CAMERA @ camera.basis()}
+
+
+def webgl_shaders(textured: bool = False) -> tuple[str, str]:
+    """The mesh's vertex and fragment shaders in GLSL ES 3.00 (WebGL 2), lit per pixel from the
+    CPU's normals: this renderer's own text under another header, so that a browser drawing the
+    same vertices, materials and uniforms shows the face with the same look (``puppet.show``)."""
+    header = "#version 300 es\nprecision highp float;\nprecision highp int;\n"
+    header += ("#define TEXTURED\n" if textured else "") + _LIGHTING
+    return header + _MESH_VERTEX_SHADER, header + _MESH_FRAGMENT_SHADER
 
 
 def texture_kwargs(face: FaceLike) -> dict:
@@ -1087,7 +1127,7 @@ def _even(image: np.ndarray) -> np.ndarray:
     return np.pad(image, ((0, height % 2), (0, width % 2), (0, 0)), mode="edge")
 
 
-def _material_data(
+def material_data(
     n_vertices: int, colors: np.ndarray | None, materials: np.ndarray | None
 ) -> np.ndarray:
     """Static per-vertex attributes (N, 4) float32: linear albedo and specular strength."""

@@ -100,10 +100,15 @@ def aim_at_head(renderer: Renderer, face: Face, view: str) -> None:
     """Aim the camera at the head (above the neck), from a named view."""
     if view not in VIEWS:
         raise ValueError(f"view {view!r}: expected one of {VIEWS}")
+    renderer.aim(head_points(face), view=view)
+
+
+def head_points(face: Face) -> np.ndarray:
+    """The skin above the neck: what a camera aimed at the head frames."""
     skin = face.vertices[face.parts["skin"]]
     chin = face.feature_points.get("2.1")
     keep = skin[:, 1] > chin[1] - 0.25 * np.ptp(skin[:, 1]) if chin is not None else slice(None)
-    renderer.aim(skin[keep], view=view)
+    return skin[keep]
 
 
 def _progress(frames: Iterator[np.ndarray], total: int | None, show: bool) -> Iterator[np.ndarray]:

@@ -42,7 +42,7 @@ import os
 import sys
 import time
 import warnings
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -56,6 +56,7 @@ from puppet.fap.table import N_FAPS
 from puppet.io.fapfile import FapError, FapReader, FapWarning, iter_fap
 from puppet.io.soundtrack import soundtrack
 from puppet.runtime.runtime import Runtime
+from puppet.view.liveoutput import LiveOutput, close_outputs
 from puppet.view.renderer import Renderer, software_rasteriser
 from puppet.view.rendertake import VIEWS, FapPlayback, aim_at_head
 from puppet.view.soundout import ClockedSound
@@ -384,8 +385,10 @@ class Player:
     REFRESH = 0.25
 
     def __init__(self, playback: FapPlayback, window: Any, view: str = "front",
-                 table: HeldTable | None = None, loop: bool = True) -> None:
+                 table: HeldTable | None = None, loop: bool = True, outputs: Sequence[LiveOutput] = ()) -> None:
         self.playback = playback
+        self.outputs = list(outputs)  # what else each frame goes to (the show server), even minimised
+        self._published: int | None = None
         self.face = playback.face
         self.window = window
         self.view = view
@@ -426,6 +429,7 @@ class Player:
                 self.renderer.release()
                 self.renderer = None
             self.table.close()
+            close_outputs(self.outputs)
             window.close()
             window.destroy()
 
@@ -440,7 +444,10 @@ class Player:
         size = tuple(self.window.buffer_size)
         k = self._frame_now(now)
         self._set_title(k)
+        for output in self.outputs:
+            output.service()
         if min(size) < 1:  # minimised
+            self._publish(k, None)
             return self._events()
         stale = (self.renderer is None or self.renderer.size != size or k != self._shown
                  or now - self._drawn_at > self.REFRESH)
@@ -450,9 +457,22 @@ class Player:
             self._make_renderer(size)
         if k != self._shown:
             self._pose, self._shown = self.table.mesh(k, normals=not self.renderer.gpu_normals), k
+        self._publish(k, self._pose[0])
         self.renderer.draw(*self._pose, framebuffer=self.window.fbo)
         self._drawn_at = now
         self.window.swap_buffers()  # also handles the window's events
+
+    def _publish(self, k: int, vertices: np.ndarray | None) -> None:
+        """Frame ``k`` to the outputs, once (its vertices made here when the window drew none)."""
+        if not self.outputs or k == self._published:
+            return
+        if vertices is None:
+            vertices = self.table.mesh(k, normals=False)[0]
+        status = {"take": self.playback.path.name, "frame": k, "frames": self.table.total,
+                  "paused": self.clock.paused}
+        for output in self.outputs:
+            output.publish(vertices, status)
+        self._published = k
 
     def _events(self) -> None:
         if self._dispatch_events is not None:
@@ -530,8 +550,11 @@ def window_title(name: str, frame: int, total: int | None, fps: float, paused: b
 
 
 def play_take(path: str | os.PathLike, *, size: tuple[int, int] = (960, 720),
-              view: str = "front", face: Face | None = None) -> None:
+              view: str = "front", face: Face | None = None,
+              outputs: Callable[[Face], Sequence[LiveOutput]] | None = None) -> None:
     """Play a .fap take in a window in real time, looping, until Q / Escape or closing it.
+
+    ``outputs`` makes, from the face played, what else each frame goes to (the show server).
 
     Everything is checked before the window opens (the take, its first frame, the display).
     Without a usable display this prints ``puppet play: <why>; use 'puppet render ...'`` on
@@ -556,10 +579,17 @@ def play_take(path: str | os.PathLike, *, size: tuple[int, int] = (960, 720),
     except BaseException:
         table.close()
         raise
+    try:
+        made = list(outputs(playback.face)) if outputs is not None else []
+    except BaseException:
+        table.close()
+        window.close()
+        window.destroy()
+        raise
     print("keys: space pause/play, right/left step a frame, Home first frame, Q/Esc quit",
           file=sys.stderr)
     try:
-        Player(playback, window, view, table).run()
+        Player(playback, window, view, table, outputs=made).run()
     except KeyboardInterrupt:  # Ctrl+C in the terminal closes the window like Q
         pass
 
