@@ -142,6 +142,31 @@ def test_the_same_seed_gives_the_same_faps_in_any_order(seed, origin, offsets, d
     assert not IdleLife(seed, origin).offsets(before).any() if before else True
 
 
+def test_threads_asking_at_once_see_the_same_motion():
+    """The session's loop and a control API's thread may both ask for a pose while the schedule grows."""
+    import threading
+
+    times = [k * 997_000_000 for k in range(7200)]           # two hours, drawn on as they go
+    reference = IdleLife(17, 0).offsets(times)
+    shared = IdleLife(17, 0)
+    results = [np.full((len(times), 68), np.nan) for _ in range(4)]
+
+    def ask(out, order):
+        for k in order:
+            out[k] = 0.0
+            shared.add_to(out[k], times[k])
+
+    rng = np.random.default_rng(0)
+    threads = [threading.Thread(target=ask, args=(out, rng.permutation(len(times)))) for out in results]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    for out in results:
+        np.testing.assert_allclose(out, reference, rtol=0, atol=1e-9)
+    assert all(np.array_equal(out, results[0]) for out in results)
+
+
 def test_another_seed_gives_other_motion():
     a, b = IdleLife(1, 0), IdleLife(2, 0)
     assert not np.array_equal(frames(a, 30)[1], frames(b, 30)[1])
@@ -220,6 +245,7 @@ def test_idle_false_keeps_the_face_still_and_idle_parts_can_be_switched_off():
     assert not any(still.pose(t).fap.any() for t in range(0, 600 * S, S // 7))
     some = parse_mapping(mapping_text("idle: {blink: false, breath: false, seed: 12}"), "m.yaml")
     assert some.idle.parts == ("eyes",) and some.idle.seed == 12
+    assert some.idle.describe().startswith("idle life: eyes (seed 12;")   # what puppet live says at start
     on = parse_mapping(mapping_text(), "m.yaml")
     assert on.idle.parts == ("blink", "eyes", "breath")
     assert on.idle.origin_ns <= time.monotonic_ns()

@@ -44,6 +44,7 @@ from __future__ import annotations
 import bisect
 import math
 import secrets
+import threading
 from dataclasses import dataclass
 
 import numpy as np
@@ -115,24 +116,32 @@ def _ease1(u: float) -> float:
 
 
 class _Schedule:
-    """A part's events, drawn in chunks of ``_CHUNK`` from its own stream as far ahead as asked."""
+    """A part's events, drawn in chunks of ``_CHUNK`` from its own stream as far ahead as asked.
 
-    def __init__(self, seed: int, stream: int, draw) -> None:
+    Drawing holds ``lock`` (the session's loop and a control API's thread may both ask for a
+    pose) and publishes the longer columns before the longer times, so a reader without the
+    lock never finds a time without its row; what was drawn never changes."""
+
+    def __init__(self, seed: int, stream: int, draw, lock: threading.RLock) -> None:
         self._rng = np.random.default_rng([seed, stream])
         self._draw = draw          # rng, n -> (gaps s, columns {name: array})
+        self._lock = lock
         self.times = np.zeros(0)
         self.columns: dict[str, np.ndarray] = {}
 
     def cover(self, until_s: float) -> None:
         """Draw until an event lies after ``until_s``."""
-        while not self.times.size or self.times[-1] <= until_s:
-            gaps, columns = self._draw(self._rng, _CHUNK)
-            start = self.times[-1] if self.times.size else 0.0
-            self.times = np.concatenate([self.times, start + np.cumsum(gaps)])
-            for key, values in columns.items():
-                self.columns[key] = np.concatenate([self.columns.get(key, np.zeros(0)), values])
-            self.rows = {key: values.tolist() for key, values in self.columns.items()}  # for one time
-            self.starts = self.times.tolist()
+        if self.times.size and self.times[-1] > until_s:
+            return
+        with self._lock:
+            while not self.times.size or self.times[-1] <= until_s:
+                gaps, drawn = self._draw(self._rng, _CHUNK)
+                start = self.times[-1] if self.times.size else 0.0
+                columns = {key: np.concatenate([self.columns.get(key, np.zeros(0)), values])
+                           for key, values in drawn.items()}
+                times = np.concatenate([self.times, start + np.cumsum(gaps)])
+                self.columns, self.rows = columns, {key: values.tolist() for key, values in columns.items()}
+                self.times, self.starts = times, times.tolist()
 
     def at(self, s: float) -> int:
         """The last event at or before ``s`` (-1: none yet), for one time (``bisect``, no numpy)."""
@@ -168,32 +177,36 @@ class _Gaze:
     beyond what both streams have drawn; an event's fixation is drawn with it, so the merged
     events up to any time are the same however far either stream was drawn."""
 
-    def __init__(self, blinks: _Schedule, saccades: _Schedule) -> None:
+    def __init__(self, blinks: _Schedule, saccades: _Schedule, lock: threading.RLock) -> None:
         self._blinks, self._saccades = blinks, saccades
+        self._lock = lock
         self.times = np.zeros(0)
         self.columns: dict[str, np.ndarray] = {}
         self.horizon = -1.0          # every event up to here is merged
 
     def cover(self, until_s: float) -> None:
-        while self.horizon <= until_s or not self.times.size:
-            self._merge(max(until_s, self.horizon))
+        if self.horizon > until_s and self.times.size:
+            return
+        with self._lock:
+            while self.horizon <= until_s or not self.times.size:
+                self._merge(max(until_s, self.horizon))
 
     def _merge(self, until_s: float) -> None:
         """Draw both streams past ``until_s`` and merge every event up to where both reach."""
         b, sac = self._blinks, self._saccades
         b.cover(until_s)
         sac.cover(until_s)
-        self.horizon = min(b.times[-1], sac.times[-1])
         shift = b.columns["shift"] > 0.0
         times = np.concatenate([sac.times, b.times[shift] + b.columns["close"][shift]])
-        keep = times <= self.horizon
+        horizon = min(b.times[-1], sac.times[-1])
+        keep = times <= horizon
         order = np.argsort(times[keep], kind="stable")
+        columns = {key: np.concatenate([[0.0], np.concatenate([sac.columns[key], b.columns[key][shift]])[keep][order]])
+                   for key in ("yaw", "pitch")}
+        self.columns, self.rows = columns, {key: values.tolist() for key, values in columns.items()}
         self.times = times[keep][order]
-        for key in ("yaw", "pitch"):
-            values = np.concatenate([sac.columns[key], b.columns[key][shift]])[keep][order]
-            self.columns[key] = np.concatenate([[0.0], values])
-        self.rows = {key: values.tolist() for key, values in self.columns.items()}
         self.starts = self.times.tolist()
+        self.horizon = horizon
 
     def at(self, s: float) -> int:
         self.cover(s)
@@ -206,8 +219,9 @@ class IdleLife:
     def __init__(self, seed: int, origin_ns: int, parts: tuple[str, ...] = PARTS) -> None:
         self.seed, self.origin_ns = int(seed), int(origin_ns)
         self.parts = tuple(p for p in PARTS if p in parts)
-        self._blinks = _Schedule(self.seed, _STREAMS["blink"], _draw_blinks)
-        self._saccades = _Gaze(self._blinks, _Schedule(self.seed, _STREAMS["eyes"], _draw_saccades))
+        lock = threading.RLock()
+        self._blinks = _Schedule(self.seed, _STREAMS["blink"], _draw_blinks, lock)
+        self._saccades = _Gaze(self._blinks, _Schedule(self.seed, _STREAMS["eyes"], _draw_saccades, lock), lock)
         rng = np.random.default_rng([self.seed, _STREAMS["breath"], 1])
         self._drift = (rng.uniform(*DRIFT_HZ, (2, 2)), rng.uniform(0, 2 * np.pi, (2, 2)))
         self._drift_rows = (self._drift[0].tolist(), self._drift[1].tolist())
@@ -218,6 +232,10 @@ class IdleLife:
     def state(self) -> dict:
         """What a take keeps to make the same motion again (``from_state``)."""
         return {"seed": self.seed, "origin_ns": self.origin_ns, "parts": list(self.parts)}
+
+    def describe(self) -> str:
+        """What a performer is told at start: the parts and the seed that makes the motion again."""
+        return f"idle life: {', '.join(self.parts)} (seed {self.seed}; the mapping's idle: false turns it off)"
 
     @classmethod
     def from_state(cls, state: dict, parts: tuple[str, ...] | None = None) -> IdleLife:
