@@ -34,8 +34,11 @@ devices:
   api: {url: "api://"}
 channels:
   api.smile: {}
+  api.wow: {}
 targets:
   - {expression: joy, source: api.smile}
+triggers:
+  wow: {source: api.wow, mode: oneshot, expression: surprise, attack: 0.05, hold: 0.2, release: 0.05}
 """
 
 
@@ -188,20 +191,33 @@ def test_a_script_sets_channels_fires_a_take_and_lists_it(show):
     with connect(f"ws://127.0.0.1:{server.port}/api?token={server.token}") as ws:
         status = _ask(ws, type="status", id="s")
         assert status["id"] == "s" and status["status"]["devices"] == {"api": "open"}
-        assert _ask(ws, type="set", channels={"smile": 1.0})["ok"]
-        assert _wait(lambda: session.mapping.pose(time.monotonic_ns()).expression[:2] == (1, 63.0))
         started = _ask(ws, type="record", action="start", id=2)
         assert started["ok"] and Path(started["take"]).name == "api_001"
         assert not _ask(ws, type="record", action="start")["ok"]  # already recording
-        _ask(ws, type="set", channels={"smile": 0.0})
+        assert _ask(ws, type="set", channels={"smile": 1.0})["ok"]
         time.sleep(0.3)
+        _ask(ws, type="set", channels={"smile": 0.0})
+        time.sleep(0.2)
         stopped = _ask(ws, type="record", action="stop")
         assert stopped["ok"] and stopped["take"] == started["take"]
         takes = _ask(ws, type="takes")["takes"]
         assert [t["name"] for t in takes] == ["api_001"] and takes[0]["complete"]
     with iter_fap(Path(started["take"]) / "take.fap") as reader:
-        joy = [frame for frame in reader]
-    assert joy and any(f.expression[0] == 1 and f.expression[1] > 0 for f in joy)  # joy, shown
+        joy = [f.expression[1] if f.expression[0] == 1 else 0 for f in reader]
+    assert max(joy) == 63 and joy[-1] == 0  # the script's smile, full, then gone
+
+
+def test_a_stream_deck_fires_a_trigger_by_name_and_the_take_keeps_it(show):
+    server, session = show
+    with connect(f"ws://127.0.0.1:{server.port}/api?token={server.token}") as ws:
+        started = _ask(ws, type="record", action="start")
+        assert _ask(ws, type="trigger", name="wow") == {"id": None, "ok": True, "name": "wow", "action": "fire"}
+        assert _wait(lambda: server.status.get("triggers", {}).get("wow", 0) > 0)
+        time.sleep(0.5)
+        _ask(ws, type="record", action="stop")
+    with iter_fap(Path(started["take"]) / "take.fap") as reader:
+        surprise = [f.expression[1] if f.expression[0] == 6 else 0 for f in reader]
+    assert max(surprise) > 60 and surprise[-1] == 0  # up, held, and back to rest
 
 
 def test_refusals_say_why_and_the_connection_goes_on(show):
@@ -209,7 +225,7 @@ def test_refusals_say_why_and_the_connection_goes_on(show):
     with connect(f"ws://127.0.0.1:{server.port}/api?token={server.token}") as ws:
         for message, reason in [("nonsense", "not JSON"), ('{"type": "fly"}', "expected one of"),
                                 ('{"type": "set", "channels": {"frown": 1}}', None),
-                                ('{"type": "trigger", "name": "wave"}', "trigger"),
+                                ('{"type": "trigger", "name": "wave"}', "no trigger 'wave': expected one of wow"),
                                 ('{"type": "record", "action": "stop"}', "not recording")]:
             ws.send(message)
             reply = json.loads(ws.recv(timeout=5))
@@ -320,3 +336,53 @@ def test_a_lighting_desk_starts_a_take_over_osc(tmp_path, face):
         loop.close()
         server.close()
         session.close()
+
+
+def test_a_stream_of_mangled_messages_is_answered_one_by_one_and_the_loop_goes_on(show):
+    server, session = show
+    rng = np.random.default_rng(7)
+    seeds = ['{"type": "status", "id": 1}', '{"type": "set", "channels": {"smile": 0.8}}',
+             '{"type": "trigger", "name": "wow", "action": "press"}', '{"type": "takes"}', '{"type": "neutral"}']
+    frames = session.frames
+    with connect(f"ws://127.0.0.1:{server.port}/api?token={server.token}") as ws:
+        answers = []
+        for k in range(300):
+            text = list(seeds[k % len(seeds)])
+            for _ in range(rng.integers(0, 3)):
+                text[rng.integers(len(text))] = chr(rng.integers(0, 0x3000))
+            ws.send("".join(text[:rng.integers(len(text) // 2, len(text) + 1)]))
+            answers.append(json.loads(ws.recv(timeout=5)))
+    assert all(isinstance(a["ok"], bool) and (a["ok"] or a["error"]) for a in answers)
+    assert 0 < sum(a["ok"] for a in answers) < 300
+    assert _wait(lambda: session.frames > frames + 10)
+
+
+def test_a_subscriber_hears_status_on_its_interval_and_at_once_when_a_take_starts(show):
+    server, _ = show
+    url = f"ws://127.0.0.1:{server.port}/api?token={server.token}"
+    with connect(url) as watcher, connect(url) as script:
+        watcher.send(json.dumps({"type": "subscribe", "interval": 1.0, "id": "w"}))
+        events = []
+        while len(events) < 1:
+            message = json.loads(watcher.recv(timeout=5))
+            if message.get("type") == "status":
+                events.append(message)
+        assert {"devices", "fps", "latency_ms", "recording", "frames", "triggers"} <= set(events[0]["status"])
+        _ask(script, type="record", action="start")
+        started = time.monotonic()
+        while True:  # the change is told before the next tick of the interval
+            message = json.loads(watcher.recv(timeout=5))
+            if message.get("type") == "status" and message["status"]["recording"]:
+                break
+        assert time.monotonic() - started < 0.9
+        _ask(script, type="record", action="stop")
+
+
+def test_the_guide_s_python_client_runs_against_a_live_rig(show, monkeypatch, capsys):
+    server, _ = show
+    guide = (Path(__file__).resolve().parents[1] / "docs" / "guide" / "show.md").read_text("utf-8")
+    example = guide.split("```python\n", 1)[1].split("```", 1)[0]
+    example = example.replace("8765", str(server.port)).replace("PASTE-THE-TOKEN", server.token)
+    exec(compile(example, "docs/guide/show.md", "exec"), {})
+    printed = capsys.readouterr().out
+    assert "'ok': True" in printed and "api_001" in printed

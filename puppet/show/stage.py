@@ -75,11 +75,8 @@ class LiveStage(Stage):
         raise ApiError(f"{kind}: not a message a stage acts on")
 
     def _trigger(self, name: str, action: str) -> dict:
-        fire = getattr(self.session, "trigger", None)
-        if fire is None:
-            raise ApiError("trigger: this session has no triggers")
         try:
-            fire(name, action)
+            self.session.trigger(name, action)
         except ValueError as exc:
             raise ApiError(f"trigger: {exc}") from None
         return {"name": name, "action": action}

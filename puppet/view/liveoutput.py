@@ -32,11 +32,12 @@ class LiveOutput(Protocol):
     def close(self) -> None: ...
 
 
-def live_status(session: Any, stats: Any) -> dict:
+def live_status(session: Any, stats: Any, frame: Any) -> dict:
     """The rig's status as outputs report it: devices and their states, the measured fps and
-    latency, the take being recorded (None when not) and the frames drawn."""
+    latency, the take being recorded (None when not), the frames drawn and each trigger's level."""
     take = session.take_folder
     return {"devices": {name: state.name.lower() for name, state in session.states.items()},
+            "triggers": {t.name: round(t.level, 3) for t in session.mapping.trigger_states(frame.pose.t_ns or frame.t_ns)},
             "fps": round(stats.fps, 1),
             "latency_ms": None if stats.latency_ms is None else round(stats.latency_ms, 2),
             "recording": None if take is None else take.name, "frames": session.frames}
@@ -71,7 +72,7 @@ class HeadlessLive:
             output.service()
         frame = self.session.frame()
         self.stats.drawn(time.monotonic_ns(), frame.newest_sample_ns, frame.n_samples > 0)
-        publish(self.outputs, frame, live_status(self.session, self.stats))
+        publish(self.outputs, frame, live_status(self.session, self.stats, frame))
         self._follow_take()
 
     def run(self) -> None:

@@ -151,7 +151,7 @@ class LiveView:
         window.swap_buffers()  # handles the window's events too (keys)
         self._follow_take()
         self.stats.drawn(time.monotonic_ns(), frame.newest_sample_ns, frame.n_samples > 0)
-        publish(self.outputs, frame, live_status(self.session, self.stats))
+        publish(self.outputs, frame, live_status(self.session, self.stats, frame))
         self._set_title(frame.states)
 
     def _follow_take(self) -> None:
