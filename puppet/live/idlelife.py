@@ -10,21 +10,24 @@ own random stream, in fixed-size chunks as far ahead as asked: the k-th event is
 however far the schedule was drawn before.
 
 Blinks (FAPs 19-22, ``close_t_l/r_eyelid``, ``close_b_l/r_eyelid``), from measurements of people
-at rest:
+at rest (the figures of the project's reference notes, ``shared/reference/LIVE-FACTS.md``):
 
 * rate: 17 a minute on average (Bentivoglio et al., *Movement Disorders* 12(6), 1997: 150
   adults, 17/min at rest, 26 in conversation, 4.5 reading). Intervals are irregular, not
   periodic; here they are log-normal (median ``BLINK_MEDIAN_S``, log-sd ``BLINK_SIGMA``, mean
   60/17 s), never shorter than ``BLINK_MIN_GAP_S`` so two blinks never overlap;
-* shape: a blink closes fast and opens more slowly, 1:2 to 1:3 (same source, and the blink
-  kinematics it reviews): closing 80-110 ms, held shut 20-60 ms, opening 2-3 times the closing,
-  so a blink lasts 260-500 ms ("a few hundred milliseconds");
-* asymmetry: the upper lid does nearly all the moving: at the peak the upper lids drop 800 IRISD
-  and the lower ones rise 224 (78% / 22%), the split with which the default face's lids meet along
-  their whole length with nothing folding (``puppet.runtime.lidclosure``: 0.5% of the opening left).
+* shape: a blink closes fast and opens more slowly, 1:2 to 1:3, and lasts a few hundred
+  milliseconds (Evinger, Manning & Sibony, "Eyelid movements: mechanisms and normal data",
+  IOVS 32(2), 1991): closing 80-110 ms, held shut 20-60 ms, opening 2-3 times the closing, so a
+  blink lasts 260-500 ms;
+* asymmetry: the upper lid does nearly all the moving (same source): at the peak the upper lids
+  drop 800 IRISD and the lower ones rise 224 (78% / 22%), the split with which the default face's
+  lids meet along their whole length with nothing folding (``puppet.runtime.lidclosure``: 0.5%
+  of the opening left).
 
 Eyes (FAPs 23-26, both eyes together): at rest the eyes make small saccades, under 1 degree, and
-drift between them, and gaze shifts come with a blink more often than chance (the same facts).
+drift between them (Martinez-Conde, Macknik & Hubel, Nat. Rev. Neurosci. 5, 2004), and gaze shifts
+come with a blink more often than chance (Evinger et al., Exp. Brain Res. 100, 1994).
 Gaze jumps every 1-3 s (uniform), and in ``BLINK_GAZE_SHIFT`` of the blinks while the lids are
 shut, to a point drawn in a disc of radius ``SACCADE_RADIUS_DEG`` around straight ahead (so every
 jump is under 1 degree), in ``SACCADE_S`` (a small saccade's duration on the main sequence,
@@ -36,7 +39,8 @@ with a slow wobble of its phase. Inhaling (40% of the cycle) lifts the head ``BR
 and flares the nostrils ``NOSTRIL_ENS``; exhaling (60%) lets them back. Subtle on purpose.
 
 ``offsets`` is vectorised over times (a 10-minute take's 18,000 frames in one call); a live frame
-asks for one time (``add_to``), a few dozen small numpy operations.
+asks for one time (``add_to``): plain floats, ``bisect`` and ``math``, about 5 us (numpy's
+per-call overhead on one-element arrays cost 20 times that). Both give the same values.
 """
 
 from __future__ import annotations
