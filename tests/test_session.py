@@ -43,6 +43,7 @@ def _run_until(session, condition, timeout=5.0, period=0.005):
 
 
 def test_sliders_move_the_face_and_an_unplugged_box_holds_it(session, shared_runtime):
+    session.mapping.idle = None   # idle life goes on through a hold (tests/test_idlelife.py); here: the channels
     box = session.devices["box"]
     rest = shared_runtime.rest
     f = _run_until(session, lambda f: f.states["box"] is State.OPEN and f.newest_sample_ns is not None
@@ -127,6 +128,7 @@ def test_a_device_that_never_answers_leaves_the_face_at_rest_and_the_take_valid(
     with PtyJoystick(rate=None) as silent:  # a port that opens and then says nothing
         box = open_device(f"serial://{silent.path}?protocol=ascii", "box")
         with LiveSession(MAPPING, face=shared_runtime, devices={"box": box}, record_root=tmp_path) as s:
+            s.mapping.idle = None   # rest is the channels' rest; idle life would blink on (tests/test_idlelife.py)
             assert box.wait_state(State.OPEN, 5.0)
             s.start_recording()
             for _ in range(5):

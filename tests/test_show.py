@@ -40,6 +40,7 @@ targets:
   - {expression: joy, source: api.smile}
 triggers:
   wow: {source: api.wow, mode: oneshot, expression: surprise, attack: 0.05, hold: 0.2, release: 0.05}
+idle: false   # the feed's first frame is compared with the face at rest (idle life: tests/test_idlelife.py)
 """
 
 

@@ -31,6 +31,10 @@ their FAPs and muscles add; the envelopes run on the Samples' timestamps and the
 ``feed(sample)`` shapes the sample's channels at once (plain Python floats, no per-sample dict or
 YAML walking beyond the sample's own values); ``pose()`` combines the targets into a ``Pose``.
 
+Idle life (``puppet.live.idlelife``: blinks, eye saccades and drift, breath) is added to the FAPs
+of a timed ``pose``, part by part, while no target that writes the part's FAPs is away from its
+rest; its seed and origin are part of ``snapshot()``, so a take's replay makes the same motion.
+
 The channels and targets come checked from the mapping file (``puppet.live.mappingfile``), as
 ``ChannelSpec`` and ``TargetSpec``; nothing here reads YAML.
 """
@@ -39,6 +43,7 @@ from __future__ import annotations
 
 import bisect
 import math
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -49,6 +54,7 @@ from puppet.fap.pose import Pose
 from puppet.fap.table import N_FAPS, faps
 from puppet.fap.units import AU
 from puppet.live.filters import Exponential, OneEuro, RateLimit
+from puppet.live.idlelife import ALL_ON, PART_FAPS, IdleLife, IdleSpec, random_seed
 from puppet.live.triggers import Triggers, TriggerSpec, TriggerState
 
 COMBINE_MODES = ("sum", "max", "last")
@@ -266,7 +272,7 @@ class _Target:
     """One target compiled: its sources, the affine map from their domain onto the range, a clamp."""
 
     __slots__ = ("kind", "key", "slots", "sources", "mode", "gain", "x0", "scale", "low", "cmin", "cmax",
-                 "label", "last", "guard")
+                 "label", "last", "guard", "rest", "still")
 
     def __init__(self, spec: TargetSpec, sources: list[_Channel], bipolar: bool, guard: _Guard) -> None:
         self.kind, self.key = spec.kind, spec.key
@@ -300,7 +306,13 @@ class _Target:
             name = next(k for k, v in EXPRESSIONS.items() if v == spec.key)
         self.label = f"{spec.kind} {spec.key}" + (f" {name}" if name else "")
         rest = low - self.x0 * self.scale  # every source at 0: the value before any sample
-        self.last = self.cmin if rest < self.cmin else self.cmax if rest > self.cmax else rest
+        self.last = self.rest = self.cmin if rest < self.cmin else self.cmax if rest > self.cmax else rest
+        self.still = 1e-3 * (self.cmax - self.cmin)  # how far from rest still counts as at rest
+
+    def away(self) -> bool:
+        """Whether the last value left rest (by more than 0.1% of the range: a filter's tail does not)."""
+        d = self.last - self.rest
+        return (d if d >= 0.0 else -d) > self.still
 
     def evaluate(self) -> float:
         sources = self.sources
@@ -340,7 +352,7 @@ class Mapping:
 
     def __init__(self, file: str, devices: dict[str, str], channels: dict[str, ChannelSpec],
                  targets: list[TargetSpec], description: str = "",
-                 triggers: list[TriggerSpec] | tuple[TriggerSpec, ...] = ()) -> None:
+                 triggers: list[TriggerSpec] | tuple[TriggerSpec, ...] = (), idle: IdleSpec | None = ALL_ON) -> None:
         self.file = file
         self.description = description
         self.devices = dict(devices)
@@ -374,6 +386,11 @@ class Mapping:
         self._ranks_visemes = bool(self._visemes or self.triggers.visemes)
         self._ranks_expressions = bool(self._expressions or self.triggers.expressions)
         self._shapes = high_level_faps() if self._ranks_visemes or self._ranks_expressions else None
+        self.idle_spec = idle
+        self.idle = None if idle is None or not idle.parts else IdleLife(
+            random_seed() if idle.seed is None else idle.seed, time.monotonic_ns(), idle.parts)
+        self._yield_to = {part: self._drivers(part) for part in PART_FAPS}
+        self._yielded: tuple[str, ...] = ()
 
     # -- the hot path --------------------------------------------------------------------------
 
@@ -404,9 +421,13 @@ class Mapping:
     def pose(self, t_ns: int | None = None, trigger_ns: int | None = None) -> Pose:
         """The Pose for the channels as last fed; with ``t_ns``, smoothing and rate limits are
         carried on to that time with each input held (without changing the state), so the face
-        settles between the samples of devices that only report changes. The triggers play at
-        ``trigger_ns`` (default ``t_ns``): a session holding the pose while a device is away
-        still plays them on its own clock."""
+        settles between the samples of devices that only report changes. The triggers and idle
+        life play at ``trigger_ns`` (default ``t_ns``): a session holding the pose while a device
+        is away still plays them on its own clock.
+
+        Idle life (``self.idle``; none without a time) is added part by part, only where no
+        target or trigger that writes the part's FAPs is away from rest at that time
+        (``idle_yields``): it yields at once, with no fade, and comes back the frame they rest."""
         if t_ns is None:
             for c in self._timed:
                 c.out = c.value
@@ -429,7 +450,44 @@ class Mapping:
             muscles[name] = 0.0 if v < 0.0 else 1.0 if v > 1.0 else v
         viseme = self._viseme(fap, visemes) if self._ranks_visemes else None
         expression = self._expression(fap, expressions) if self._ranks_expressions else None
+        at = t_ns if trigger_ns is None else trigger_ns
+        if self.idle is not None and at is not None:
+            self._yielded = self._yields(at)
+            self.idle.add_to(fap, at, self._yielded)
         return Pose(fap, viseme, expression, muscles, t_ns)
+
+    def _drivers(self, part: str) -> tuple[tuple[_Target, ...], tuple]:
+        """What writes a part's FAPs: the targets (FAP, head and eye targets on them, visemes and
+        expressions whose shapes move them, and for the blink the muscles that shut the eye)
+        and the triggers (FAPs, expressions, visemes or clips that move them, those muscles)."""
+        slots = sorted({n - 1 for n in PART_FAPS[part]})
+        shapes = self._shapes or {}
+
+        def moves(kind: str, key) -> bool:
+            shape = shapes.get(kind, {}).get(key)
+            return shape is not None and bool(np.any(shape[slots]))
+
+        eyelids = part == "blink"
+        found = [t for t in self._faps if set(slots) & set(t.slots)]
+        found += [t for t in self._visemes if moves("visemes", t.key)]
+        found += [t for t in self._expressions if moves("expressions", t.key)]
+        found += [t for t in self._muscles if eyelids and t.key.startswith("orbicularis_oculi")]
+        triggers = [tr for tr in self.triggers.all.values()
+                    if (tr.fap is not None and np.any(tr.fap[slots]))
+                    or (tr.spec.expression and moves("expressions", tr.spec.expression))
+                    or (tr.spec.viseme and moves("visemes", tr.spec.viseme))
+                    or (tr.spec.clip is not None and np.any(tr.spec.clip.frames[:, slots]))
+                    or (eyelids and any(m.startswith("orbicularis_oculi") for m, _ in tr.spec.muscles))]
+        return tuple(found), tuple(triggers)
+
+    def _yields(self, t_ns: int) -> tuple[str, ...]:
+        """The idle parts a target away from rest, or a trigger playing at ``t_ns``, drives."""
+        return tuple(part for part, (targets, triggers) in self._yield_to.items()
+                     if any(t.away() for t in targets) or any(tr.level(t_ns) > 0.0 for tr in triggers))
+
+    def idle_yields(self) -> tuple[str, ...]:
+        """The idle parts left to the channels and triggers at the last timed ``pose``."""
+        return self._yielded
 
     def _strengths(self, targets, extra: dict[int, float]) -> list[tuple[float, int]]:
         """(strength 0..63, select) per distinct select, strongest first (ties: target order, then
@@ -540,7 +598,8 @@ class Mapping:
         """The state the fed Samples left (raw and shaped values, filters, buttons, triggers), JSON-able
         and exact: a take keeps it from its first frame, so replaying the take's log from it
         gives the same poses as the live session did."""
-        state = {"seq": self._seq, "channels": {name: c.snapshot() for name, c in self._channels.items()}}
+        state = {"seq": self._seq, "channels": {name: c.snapshot() for name, c in self._channels.items()},
+                 "idle": None if self.idle is None else self.idle.state()}
         if self.triggers:
             state["triggers"] = self.triggers.snapshot()
         return state
@@ -552,6 +611,7 @@ class Mapping:
         performer's hands were."""
         self.reset()
         self._seq = snapshot["seq"]
+        self._restore_idle(snapshot.get("idle"))
         specs = self._specs if recorded is None else recorded._specs
         readings: dict[tuple[int, str], dict[str, float]] = {}
         for name, data in snapshot["channels"].items():
@@ -566,6 +626,15 @@ class Mapping:
         for (t_ns, device), values in sorted(readings.items()):
             self.feed(Sample(t_ns, device, values))
         self.triggers.restore(snapshot.get("triggers"), None if recorded is None else recorded.triggers)
+
+    def _restore_idle(self, state: dict | None) -> None:
+        """The recorded idle life's seed and origin, with this mapping's parts (a take without
+        one, idle off or made before idle life, gets none: its frames had none)."""
+        spec = self.idle_spec
+        if state is None or spec is None or not spec.parts:
+            self.idle = None
+            return
+        self.idle = IdleLife(int(state["seed"]), int(state["origin_ns"]), spec.parts)
 
     def __repr__(self) -> str:
         return (f"Mapping({self.file!r}: {len(self.devices)} devices, {len(self._channels)} channels, "

@@ -30,6 +30,7 @@ and sends the shaped values to targets: FAPs (in FAPU units, as in a .fap file),
       - {muscle: zygomatic_major_l, source: box.ch0, gain: 0.5}
       - {head: yaw, source: pad.X, range: [-30, 30]}          # degrees, written as FAP 49 in AU
       - {expression: joy, source: [pad.A, box.ch0], combine: max}
+    idle: {blink: true, eyes: true, breath: false, seed: 7}  # idle life; default all on; false: off
 
 Per-device ``options`` are folded into the device URL's query, so ``Mapping.devices`` is just
 {name: URL}. Before its first sample a channel reads 0 (the face at rest). ``pose(t_ns)`` carries
@@ -68,11 +69,14 @@ from puppet.errors import PuppetError
 from puppet.face.muscles import MUSCLE_NAMES
 from puppet.fap.table import N_FAPS, faps
 from puppet.live.channels import COMBINE_MODES, EXPRESSIONS, EYE_AXES, HEAD_AXES, ChannelSpec, Mapping, TargetSpec
+from puppet.live.idlelife import ALL_ON, IdleSpec
+from puppet.live.idlelife import PARTS as IDLE_PARTS
 from puppet.live.triggercheck import check_triggers
 
 # -- the format -------------------------------------------------------------------------------
 
-ROOT_KEYS = ("devices", "channels", "targets", "description", "triggers")
+ROOT_KEYS = ("devices", "channels", "targets", "description", "triggers", "idle")
+IDLE_KEYS = IDLE_PARTS + ("seed",)
 DEVICE_KEYS = ("url", "options", "description")
 CHANNEL_KEYS = ("range", "min", "centre", "max", "invert", "dead_zone", "curve", "smoothing",
                 "rate_limit", "button", "description")
@@ -435,7 +439,7 @@ class _Checker:
 
     # -- the document ------------------------------------------------------------------------
 
-    def root(self, data) -> tuple[dict, dict, list] | None:
+    def root(self, data) -> tuple[dict, dict, list, IdleSpec | None] | None:
         if not isinstance(data, dict):
             self.expect((), "a mapping with the keys devices, channels and targets at the top of the file", data)
             return None
@@ -445,7 +449,29 @@ class _Checker:
         devices = self.devices(data["devices"]) if "devices" in data else {}
         channels = self.channels(data["channels"]) if "channels" in data else {}
         targets = self.targets(data["targets"], channels) if "targets" in data else []
-        return devices, channels, targets
+        idle = self.idle(data["idle"]) if "idle" in data else ALL_ON
+        return devices, channels, targets, idle
+
+    def idle(self, value) -> IdleSpec | None:
+        """``idle: false`` (none), ``true`` (all parts), or ``{blink, eyes, breath: bool, seed: int}``."""
+        if isinstance(value, bool):
+            return ALL_ON if value else None
+        if not isinstance(value, dict):
+            self.expect(("idle",), "true, false or a mapping (blink, eyes, breath: true/false; seed: a whole "
+                                   "number)", value)
+            return None
+        self.mapping(("idle",), value, IDLE_KEYS, "idle life")
+        parts = {}
+        for part in IDLE_PARTS:
+            on = value.get(part, True)
+            if not isinstance(on, bool):
+                self.expect(("idle", part), "true or false", on)
+            parts[part] = on is not False
+        seed = value.get("seed")
+        if seed is not None and (not isinstance(seed, int) or isinstance(seed, bool) or not 0 <= seed < 2 ** 63):
+            self.expect(("idle", "seed"), f"a whole number from 0 to {2 ** 63 - 1}", seed)
+            seed = None
+        return IdleSpec(**parts, seed=seed)
 
     def devices(self, value) -> dict[str, str]:
         path = ("devices",)
@@ -840,7 +866,7 @@ def compile_mapping(data, file: str = "<mapping>", *, lines: dict | None = None,
     if checker.problems:
         checker.problems.sort(key=lambda p: (p.line or 0))
         raise MappingError(file, checker.problems)
-    devices, channels, targets = result
-    return Mapping(file, devices, channels, targets, data.get("description", ""), triggers)
+    devices, channels, targets, idle = result
+    return Mapping(file, devices, channels, targets, data.get("description", ""), triggers, idle)
 
 

@@ -18,7 +18,9 @@ Holding the pose
     channels (no new samples) give exactly the values of that frame, so the face holds still
     instead of drifting on filter previews; other devices' new samples still come through at
     their filtered values, and the triggers play on at ``now`` (a key pressed while the slider
-    box is away still smiles). When the device is back (OPEN) the clock runs again.
+    box is away still smiles), and so does idle life (blinks, eyes, breath:
+    ``puppet.live.idlelife``): the performed channels hold, the face does not freeze mid-blink.
+    When the device is back (OPEN) the clock runs again.
 
 Recording
     ``start_recording()`` opens a ``TakeRecorder`` and a ``TakeClock`` (``puppet.live.takeclock``):
@@ -221,7 +223,8 @@ class LiveSession:
         if self.pose_error is None and self.mapping.held_values:
             self.pose_error = self.mapping.held_problem
             warnings.warn(self.pose_error, RuntimeWarning, stacklevel=2)
-        playing = triggered or self.mapping.triggers  # triggers play on while the pose is held
+        # triggers and idle life play on while the pose is held
+        playing = triggered or self.mapping.triggers or self.mapping.idle is not None
         if samples or playing or pose_ns != self._last_pose_ns or not self._have_mesh or self.layer is not None:
             shown = pose if self.layer is None else Pose(*self._layered(now, pose), pose.muscles)
             self.runtime.deform_pose(shown, out=self._vertices, normals_out=self._normals,

@@ -10,7 +10,7 @@ writes exactly the frames the live session wrote:
   the live loop wrote ticks after its last Sample);
 * ``hold`` at t: a device is away; ticks are evaluated at ``min(tick, t)``, so the take holds
   the pose of the moment it went (other devices' new Samples still come through, and the
-  triggers play on at the tick);
+  triggers and idle life (``puppet.live.idlelife``) play on at the tick);
 * ``resume``: every device is back; ticks run at their own time again;
 * ``reset``: ticks before t are written, then every channel goes back to rest (neutral);
 * ``recentre``: ticks before t are written, then the bipolar channels take the logged centres;

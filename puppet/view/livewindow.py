@@ -372,6 +372,8 @@ def run_live(mapping_path: str | os.PathLike, *, record: str | None = None, fps:
             _exit(str(error))
         raise
     print(f"takes go to {session.record_root.resolve()}", file=sys.stderr)
+    print(session.mapping.idle.describe() if session.mapping.idle is not None else "idle life: off",
+          file=sys.stderr)
     if shown is None:
         print("no window: Ctrl+C ends (a take being recorded is finished first)", file=sys.stderr)
         live = HeadlessLive(session, made, LiveStats())
