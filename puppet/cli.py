@@ -137,13 +137,19 @@ PROGRAM_HELP = ("with --serve: also open the program window, the face alone on a
 KEY_COLOUR_HELP = "the program window's key colour, RRGGBB in hex (default 00FF00: pure green)"
 
 
-def _program_options(parser: argparse.ArgumentParser) -> None:
+def _show_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--program", action="store_true", help=PROGRAM_HELP)
     parser.add_argument("--key-colour", type=_colour, default=(0, 255, 0), metavar="RRGGBB", help=KEY_COLOUR_HELP)
+    parser.add_argument("--ndi", default=None, metavar="NAME",
+                        help="also send the face as an NDI source NAME, with alpha (needs the ndi extra: cyndilib)")
 
 
-def _check_program(args: argparse.Namespace) -> None:
-    """``--program`` needs ``--serve`` and a display, both checked before anything opens."""
+def _check_shows(args: argparse.Namespace) -> None:
+    """``--program`` needs ``--serve`` and a display, ``--ndi`` its extra: checked before anything opens."""
+    if args.ndi is not None:
+        from puppet.show.ndi import load_cyndilib
+
+        load_cyndilib()
     if args.program and args.serve is None:
         raise PuppetError("--program needs --serve HOST:PORT: the window shows the served feed")
     if args.program:
@@ -155,32 +161,47 @@ def _check_program(args: argparse.Namespace) -> None:
             raise NoDisplayError(f"--program: {exc}") from None
 
 
-def _with_program(args: argparse.Namespace, server) -> list:
-    """The rig's outputs: the server, and before it (so it closes first) the program window."""
-    if not args.program:
-        return [server]
-    from puppet.show.program import ProgramProcess
+def _shows(args: argparse.Namespace, face, serve: Callable) -> list:
+    """The rig's outputs: the server (``serve()`` starts it) when ``--serve``, the program window
+    before it (so that it closes first) when ``--program``, the NDI source when ``--ndi``."""
+    made: list = []
+    try:
+        if args.ndi is not None:
+            from puppet.show.ndi import ndi_output
 
-    return [ProgramProcess(server, args.key_colour), server]
+            made.append(ndi_output(face, args.ndi, args.view))
+        if args.serve is not None:
+            server = serve()
+            made.insert(0, server)
+            if args.program:
+                from puppet.show.program import ProgramProcess
+
+                made.insert(0, ProgramProcess(server, args.key_colour))
+    except BaseException:
+        from puppet.view.liveoutput import close_outputs
+
+        close_outputs(made)
+        raise
+    return made
 
 
 def _play_arguments(play: argparse.ArgumentParser) -> None:
     _window_arguments(play)
     play.add_argument("--serve", type=_address, default=None, metavar="HOST:PORT", help=SERVE_HELP)
-    _program_options(play)
+    _show_options(play)
 
 
 def _play(args: argparse.Namespace) -> int:
     """``puppet play``: a take in a window, in real time."""
     from puppet.view.window import play_take
 
-    _check_program(args)
+    _check_shows(args)
     outputs = None
-    if args.serve is not None:
-        from puppet.show.serving import serve_playback
-
+    if args.serve is not None or args.ndi is not None:
         def outputs(face):
-            return _with_program(args, serve_playback(face, args.serve, args.view))
+            from puppet.show.serving import serve_playback
+
+            return _shows(args, face, lambda: serve_playback(face, args.serve, args.view))
     play_take(args.take, size=args.size, view=args.view, face=_face(args.face), outputs=outputs)
     return 0
 
@@ -269,8 +290,9 @@ def _live_arguments(live: argparse.ArgumentParser) -> None:
                       help="with --serve: also take the control API as OSC messages on this UDP address "
                            "(/puppet/set/CHANNEL, /puppet/trigger/NAME, /puppet/record/start|stop, /puppet/neutral)")
     live.add_argument("--no-window", action="store_true",
-                      help="no window, only the --serve feed and API (e.g. on a machine with no display); Ctrl+C ends")
-    _program_options(live)
+                      help="no window, only the --serve feed and API or the --ndi source (e.g. on a machine with no "
+                           "display); Ctrl+C ends")
+    _show_options(live)
 
 
 def _live(args: argparse.Namespace) -> int:
@@ -282,15 +304,18 @@ def _live(args: argparse.Namespace) -> int:
         raise TakeError("--layer-over needs --arm: what the pass replaces (e.g. --arm box.ch0)")
     if args.arm and not args.layer_over:
         raise TakeError("--arm needs --layer-over: the take the pass is recorded over")
-    if args.serve is None and (args.no_window or args.osc_control):
-        raise PuppetError(f"{'--no-window' if args.no_window else '--osc-control'} needs --serve HOST:PORT")
-    _check_program(args)
+    if args.serve is None and args.osc_control:
+        raise PuppetError("--osc-control needs --serve HOST:PORT")
+    if args.serve is None and args.ndi is None and args.no_window:
+        raise PuppetError("--no-window needs --serve HOST:PORT or --ndi NAME")
+    _check_shows(args)
     outputs = None
-    if args.serve is not None:
-        from puppet.show.serving import serve_live
-
+    if args.serve is not None or args.ndi is not None:
         def outputs(session):
-            return _with_program(args, serve_live(session, args.serve, args.view, args.osc_control))
+            from puppet.show.serving import serve_live
+
+            return _shows(args, session.runtime.face,
+                          lambda: serve_live(session, args.serve, args.view, args.osc_control))
     run_live(args.mapping, record=args.record, fps=args.fps, size=args.size, view=args.view,
              devices=dict(args.device) or None, face=_face(args.face), layer_over=args.layer_over,
              arm=[a for a in args.arm.split(",") if a], record_root=args.takes, outputs=outputs,
