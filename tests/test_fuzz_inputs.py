@@ -1,5 +1,6 @@
 """Fuzzing what users, devices and other programs hand us: arbitrary bytes and near-valid .fap
-files, mappings, serial byte streams, OSC datagrams, and take folders with a part garbled (HID
+files, mappings, serial byte streams, OSC datagrams, the control API's messages and OSC control
+addresses, and take folders with a part garbled (HID
 descriptors: tests/test_hid_descriptors.py). Only documented errors may come out (``PuppetError`` and its
 subclasses; ``MappingError`` and ``DeviceError`` for a take's mapping and devices), each input in
 bounded time (hypothesis's deadline) and bounded memory (tracemalloc's peak). Set
@@ -40,6 +41,7 @@ from puppet.io.takes import open_take
 from puppet.live.arkit import import_csv
 from puppet.live.mappingfile import MappingError, load_mapping, parse_mapping
 from puppet.live.retake import retake
+from puppet.show import api, osccontrol
 from puppet.view.rendertake import FapPlayback
 
 DOCUMENTED = (PuppetError, MappingError, DeviceError)
@@ -276,6 +278,42 @@ def near_valid_datagram(draw) -> bytes:
 @given(datagram=st.one_of(st.binary(max_size=600), near_valid_datagram()))
 def test_osc_datagrams(datagram):
     _bounded("osc datagram", lambda: parse_datagram(datagram))
+
+
+# -- the control API's messages and OSC control addresses -------------------------------------------
+
+API_SEEDS = ['{"type": "status", "id": 1}', '{"type": "set", "channels": {"smile": 0.8}}',
+             '{"type": "trigger", "name": "wow", "action": "press"}', '{"type": "record", "action": "start"}',
+             '{"type": "subscribe", "interval": 0.5}', '{"type": "takes"}', '{"type": "neutral"}']
+
+
+@st.composite
+def near_valid_api_message(draw) -> str:
+    text = list(draw(st.sampled_from(API_SEEDS)))
+    for _ in range(draw(st.integers(0, 3))):
+        text[draw(st.integers(0, len(text) - 1))] = draw(st.characters())
+    return "".join(text[:draw(st.one_of(st.just(len(text)), st.integers(0, len(text))))])
+
+
+@settings(max_examples=400 * SCALE, deadline=2000, suppress_health_check=[HealthCheck.too_slow])
+@given(message=st.one_of(st.text(max_size=400), st.binary(max_size=200), near_valid_api_message()))
+def test_api_messages(message):
+    _bounded("api message", lambda: api.parse(message))
+
+
+OSC_CONTROL_SEEDS = [_osc_message(b"/puppet/set/smile", b",f", b"\x3f\x00\x00\x00"),
+                     _osc_message(b"/puppet/trigger/wow", b",i", b"\0\0\0\1"),
+                     _osc_message(b"/puppet/record/start", b",", b""),
+                     _osc_message(b"/puppet/set", b",sf", b"smile\0\0\0\x3f\x00\x00\x00")]
+
+
+@settings(max_examples=300 * SCALE, deadline=2000, suppress_health_check=[HealthCheck.too_slow])
+@given(datagram=st.one_of(st.binary(max_size=300), st.sampled_from(OSC_CONTROL_SEEDS).flatmap(
+    lambda seed: st.integers(0, len(seed) - 1).flatmap(
+        lambda at: st.integers(0, 255).map(lambda byte: seed[:at] + bytes([byte]) + seed[at + 1:])))))
+def test_osc_control_messages(datagram):
+    _bounded("osc control", lambda: [osccontrol.api_message(address, arguments)
+                                     for address, arguments in parse_datagram(datagram)])
 
 
 # -- take folders -----------------------------------------------------------------------------------

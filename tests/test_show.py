@@ -3,6 +3,7 @@ WebSockets against a live session; the page itself in a real browser is in test_
 
 from __future__ import annotations
 
+import contextlib
 import json
 import socket
 import threading
@@ -149,13 +150,14 @@ def face():
     return load_face()
 
 
-@pytest.fixture
-def show(tmp_path, face):
-    mapping = tmp_path / "api.yaml"
+@contextlib.contextmanager
+def live_show(folder: Path, face, take: str = "api", osc: tuple[str, int] | None = None):
+    """(server, session): the API mapping's live session, served, its loop running."""
+    mapping = folder / "api.yaml"
     mapping.write_text(API_MAPPING)
-    session = open_session(mapping, record="api", record_root=tmp_path / "takes", face=face)
+    session = open_session(mapping, record=take, record_root=folder / "takes", face=face)
     camera = aim_camera(head_points(face), (320, 320))
-    server = ShowServer(face, camera, port=0, size=(320, 320), stage=LiveStage(session)).start()
+    server = ShowServer(face, camera, port=0, size=(320, 320), stage=LiveStage(session), osc=osc).start()
     loop = Loop(session, server)
     try:
         yield server, session
@@ -163,6 +165,12 @@ def show(tmp_path, face):
         loop.close()
         server.close()
         session.close()
+
+
+@pytest.fixture
+def show(tmp_path, face):
+    with live_show(tmp_path, face) as served:
+        yield served
 
 
 def _ask(ws, **message) -> dict:
@@ -266,7 +274,7 @@ def test_the_feed_sends_the_face_then_frames_and_hears_each_drawn(show, face):
     with connect(f"ws://127.0.0.1:{server.port}/feed?token={server.token}", max_size=None) as ws:
         first = json.loads(ws.recv(timeout=5))
         assert first["type"] == "face" and first["n_vertices"] == len(face.vertices)
-        assert "#version 300 es" in first["vertex_shader"]
+        assert all("#version 300 es" in text for pair in first["shaders"].values() for text in pair)
         kind, number, published, codes = decode(ws.recv(timeout=5), None)
         assert kind == KEY
         positions = Quantiser(np.array(first["origin"]), np.array(first["step"])).positions(codes)
@@ -314,13 +322,7 @@ def test_osc_messages_that_stand_for_nothing_say_why(address, arguments, reason)
 
 
 def test_a_lighting_desk_starts_a_take_over_osc(tmp_path, face):
-    mapping = tmp_path / "api.yaml"
-    mapping.write_text(API_MAPPING)
-    session = open_session(mapping, record="desk", record_root=tmp_path / "takes", face=face)
-    camera = aim_camera(head_points(face), (320, 320))
-    server = ShowServer(face, camera, port=0, stage=LiveStage(session), osc=("127.0.0.1", 0)).start()
-    loop = Loop(session, server)
-    try:
+    with live_show(tmp_path, face, "desk", osc=("127.0.0.1", 0)) as (server, session):
         desk = SimpleUDPClient(*server.osc_address)
         desk.send_message("/puppet/set/smile", 1.0)
         desk.send_message("/puppet/record/start", [])
@@ -332,7 +334,53 @@ def test_a_lighting_desk_starts_a_take_over_osc(tmp_path, face):
         sock.sendto(b"\xff" * 13, server.osc_address)  # not OSC at all
         assert _wait(lambda: server.osc.counts["refused"] == 2)
         assert (tmp_path / "takes" / "desk_001" / "take.fap").exists()
-    finally:
-        loop.close()
-        server.close()
-        session.close()
+
+
+def test_a_stream_of_mangled_messages_is_answered_one_by_one_and_the_loop_goes_on(show):
+    server, session = show
+    rng = np.random.default_rng(7)
+    seeds = ['{"type": "status", "id": 1}', '{"type": "set", "channels": {"smile": 0.8}}',
+             '{"type": "trigger", "name": "wow", "action": "press"}', '{"type": "takes"}', '{"type": "neutral"}']
+    frames = session.frames
+    with connect(f"ws://127.0.0.1:{server.port}/api?token={server.token}") as ws:
+        answers = []
+        for k in range(300):
+            text = list(seeds[k % len(seeds)])
+            for _ in range(rng.integers(0, 3)):
+                text[rng.integers(len(text))] = chr(rng.integers(0, 0x3000))
+            ws.send("".join(text[:rng.integers(len(text) // 2, len(text) + 1)]))
+            answers.append(json.loads(ws.recv(timeout=5)))
+    assert all(isinstance(a["ok"], bool) and (a["ok"] or a["error"]) for a in answers)
+    assert 0 < sum(a["ok"] for a in answers) < 300
+    assert _wait(lambda: session.frames > frames + 10)
+
+
+def test_a_subscriber_hears_status_on_its_interval_and_at_once_when_a_take_starts(show):
+    server, _ = show
+    url = f"ws://127.0.0.1:{server.port}/api?token={server.token}"
+    with connect(url) as watcher, connect(url) as script:
+        watcher.send(json.dumps({"type": "subscribe", "interval": 1.0, "id": "w"}))
+        events = []
+        while len(events) < 1:
+            message = json.loads(watcher.recv(timeout=5))
+            if message.get("type") == "status":
+                events.append(message)
+        assert {"devices", "fps", "latency_ms", "recording", "frames", "triggers"} <= set(events[0]["status"])
+        _ask(script, type="record", action="start")
+        started = time.monotonic()
+        while True:  # the change is told before the next tick of the interval
+            message = json.loads(watcher.recv(timeout=5))
+            if message.get("type") == "status" and message["status"]["recording"]:
+                break
+        assert time.monotonic() - started < 0.9
+        _ask(script, type="record", action="stop")
+
+
+def test_the_guide_s_python_client_runs_against_a_live_rig(show, monkeypatch, capsys):
+    server, _ = show
+    guide = (Path(__file__).resolve().parents[1] / "docs" / "guide" / "show.md").read_text("utf-8")
+    example = guide.split("```python\n", 1)[1].split("```", 1)[0]
+    example = example.replace("8765", str(server.port)).replace("PASTE-THE-TOKEN", server.token)
+    exec(compile(example, "docs/guide/show.md", "exec"), {})
+    printed = capsys.readouterr().out
+    assert "'ok': True" in printed and "api_001" in printed

@@ -27,11 +27,16 @@ def face():
     return load_face()
 
 
+@pytest.fixture(scope="module", params=["pixel", "vertex"])
+def shading(request):
+    return request.param
+
+
 @pytest.fixture(scope="module")
-def reference(face):
-    """The desktop renderer on a transparent backdrop, lit per pixel with no antialiasing (the
-    page's draw with ``antialias=0``), and its camera."""
-    renderer = Renderer.for_face(face, width=SIZE[0], height=SIZE[1], transparent=True, shading="pixel",
+def reference(face, shading):
+    """The desktop renderer on a transparent backdrop, lit per pixel or per vertex with no
+    antialiasing (the page's draw with ``antialias=0`` and that ``shading``), and its camera."""
+    renderer = Renderer.for_face(face, width=SIZE[0], height=SIZE[1], transparent=True, shading=shading,
                                  antialias="none", samples=0, detail=False)
     aim_at_head(renderer, face, "front")
     yield renderer
@@ -39,9 +44,9 @@ def reference(face):
 
 
 @pytest.fixture(scope="module")
-def page(face, reference):
+def page(face, reference, shading):
     with ShowServer(face, reference.camera, port=0, size=SIZE) as server, HeadlessChromium(SIZE) as browser:
-        browser.open(server.page_url + "&antialias=0")
+        browser.open(server.page_url + f"&antialias=0&shading={shading}")
         yield server, browser
 
 

@@ -1,7 +1,7 @@
 """Run the fuzz properties for longer than CI does and print the counts a robustness report needs.
 
 The properties are the test suite's own (``tests/test_fuzz_inputs.py``: .fap files, mappings,
-serial framing, OSC datagrams, take folders; ``tests/test_hid_descriptors.py``: HID descriptors),
+serial framing, OSC datagrams, the control API's messages and OSC control addresses, take folders; ``tests/test_hid_descriptors.py``: HID descriptors),
 run by pytest exactly as CI runs them, with ``PUPPET_FUZZ_SCALE`` raised so that each target
 takes about its share of the budget (a first run at scale 1 measures it). For each kind of input
 it prints the inputs tried, how many were read, how many were refused with a documented error,
@@ -32,6 +32,8 @@ TARGETS = {
     "mapping": "tests/test_fuzz_inputs.py::test_mapping_text",
     "serial": "tests/test_fuzz_inputs.py::test_serial_framing",
     "osc": "tests/test_fuzz_inputs.py::test_osc_datagrams",
+    "api": "tests/test_fuzz_inputs.py::test_api_messages",
+    "osc-control": "tests/test_fuzz_inputs.py::test_osc_control_messages",
     "take-folders": "tests/test_fuzz_inputs.py::test_garbled_take_folders",
     "hid": "tests/test_hid_descriptors.py::test_any_bytes_as_a_descriptor_read_or_refused_in_bounded_memory",
 }

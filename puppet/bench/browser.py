@@ -28,7 +28,7 @@ from websockets.sync.client import connect
 from puppet.errors import PuppetError
 
 BROWSERS = ("chromium", "chromium-browser", "google-chrome")
-START_TIMEOUT = 30.0
+START_TIMEOUT = 60.0
 
 
 class BrowserError(PuppetError, RuntimeError):
@@ -109,7 +109,7 @@ class HeadlessChromium:
             raise BrowserError(f"{expression}: {result['exceptionDetails'].get('text')}")
         return result["result"].get("value")
 
-    def wait_for(self, expression: str, timeout: float = 20.0) -> Any:
+    def wait_for(self, expression: str, timeout: float = 60.0) -> Any:
         """Wait until ``expression`` is truthy in the page; its value (BrowserError on timeout)."""
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:

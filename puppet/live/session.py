@@ -59,6 +59,7 @@ import statistics
 import threading
 import time
 import warnings
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -365,20 +366,26 @@ class LiveSession:
             self._close_devices()
 
     def _close_devices(self) -> None:
-        errors = []
-        for device in self.devices.values():
-            try:
-                device.close()
-            except Exception as exc:  # noqa: BLE001 -- close the rest, then report
-                errors.append(exc)
-        if errors:
-            raise errors[0]
+        close_each(self.devices.values())
 
     def __enter__(self) -> LiveSession:
         return self
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def close_each(things: Iterable) -> None:
+    """Close each of ``things`` (devices, outputs), even if another fails; the first failure is
+    raised after."""
+    errors = []
+    for thing in things:
+        try:
+            thing.close()
+        except Exception as exc:  # noqa: BLE001 -- close the rest, then report
+            errors.append(exc)
+    if errors:
+        raise errors[0]
 
 
 # -- latency ----------------------------------------------------------------------------------

@@ -26,7 +26,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from puppet.view.renderer import LIGHT_UNIFORMS, Camera, camera_uniforms, material_data, webgl_shaders
+from puppet.view.renderer import (
+    LIGHT_UNIFORMS,
+    SHADING_MODES,
+    Camera,
+    camera_uniforms,
+    material_data,
+    webgl_shaders,
+)
 
 KEY, DELTA = 1, 2
 HEADER = struct.Struct("<B3xId")
@@ -72,7 +79,6 @@ class Quantiser:
 def face_message(face, camera: Camera, quantiser: Quantiser, size: tuple[int, int]) -> dict:
     """The page's first message: topology, materials, shaders, camera and lights (JSON-able)."""
     textured = getattr(face, "texture", None) is not None
-    vertex_shader, fragment_shader = webgl_shaders(textured)
     message = {
         "type": "face", "n_vertices": len(face.vertices), "width": size[0], "height": size[1],
         "triangles": _b64(np.asarray(face.triangles, dtype="<u4")),
@@ -82,7 +88,7 @@ def face_message(face, camera: Camera, quantiser: Quantiser, size: tuple[int, in
                    "fov": camera.fov, "near": camera.near, "far": camera.far},
         "uniforms": {name: np.asarray(value, dtype=float).ravel().tolist() for name, value in LIGHT_UNIFORMS.items()},
         "light_direction": camera_uniforms(camera, size[0] / size[1])["light_direction"].ravel().tolist(),
-        "vertex_shader": vertex_shader, "fragment_shader": fragment_shader, "textured": textured,
+        "shaders": {shading: webgl_shaders(textured, shading) for shading in SHADING_MODES}, "textured": textured,
     }
     if textured:
         message.update(texture_message(face))

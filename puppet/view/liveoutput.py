@@ -21,6 +21,8 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from puppet.live.session import close_each
+
 MAX_FPS = 60
 IDLE_FPS = 30
 
@@ -51,14 +53,7 @@ def publish(outputs: Sequence[LiveOutput], frame: Any, status: dict) -> None:
 
 def close_outputs(outputs: Iterable[LiveOutput]) -> None:
     """Close each output, even if another fails; the first failure is raised after."""
-    errors = []
-    for output in outputs:
-        try:
-            output.close()
-        except Exception as exc:  # noqa: BLE001 -- close the rest, then report
-            errors.append(exc)
-    if errors:
-        raise errors[0]
+    close_each(outputs)
 
 
 class HeadlessLive:

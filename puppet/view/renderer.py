@@ -1071,12 +1071,14 @@ def camera_uniforms(camera: Camera, aspect: float) -> dict[str, np.ndarray]:
             "light_direction": _LIGHT_DIRECTIONS_CAMERA @ camera.basis()}
 
 
-def webgl_shaders(textured: bool = False) -> tuple[str, str]:
-    """The mesh's vertex and fragment shaders in GLSL ES 3.00 (WebGL 2), lit per pixel from the
-    CPU's normals: this renderer's own text under another header, so that a browser drawing the
-    same vertices, materials and uniforms shows the face with the same look (``puppet.show``)."""
+def webgl_shaders(textured: bool = False, shading: str = "pixel") -> tuple[str, str]:
+    """The mesh's vertex and fragment shaders in GLSL ES 3.00 (WebGL 2), lit per pixel or per
+    vertex (``SHADING_MODES``) from the normals given: this renderer's own text under another
+    header, so that a browser drawing the same vertices, materials and uniforms shows the face
+    with the same look (``puppet.show``)."""
     header = "#version 300 es\nprecision highp float;\nprecision highp int;\n"
-    header += ("#define TEXTURED\n" if textured else "") + _LIGHTING
+    header += ("#define TEXTURED\n" if textured else "") + ("#define PER_VERTEX\n" if shading == "vertex" else "")
+    header += _LIGHTING
     return header + _MESH_VERTEX_SHADER, header + _MESH_FRAGMENT_SHADER
 
 

@@ -32,10 +32,21 @@ function compile(kind, source) {
   return shader;
 }
 
+// Where the lighting is computed: per pixel, or per vertex where WebGL runs on the CPU (SwiftShader,
+// llvmpipe), as the desktop renderer chooses; ?shading=pixel|vertex says which.
+function shading() {
+  const asked = params.get("shading");
+  if (asked === "pixel" || asked === "vertex") return asked;
+  const info = gl.getExtension("WEBGL_debug_renderer_info");
+  const renderer = info ? gl.getParameter(info.UNMASKED_RENDERER_WEBGL) : gl.getParameter(gl.RENDERER);
+  return /swiftshader|llvmpipe|softpipe|software/i.test(renderer) ? "vertex" : "pixel";
+}
+
 function program(face) {
+  const [vertexShader, fragmentShader] = face.shaders[shading()];
   const p = gl.createProgram();
-  gl.attachShader(p, compile(gl.VERTEX_SHADER, face.vertex_shader));
-  gl.attachShader(p, compile(gl.FRAGMENT_SHADER, face.fragment_shader));
+  gl.attachShader(p, compile(gl.VERTEX_SHADER, vertexShader));
+  gl.attachShader(p, compile(gl.FRAGMENT_SHADER, fragmentShader));
   gl.linkProgram(p);
   if (!gl.getProgramParameter(p, gl.LINK_STATUS)) throw new Error(gl.getProgramInfoLog(p));
   return p;
