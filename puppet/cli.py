@@ -132,21 +132,76 @@ SERVE_HELP = ("also serve the face as a program feed for OBS or a browser (trans
               "control API, on HOST:PORT (e.g. 127.0.0.1:8765; the URLs, with their token, are printed)")
 
 
+PROGRAM_HELP = ("with --serve: also open the program window, the face alone on a key colour for OBS's Window "
+                "Capture with a Chroma Key (puppet program)")
+KEY_COLOUR_HELP = "the program window's key colour, RRGGBB in hex (default 00FF00: pure green)"
+
+
+def _show_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--program", action="store_true", help=PROGRAM_HELP)
+    parser.add_argument("--key-colour", type=_colour, default=(0, 255, 0), metavar="RRGGBB", help=KEY_COLOUR_HELP)
+    parser.add_argument("--ndi", default=None, metavar="NAME",
+                        help="also send the face as an NDI source NAME, with alpha (needs the ndi extra: cyndilib)")
+
+
+def _check_shows(args: argparse.Namespace) -> None:
+    """``--program`` needs ``--serve`` and a display, ``--ndi`` its extra: checked before anything opens."""
+    if args.ndi is not None:
+        from puppet.show.ndi import load_cyndilib
+
+        load_cyndilib()
+    if args.program and args.serve is None:
+        raise PuppetError("--program needs --serve HOST:PORT: the window shows the served feed")
+    if args.program:
+        from puppet.view.window import NoDisplayError, check_display
+
+        try:
+            check_display()
+        except NoDisplayError as exc:
+            raise NoDisplayError(f"--program: {exc}") from None
+
+
+def _shows(args: argparse.Namespace, face, serve: Callable) -> list:
+    """The rig's outputs: the server (``serve()`` starts it) when ``--serve``, the program window
+    before it (so that it closes first) when ``--program``, the NDI source when ``--ndi``."""
+    made: list = []
+    try:
+        if args.ndi is not None:
+            from puppet.show.ndi import ndi_output
+
+            made.append(ndi_output(face, args.ndi, args.view))
+        if args.serve is not None:
+            server = serve()
+            made.insert(0, server)
+            if args.program:
+                from puppet.show.program import ProgramProcess
+
+                made.insert(0, ProgramProcess(server, args.key_colour))
+    except BaseException:
+        from puppet.view.liveoutput import close_outputs
+
+        close_outputs(made)
+        raise
+    return made
+
+
 def _play_arguments(play: argparse.ArgumentParser) -> None:
     _window_arguments(play)
     play.add_argument("--serve", type=_address, default=None, metavar="HOST:PORT", help=SERVE_HELP)
+    _show_options(play)
 
 
 def _play(args: argparse.Namespace) -> int:
     """``puppet play``: a take in a window, in real time."""
     from puppet.view.window import play_take
 
+    _check_shows(args)
     outputs = None
-    if args.serve is not None:
-        from puppet.show.serving import serve_playback
-
+    if args.serve is not None or args.ndi is not None:
         def outputs(face):
-            return [serve_playback(face, args.serve, args.view)]
+            from puppet.show.serving import serve_playback
+
+            return _shows(args, face, lambda: serve_playback(face, args.serve, args.view))
     play_take(args.take, size=args.size, view=args.view, face=_face(args.face), outputs=outputs)
     return 0
 
@@ -235,7 +290,9 @@ def _live_arguments(live: argparse.ArgumentParser) -> None:
                       help="with --serve: also take the control API as OSC messages on this UDP address "
                            "(/puppet/set/CHANNEL, /puppet/trigger/NAME, /puppet/record/start|stop, /puppet/neutral)")
     live.add_argument("--no-window", action="store_true",
-                      help="no window, only the --serve feed and API (e.g. on a machine with no display); Ctrl+C ends")
+                      help="no window, only the --serve feed and API or the --ndi source (e.g. on a machine with no "
+                           "display); Ctrl+C ends")
+    _show_options(live)
 
 
 def _live(args: argparse.Namespace) -> int:
@@ -247,18 +304,37 @@ def _live(args: argparse.Namespace) -> int:
         raise TakeError("--layer-over needs --arm: what the pass replaces (e.g. --arm box.ch0)")
     if args.arm and not args.layer_over:
         raise TakeError("--arm needs --layer-over: the take the pass is recorded over")
-    if args.serve is None and (args.no_window or args.osc_control):
-        raise PuppetError(f"{'--no-window' if args.no_window else '--osc-control'} needs --serve HOST:PORT")
+    if args.serve is None and args.osc_control:
+        raise PuppetError("--osc-control needs --serve HOST:PORT")
+    if args.serve is None and args.ndi is None and args.no_window:
+        raise PuppetError("--no-window needs --serve HOST:PORT or --ndi NAME")
+    _check_shows(args)
     outputs = None
-    if args.serve is not None:
-        from puppet.show.serving import serve_live
-
+    if args.serve is not None or args.ndi is not None:
         def outputs(session):
-            return [serve_live(session, args.serve, args.view, args.osc_control)]
+            from puppet.show.serving import serve_live
+
+            return _shows(args, session.runtime.face,
+                          lambda: serve_live(session, args.serve, args.view, args.osc_control))
     run_live(args.mapping, record=args.record, fps=args.fps, size=args.size, view=args.view,
              devices=dict(args.device) or None, face=_face(args.face), layer_over=args.layer_over,
              arm=[a for a in args.arm.split(",") if a], record_root=args.takes, outputs=outputs,
              window=not args.no_window)
+    return 0
+
+
+def _program_arguments(program: argparse.ArgumentParser) -> None:
+    program.add_argument("url", help="the program feed URL that puppet live --serve (or puppet play --serve) printed")
+    program.add_argument("--key-colour", type=_colour, default=(0, 255, 0), metavar="RRGGBB", help=KEY_COLOUR_HELP)
+    program.add_argument("--size", type=_size, default=(720, 720), help="window size WxH (default 720x720)")
+
+
+def _program(args: argparse.Namespace) -> int:
+    """``puppet program``: a served face alone on a key colour, in a window for window capture."""
+    from puppet.show.program import run_program
+
+    if run_program(args.url, args.key_colour, args.size) == "feed ended":
+        print("puppet program: the feed ended (the rig stopped)", file=sys.stderr)
     return 0
 
 
@@ -766,6 +842,15 @@ def _address(text: str) -> tuple[str, int]:
     return host.strip("[]") or "127.0.0.1", int(port)
 
 
+def _colour(text: str) -> tuple[int, int, int]:
+    """An argparse type: a colour as RRGGBB (or #RRGGBB) in hex, as three bytes."""
+    match = re.fullmatch(r"#?([0-9a-fA-F]{6})", text.strip())
+    if match is None:
+        raise argparse.ArgumentTypeError(f"expected a colour as RRGGBB in hex such as 00FF00, got {text!r}")
+    value = int(match.group(1), 16)
+    return value >> 16, (value >> 8) & 0xFF, value & 0xFF
+
+
 def _size(text: str) -> tuple[int, int]:
     try:
         width, height = (int(v) for v in text.lower().split("x"))
@@ -820,6 +905,8 @@ COMMANDS: dict[str, Command] = {
     "lipsync": Command("make a take from a recording of speech: the mouth follows the voice, the sound kept",
                        _lipsync_arguments, _lipsync),
     "live": Command("run a mapping's devices onto the face in a window, live", _live_arguments, _live),
+    "program": Command("show a served face alone on a key colour, in a window for OBS's window capture",
+                       _program_arguments, _program),
     "devices": Command("list the controllers that are connected (serial, HID, MIDI, CAN, sound inputs)",
                        _no_arguments, _devices),
     "mappings": Command("list the shipped mappings, or write an editable copy of one", _mappings_arguments,

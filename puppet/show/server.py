@@ -237,7 +237,8 @@ class ShowServer:
             sent = -1
             while True:
                 if self._encoder.number == sent or self._encoder.number == 0:
-                    await self._frame.wait()
+                    if await self._next_frame_or_gone(echoes):
+                        return
                     continue
                 message = self._encoder.message(sent)
                 sent = self._encoder.number
@@ -248,11 +249,23 @@ class ShowServer:
             self.viewers -= 1
             echoes.cancel()
 
+    async def _next_frame_or_gone(self, echoes: asyncio.Task) -> bool:
+        """Wait for the next frame, or for the viewer to go (True): a viewer that left while no frame
+        came (a paused take) is let go at once, not at the next frame."""
+        frame = asyncio.ensure_future(self._frame.wait())
+        try:
+            await asyncio.wait((frame, echoes), return_when=asyncio.FIRST_COMPLETED)
+        finally:
+            frame.cancel()
+        return echoes.done()
+
     async def _echoes(self, ws: ServerConnection) -> None:
-        """The page's echo of each frame drawn: ``{"drawn": number, "published": t}``."""
-        async for text in ws:
-            with contextlib.suppress(ValueError, TypeError, KeyError):
-                self.delays_ms.append((time.monotonic() - float(json.loads(text)["published"])) * 1e3)
+        """The page's echo of each frame drawn: ``{"drawn": number, "published": t}``; returns when
+        the viewer's connection closes."""
+        with contextlib.suppress(ConnectionClosed):
+            async for text in ws:
+                with contextlib.suppress(ValueError, TypeError, KeyError):
+                    self.delays_ms.append((time.monotonic() - float(json.loads(text)["published"])) * 1e3)
 
     async def _api(self, ws: ServerConnection) -> None:
         subscription: asyncio.Task | None = None

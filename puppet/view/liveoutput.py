@@ -1,6 +1,7 @@
 """Where a live frame goes besides the window: outputs, and the live loop with no window at all.
 
-A ``LiveOutput`` (the show server, ``puppet.show.server.ShowServer``) is handed every frame's
+A ``LiveOutput`` (the show server, ``puppet.show.server.ShowServer``; the NDI source,
+``puppet.show.ndi.NdiOutput``; the program window's process, ``puppet.show.program``) is handed every frame's
 vertices and the rig's status after the frame is drawn (``publish``), and gets a turn on the live
 loop's thread before each frame (``service``: what it queued that changes the session runs
 there, between frames). Outputs sit above this layer, so the loop knows them only by these calls.

@@ -578,6 +578,7 @@ class Renderer:
         gpu_normals: bool | None = None,
         detail: PartDetail | None = None,
         transparent: bool = False,
+        backdrop: tuple[float, float, float] | None = None,
     ) -> None:
         """Upload topology, albedo (sRGB 0-1, per vertex) and specular strengths (0-1).
 
@@ -593,13 +594,16 @@ class Renderer:
         ``detail`` (``PartDetail``, of these triangles) draws inner parts seen small from fewer
         triangles, chosen whenever the camera changes; None draws every triangle.
         ``transparent`` draws the face alone on a transparent backdrop (alpha 0 where no surface
-        is: a program feed keyed over other video); ``read`` returns RGBA then.
+        is: a program feed keyed over other video); ``read`` returns RGBA then. ``backdrop`` (sRGB 0-1)
+        paints every pixel the face does not cover that flat colour instead of the studio gradient
+        (a key colour, for a window captured and chroma-keyed: ``puppet.show.program``).
         On a software rasteriser its threads get a core each (``rasterthreads.spread``;
         ``rasteriser_cores``: {thread id: core} of those pinned).
         """
         self.n_vertices = int(n_vertices)
         self.cull = cull
         self.transparent = transparent
+        self.backdrop = None if backdrop is None else tuple(float(c) for c in backdrop)
         self.size = (int(width), int(height))
         self._owns_ctx = ctx is None
         self.ctx = ctx or moderngl.create_context(standalone=True, backend=backend)
@@ -723,6 +727,16 @@ class Renderer:
     def samples(self) -> int:
         """Multisample count actually in use (0: no multisampling)."""
         return self._multi.samples if self._multi is not None else 0
+
+    def set_material_data(self, data: np.ndarray) -> None:
+        """Replace the per-vertex linear albedo and specular strengths with ``data`` (N, 4), as
+        ``material_data`` makes them: what the show's feed sends, taken as sent (a round trip
+        through sRGB colours could move a value by one float32 step)."""
+        data = np.ascontiguousarray(data, dtype="f4")
+        if data.shape != (self.n_vertices, 4):
+            raise ValueError(f"expected material data of shape ({self.n_vertices}, 4), got {data.shape}")
+        with self._current():
+            self._static.write(data)
 
     def look_at(
         self,
@@ -970,9 +984,12 @@ class Renderer:
         self.ctx.disable(moderngl.CULL_FACE)
 
     def _paint_backdrop(self, target: moderngl.Framebuffer) -> None:
-        """The studio gradient, or nothing at all (alpha 0) when ``transparent``."""
+        """The studio gradient; nothing at all (alpha 0) when ``transparent``; the flat
+        ``backdrop`` colour when there is one."""
         if self.transparent:
             target.clear(0.0, 0.0, 0.0, 0.0)
+        elif self.backdrop is not None:
+            target.clear(*self.backdrop, 1.0)
         else:
             self._background.render(moderngl.TRIANGLES, vertices=3)
 
