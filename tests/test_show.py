@@ -161,6 +161,7 @@ def live_show(folder: Path, face, take: str = "api", osc: tuple[str, int] | None
     server = ShowServer(face, camera, port=0, size=(320, 320), stage=LiveStage(session), osc=osc).start()
     loop = Loop(session, server)
     try:
+        assert _wait(lambda: "devices" in server.status)  # the loop's first frame is out
         yield server, session
     finally:
         loop.close()

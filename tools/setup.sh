@@ -67,7 +67,7 @@ fi
 # move or a rename) would be installed beside the new ones, so every set-up builds afresh.
 rm -rf build
 "$VENV/bin/python" -m pip install -q --force-reinstall --no-deps . \
-  && "$VENV/bin/python" -m pip install -q '.[test,midi,osc,docs,batch]'
+  && "$VENV/bin/python" -m pip install -q '.[test,midi,osc,docs,batch,ndi]'
 
 # The photo environment: MediaPipe's face landmarks for `puppet face-from-photo` (its model ships
 # in the wheel; it pins numpy < 2, so it lives apart from .venv). FACEPUPPET_NO_PHOTO=1 skips it.
