@@ -169,7 +169,8 @@ def _print_show(show: dict) -> None:
     print(f"live loop with the show server (sample -> drawn, median, {crowd['seconds']:g} s each): no client "
           f"{runs['no_clients']:.1f} ms, four clients {runs['four_clients']:.1f} ms, none again "
           f"{runs['no_clients_again']:.1f} ms (ratio {crowd['ratio']:.2f}); the flooding client answered "
-          f"{crowd['api_answers_s']:.0f} messages/s, {crowd['api_refused']} refused")
+          f"{crowd['api_answers_s']:.0f} messages/s, {crowd['api_refused']} refused; the server's thread used "
+          f"{crowd['server_cpu_share']:.1%} of a core meanwhile")
 
 
 def _cores(cores: list[int]) -> str:

@@ -8,9 +8,11 @@
   frame costs to encode each way.
 * ``clients``: the live loop's input-to-frame latency (``session.measure_latency``, the slider box
   in a process of its own) with the server publishing every frame and no client, then with four
-  clients in processes of their own -- three feed viewers that decode every frame and one API
+  clients in processes of their own -- three feed viewers that take and echo every frame and one API
   client flooding messages (status, refusals) as fast as it is answered -- then with none again,
-  all in one run: the ratio of the medians says what the clients cost.
+  all in one run: the ratio of the medians says what the clients cost. The clients run on the
+  same machine, so on a small one their own CPU is part of it; ``server_cpu_share`` is the
+  server thread's own CPU while they were there, in cores.
 """
 
 from __future__ import annotations
@@ -30,7 +32,7 @@ from puppet.live.session import measure_latency
 from puppet.runtime.runtime import Runtime
 from puppet.show.server import ShowServer
 from puppet.show.stage import LiveStage
-from puppet.show.wire import FrameEncoder, Quantiser, decode
+from puppet.show.wire import HEADER, FrameEncoder, Quantiser
 from puppet.view.demo import demo_take
 from puppet.view.renderer import Renderer
 from puppet.view.rendertake import aim_at_head
@@ -139,8 +141,9 @@ def clients(runtime: Runtime, seconds: float = 10.0) -> dict:
             for worker in workers:
                 worker.start()
             _wait_until(lambda: server.viewers == 3 and answered.value > 0)
-            refused = server.counts["refused"]
+            refused, cpu = server.counts["refused"], server.thread_cpu()
             crowded = measure_latency(session, renderer, seconds, outputs=[server])
+            cpu = server.thread_cpu() - cpu
             flood = answered.value
             stop.set()
             for worker in workers:
@@ -151,7 +154,8 @@ def clients(runtime: Runtime, seconds: float = 10.0) -> dict:
     drawn = {name: run["sample_to_drawn_ms"]["median"] for name, run in runs.items()}
     return {name: {"sample_to_drawn_ms": run["sample_to_drawn_ms"], "fps": run["fps"]} for name, run in runs.items()} | {
         "ratio": drawn["four_clients"] / statistics.mean([drawn["no_clients"], drawn["no_clients_again"]]),
-        "api_answers_s": flood / seconds, "api_refused": refused, "seconds": seconds}
+        "api_answers_s": flood / seconds, "api_refused": refused, "seconds": seconds,
+        "server_cpu_share": cpu / seconds}
 
 
 def _wait_until(condition, timeout: float = 30.0) -> None:
@@ -163,18 +167,19 @@ def _wait_until(condition, timeout: float = 30.0) -> None:
 
 
 def view_feed(url: str, stop) -> None:
-    """A feed viewer in a process of its own: decodes every frame and echoes it, until ``stop``."""
+    """A feed viewer in a process of its own: takes every frame and echoes it, as a page does
+    after drawing it, until ``stop`` (it does not decode: a page's drawing is the browser's CPU,
+    elsewhere or not, and the point is what the server costs the loop)."""
     from websockets.sync.client import connect
 
     with connect(url, max_size=None) as ws:
         ws.recv()
-        codes = None
         while not stop.is_set():
             try:
                 message = ws.recv(timeout=0.2)
             except TimeoutError:
                 continue
-            _, number, published, codes = decode(message, codes)
+            _, number, published = HEADER.unpack_from(message)
             ws.send(json.dumps({"drawn": number, "published": published}))
 
 

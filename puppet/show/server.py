@@ -139,6 +139,12 @@ class ShowServer:
             except Exception as exc:  # noqa: BLE001 -- a command's failure is its client's answer, not the loop's
                 future.set_exception(api.ApiError(f"{message['type']}: {type(exc).__name__}: {exc}"))
 
+    def thread_cpu(self) -> float:
+        """The CPU seconds the server's thread has used so far (for what it costs a machine)."""
+        future = concurrent.futures.Future()
+        self._loop.call_soon_threadsafe(lambda: future.set_result(time.thread_time()))
+        return future.result(timeout=5)
+
     def close(self) -> None:
         if self._loop is not None and self._stopped is not None:
             self._loop.call_soon_threadsafe(self._stopped.set)
@@ -196,7 +202,10 @@ class ShowServer:
             self._take_frame()
 
     def _take_frame(self) -> None:
+        """Encode the newest frame for the viewers; with none, leave it for the first to come."""
         self._pending = False
+        if not self.viewers:
+            return
         self._taken_at = time.monotonic()
         with self._slot_lock:
             slot, self._slot = self._slot, None
@@ -231,6 +240,7 @@ class ShowServer:
 
     async def _feed(self, ws: ServerConnection) -> None:
         self.viewers += 1
+        self._take_frame()  # the frame waiting since the last viewer left, if any
         echoes = asyncio.create_task(self._echoes(ws))
         try:
             await ws.send(self._face_text)
