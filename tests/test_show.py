@@ -79,8 +79,9 @@ def test_a_still_face_costs_next_to_nothing_per_frame():
 # -- the API's messages ------------------------------------------------------------------------
 
 NAMES = st.text(min_size=0, max_size=70)
-VALUES = st.one_of(st.none(), st.booleans(), st.integers(-2**60, 2**60), st.floats(allow_nan=False, allow_infinity=False),
-                   NAMES, st.lists(st.integers(), max_size=2), st.dictionaries(NAMES, st.floats(allow_nan=False), max_size=3))
+VALUES = st.one_of(st.none(), st.booleans(), st.integers(-2**60, 2**60),
+                   st.floats(allow_nan=False, allow_infinity=False), NAMES, st.lists(st.integers(), max_size=2),
+                   st.dictionaries(NAMES, st.floats(allow_nan=False), max_size=3))
 MESSAGES = st.fixed_dictionaries(
     {"type": st.one_of(st.sampled_from(api.TYPES), VALUES)},
     optional={"id": VALUES, "interval": VALUES, "name": VALUES, "action": st.one_of(

@@ -1,9 +1,10 @@
 """Run the fuzz properties for longer than CI does and print the counts a robustness report needs.
 
 The properties are the test suite's own (``tests/test_fuzz_inputs.py``: .fap files, mappings,
-serial framing, OSC datagrams, the control API's messages and OSC control addresses, take folders; ``tests/test_hid_descriptors.py``: HID descriptors),
-run by pytest exactly as CI runs them, with ``PUPPET_FUZZ_SCALE`` raised so that each target
-takes about its share of the budget (a first run at scale 1 measures it). For each kind of input
+serial framing, OSC datagrams, the control API's messages and OSC control addresses, take
+folders; ``tests/test_hid_descriptors.py``: HID descriptors), run by pytest exactly as CI runs
+them, with ``PUPPET_FUZZ_SCALE`` raised so that each target takes about its share of the budget
+(a first run at scale 1 measures it). For each kind of input
 it prints the inputs tried, how many were read, how many were refused with a documented error,
 anything else (an undocumented exception or a memory peak past the bound: must be 0) and the
 slowest input; a property that fails (anything else, or an input past hypothesis's deadline)

@@ -152,7 +152,8 @@ def clients(runtime: Runtime, seconds: float = 10.0) -> dict:
             again = measure_latency(session, renderer, seconds, outputs=[server])
     runs = {"no_clients": alone, "four_clients": crowded, "no_clients_again": again}
     drawn = {name: run["sample_to_drawn_ms"]["median"] for name, run in runs.items()}
-    return {name: {"sample_to_drawn_ms": run["sample_to_drawn_ms"], "fps": run["fps"]} for name, run in runs.items()} | {
+    summary = {name: {"sample_to_drawn_ms": run["sample_to_drawn_ms"], "fps": run["fps"]} for name, run in runs.items()}
+    return summary | {
         "ratio": drawn["four_clients"] / statistics.mean([drawn["no_clients"], drawn["no_clients_again"]]),
         "api_answers_s": flood / seconds, "api_refused": refused, "seconds": seconds,
         "server_cpu_share": cpu / seconds}

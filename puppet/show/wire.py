@@ -5,8 +5,9 @@ JSON) and then, per frame, only where the vertices are. Positions are quantised 
 per coordinate over the rest pose's box widened by ``MARGIN`` on every side, and laid out a
 coordinate at a time (every x, then every y, then every z: neighbours' codes are alike, so they
 deflate better). A frame is sent as its difference from the frame before (``DELTA``; modulo
-2^16, so no difference overflows), then deflated (zlib level 1). A client that missed a frame, or has just connected, gets the whole frame
-instead (``KEY``). The page inflates it (``DecompressionStream``), adds, and draws.
+2^16, so no difference overflows), then deflated (zlib level 1). A client that missed a frame,
+or has just connected, gets the whole frame instead (``KEY``). The page inflates it
+(``DecompressionStream``), adds, and draws.
 
 A frame message: kind (u8: ``KEY`` or ``DELTA``), three zero bytes, the frame number (u32) and the
 time it was published (f64, seconds on the server's monotonic clock: the page echoes it back so

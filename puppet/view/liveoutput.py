@@ -40,7 +40,8 @@ def live_status(session: Any, stats: Any, frame: Any) -> dict:
     latency, the take being recorded (None when not), the frames drawn and each trigger's level."""
     take = session.take_folder
     return {"devices": {name: state.name.lower() for name, state in session.states.items()},
-            "triggers": {t.name: round(t.level, 3) for t in session.mapping.trigger_states(frame.pose.t_ns or frame.t_ns)},
+            "triggers": {t.name: round(t.level, 3)
+                         for t in session.mapping.trigger_states(frame.pose.t_ns or frame.t_ns)},
             "fps": round(stats.fps, 1),
             "latency_ms": None if stats.latency_ms is None else round(stats.latency_ms, 2),
             "recording": None if take is None else take.name, "frames": session.frames}
