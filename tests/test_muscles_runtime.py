@@ -33,6 +33,7 @@ channels:
 targets:
   - {muscle: zygomatic_major_l, source: box.ch1}
   - {muscle: zygomatic_major_r, source: box.ch2}
+idle: false   # the face shows the muscles alone: no blink or breath to tell apart
 """
 
 
