@@ -269,8 +269,9 @@ class _Trials:
 def _dots(corners: np.ndarray, rest_normals: np.ndarray) -> np.ndarray:
     """Each triangle's normal (corners (T, 3, 3)) dotted with its rest normal, as
     ``musclesolver.folded_triangles`` takes them."""
-    normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    return np.einsum("ij,ij->i", normals, rest_normals)
+    (bx, by, bz), (cx, cy, cz) = (corners[:, 1] - corners[:, 0]).T, (corners[:, 2] - corners[:, 0]).T
+    nx, ny, nz = rest_normals.T
+    return (by * cz - bz * cy) * nx + (bz * cx - bx * cz) * ny + (bx * cy - by * cx) * nz
 
 
 def _normals(positions: np.ndarray, triangles: np.ndarray) -> np.ndarray:
