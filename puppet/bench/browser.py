@@ -26,6 +26,7 @@ import numpy as np
 from websockets.sync.client import connect
 
 from puppet.errors import PuppetError
+from puppet.show.process import end_process
 
 BROWSERS = ("chromium", "chromium-browser", "google-chrome")
 START_TIMEOUT = 60.0
@@ -128,12 +129,7 @@ class HeadlessChromium:
 
     def close(self) -> None:
         self._closing.close()
-        self._process.terminate()
-        try:
-            self._process.wait(10)
-        except subprocess.TimeoutExpired:
-            self._process.kill()
-            self._process.wait()
+        end_process(self._process, 10)
         self._profile.cleanup()
 
     def __enter__(self) -> HeadlessChromium:

@@ -43,6 +43,7 @@ from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidSta
 from websockets.sync.client import ClientConnection, connect
 
 from puppet.errors import PuppetError
+from puppet.show.process import end_process
 from puppet.show.wire import Quantiser, decode
 from puppet.view.renderer import Camera, Renderer
 from puppet.view.window import IDLE_WAKE, check_display, open_window
@@ -296,10 +297,4 @@ class ProgramProcess:
 
     def close(self) -> None:
         """End the window's process (at once: it holds nothing to save)."""
-        if self.process.poll() is None:
-            self.process.terminate()
-            try:
-                self.process.wait(5)
-            except subprocess.TimeoutExpired:
-                self.process.kill()
-                self.process.wait()
+        end_process(self.process, 5)
