@@ -37,6 +37,7 @@ from puppet.face.atlas import pack, place_uv
 from puppet.face.gltfread import MAX_BYTES, MAX_VERTICES, read_gltf
 from puppet.face.meshparts import Piece, cornea_vertices, name_parts, overlay_vertices
 from puppet.face.model import Face, FaceFileError, TexturedFace
+from puppet.face.objbulk import read_bulk
 
 GLTF_SUFFIXES = (".glb", ".gltf", ".vrm")
 
@@ -275,6 +276,16 @@ def read_obj(path: str | os.PathLike) -> ObjMesh:
     except OSError as exc:
         raise FaceFileError(f"cannot read face mesh {str(path)!r}: {exc.strerror or exc}") from exc
     _check_vertices(path, len(re.findall(r"^[ \t]*v[ \t]", text, flags=re.MULTILINE)))
+    bulk = read_bulk(text)
+    if bulk is not None:
+        return ObjMesh(positions=bulk.positions, uvs=bulk.uvs, corners=bulk.corners, corner_uvs=bulk.corner_uvs,
+                       starts=bulk.starts, groups=bulk.groups, colors=_colors(bulk.colors), materials=bulk.materials,
+                       mtllibs=bulk.mtllibs)
+    return _read_lines(path, text)
+
+
+def _read_lines(path: Path, text: str) -> ObjMesh:
+    """``read_obj`` line by line: any OBJ it reads, and the line of the first mistake."""
     positions: list[list[float]] = []
     colors: list[list[float]] = []
     uvs: list[list[float]] = []
@@ -315,10 +326,7 @@ def read_obj(path: str | os.PathLike) -> ObjMesh:
             raise FaceFileError(f"{path}:{lineno}: {exc}: {line.strip()[:80]!r}") from None
     if not positions:
         raise FaceFileError(f"face mesh {str(path)!r} has no vertices ('v' lines)")
-    color_array = None
-    if colors and len(colors) == len(positions):
-        c = np.array(colors, dtype=np.float32)
-        color_array = c / 255.0 if c.max(initial=0.0) > 1.0 else c
+    color_array = _colors(np.array(colors, dtype=np.float32)) if colors and len(colors) == len(positions) else None
     starts = np.concatenate([[0], np.cumsum([len(p.vertices) for p in polygons], dtype=np.int64)])
     return ObjMesh(
         positions=np.array(positions, dtype=np.float64),
@@ -331,6 +339,13 @@ def read_obj(path: str | os.PathLike) -> ObjMesh:
         materials=materials,
         mtllibs=mtllibs,
     )
+
+
+def _colors(colors: np.ndarray | None) -> np.ndarray | None:
+    """Vertex colours as 0-1 floats: written as 0-255 where any exceeds 1."""
+    if colors is None:
+        return None
+    return colors / 255.0 if colors.max(initial=0.0) > 1.0 else colors
 
 
 class _Polygon(NamedTuple):
