@@ -78,7 +78,7 @@ class OscDevice(Device):
     def _read(self) -> list[Mapping[str, float]]:
         try:
             datagram = self._socket.recv(DATAGRAM)
-        except socket.timeout:
+        except TimeoutError:
             return []
         try:
             messages = parse_datagram(datagram)

@@ -104,7 +104,7 @@ class TakeRecorder:
         self.folder = exact_take_folder(Path(root) / name) if exact else next_take_folder(root, name)
         self.fps = fps
         self.meta = {
-            "name": name, "fps": fps, "started": _dt.datetime.now(_dt.timezone.utc).isoformat(),
+            "name": name, "fps": fps, "started": _dt.datetime.now(_dt.UTC).isoformat(),
             "mapping": None if mapping_path is None else str(mapping_path),
             "mapping_text": None if mapping_path is None else Path(mapping_path).read_text("utf-8"),
             "devices": dict(devices or {}), **dict(extra or {}), "frames": None, "samples": None,
