@@ -27,8 +27,12 @@ import importlib.metadata
 import warnings
 from collections.abc import Mapping
 from types import ModuleType
+from typing import TYPE_CHECKING, Any
 
 from devices.base import Counters, Device, DeviceError, DeviceLost, Found, Sample, Sound, State, Url
+
+if TYPE_CHECKING:
+    from devices.twin import Twin
 
 BACKENDS: dict[str, str] = {
     "serial": "devices.serial_port",
@@ -74,7 +78,8 @@ def backend(scheme: str, what: str) -> ModuleType:
 
 def device_class(scheme: str, what: str) -> type[Device]:
     """The ``Device`` class of a URL scheme."""
-    return backend(scheme, what).DEVICE
+    device: type[Device] = backend(scheme, what).DEVICE
+    return device
 
 
 def open_device(url: str, name: str | None = None) -> Device:
@@ -85,7 +90,7 @@ def open_device(url: str, name: str | None = None) -> Device:
     return device
 
 
-def open_twin(url: str, name: str, wire_info: Mapping | None = None):
+def open_twin(url: str, name: str, wire_info: Mapping[str, Any] | None = None) -> Twin | None:
     """The twin of a logged device (its URL, name and ``wire_info``), its adapter open and ready:
     a ``devices.twin.Twin``. A URL whose backend has no wire (``replay://``) has none."""
     try:
@@ -98,7 +103,8 @@ def open_twin(url: str, name: str, wire_info: Mapping | None = None):
         raise DeviceError(f"{name}: {url!r} cannot be replayed through a device: only device URLs with a wire "
                           f"have a twin ({wired})")
     try:
-        return twin.from_url(url, name, wire_info or {})
+        opened: Twin = twin.from_url(url, name, wire_info or {})
+        return opened
     except DeviceError as exc:
         if str(exc).startswith(f"{name}: "):
             raise

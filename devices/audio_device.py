@@ -19,6 +19,7 @@ from __future__ import annotations
 import errno
 import queue
 import time
+from typing import Any
 from urllib.parse import quote, unquote
 
 import numpy as np
@@ -31,7 +32,7 @@ SILENT_S = 1.0
 PORTAUDIO_HINT = "the PortAudio library is missing (Debian/Ubuntu: sudo apt-get install libportaudio2)"
 
 
-def _sounddevice():
+def _sounddevice() -> Any:
     """The ``sounddevice`` module; an OSError saying what to install when PortAudio is missing."""
     try:
         import sounddevice
@@ -45,20 +46,20 @@ class AudioDevice(SoundDevice):
 
     OPTIONS = SOUND_OPTIONS
 
-    def __init__(self, name: str, which: str = "", *, sd_module=None, **options) -> None:
+    def __init__(self, name: str, which: str = "", *, sd_module: Any = None, **options: Any) -> None:
         super().__init__(name, **options)
         self.which = which
         self._sd = sd_module  # sounddevice, or a stand-in with its interface (devices.simulated_audio)
-        self._stream = None
-        self._heard: queue.SimpleQueue = queue.SimpleQueue()
+        self._stream: Any = None
+        self._heard: queue.SimpleQueue[Any] = queue.SimpleQueue()
         self._heard_ns = 0
 
     @classmethod
-    def from_url(cls, url: Url, name: str, sd_module=None) -> AudioDevice:
+    def from_url(cls, url: Url, name: str, sd_module: Any = None) -> AudioDevice:
         cls.check_options(url)
         return cls(name, unquote(url.target.strip("/")), sd_module=sd_module, **sound_options(url))
 
-    def _input(self, sd) -> int | str | None:
+    def _input(self, sd: Any) -> int | str | None:
         """The PortAudio input the URL names (None: the default); an OSError when there is none."""
         sd._terminate()   # PortAudio lists its devices once per initialisation: look afresh
         sd._initialize()
@@ -88,7 +89,7 @@ class AudioDevice(SoundDevice):
             raise OSError(f"the input would not open ({exc}): busy, or it cannot give {self.rate} Hz") from None
         self._heard_ns = time.monotonic_ns()
 
-    def _callback(self, indata: np.ndarray, frames: int, timing, status) -> None:
+    def _callback(self, indata: np.ndarray, frames: int, timing: Any, status: Any) -> None:
         now = time.monotonic_ns()
         if status.input_overflow:
             self.counters.overruns += 1
@@ -123,7 +124,7 @@ class AudioDevice(SoundDevice):
                 pass
 
 
-def discover(sd_module=None) -> list[Found]:
+def discover(sd_module: Any = None) -> list[Found]:
     """The sound inputs PortAudio has, as ``audio://NAME`` URLs."""
     try:
         sd = sd_module or _sounddevice()

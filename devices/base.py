@@ -22,6 +22,7 @@ import time
 from abc import ABC, abstractmethod
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
+from typing import Any
 from urllib.parse import parse_qsl, urlsplit
 
 import numpy as np
@@ -37,7 +38,7 @@ class Sound:
     pcm: np.ndarray
     rate: int
     start_ns: int
-    state: Mapping | None = None
+    state: Mapping[str, Any] | None = None
 
 
 @dataclass(frozen=True)
@@ -113,10 +114,11 @@ def lost_reason(exc: BaseException) -> str:
     """Why a device is LOST, as ``counters.last_error`` keeps it and the live cockpit and
     ``puppet calibrate`` show it: the plain reason first (port missing, permission denied,
     unplugged, ...), then the adapter's own words."""
+    plain: str | None
     if isinstance(exc, DeviceLost):
         plain = "unplugged"
     else:
-        plain = PLAIN_REASONS.get(getattr(exc, "errno", None))
+        plain = PLAIN_REASONS.get(getattr(exc, "errno", -1))
     text = (exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)) or type(exc).__name__
     return f"{plain}: {text}" if plain else text
 
@@ -202,7 +204,7 @@ class Device(ABC):
     def _close(self) -> None:
         """Release the hardware; must not raise."""
 
-    def wire_info(self) -> dict:
+    def wire_info(self) -> dict[str, Any]:
         """What a take must keep to rebuild this device's wire later (JSON-able; e.g. a HID
         report descriptor read from the hardware). Most devices are fully described by their
         URL and return ``{}``."""

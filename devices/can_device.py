@@ -54,7 +54,7 @@ from devices.twin import Twin
 try:
     import can
 except ImportError:  # the backend says what to install when it is used
-    can = None
+    can = None  # type: ignore[assignment]
 
 _OURS = {"dbc", "signals", "decoder", "filter", "timeout_ms"}
 BUS_OPTIONS = frozenset({
@@ -166,7 +166,7 @@ class SignalDecoder:
         for s in signals:
             by_id.setdefault(s.frame_id, []).append(s)
         self.signals = [s for group in by_id.values() for s in group]
-        self._plans: dict[int, tuple[int, bool, bool, list[tuple]]] = {}
+        self._plans: dict[int, tuple[int, bool, bool, list[tuple[Any, ...]]]] = {}
         for frame_id, group in by_id.items():
             nbytes = max([s.min_bytes for s in group] + [(lengths or {}).get(frame_id, 0)])
             plan = []
@@ -263,7 +263,7 @@ def load_dbc(path: str, decoder: str = "auto") -> SignalDecoder | CantoolsDecode
     """A decoder for every message of a DBC file (``decoder``: auto, own or cantools)."""
     import cantools
 
-    database = cantools.database.load_file(path)
+    database: Any = cantools.database.load_file(path)  # a DBC file loads as a CAN database
     counts: dict[str, int] = {}
     for m in database.messages:
         for s in m.signals:
@@ -350,13 +350,13 @@ class CanDevice(Device):
         return cls(name, interface, unquote(channel) or None, signals=signals, dbc=dbc, decoder=decoder,
                    filter=filt, timeout_ms=timeout_ms, bus_kwargs=bus_kwargs)
 
-    def wire_info(self) -> dict:
+    def wire_info(self) -> dict[str, Any]:
         """What decodes the frames, so a take decodes as recorded later: the DBC file's text (even
         after the file changed or moved), or the hand-given signals (they may come from a
         mapping, not the URL)."""
         if self._dbc_text is not None:
             return {"dbc": self._dbc_text}
-        return {"signals": [asdict(s) for s in self.decoder.signals]}
+        return {"signals": [asdict(s) for s in self.decoder.signals]}  # type: ignore[union-attr]  # no DBC
 
     # -- Device ------------------------------------------------------------------------------
 
@@ -445,13 +445,14 @@ class CanTwin(Twin):
     Values go through each signal's integer raw value (``raw * scale + offset``), so only values
     the decoder produces come back exactly; float signals (cantools) carry their float.
     """
+    device: CanDevice  # the adapter this twin feeds
 
     def __init__(self, device: CanDevice, sender: Any, url: str) -> None:
         self.sender = sender
         super().__init__(device, url)
 
     @classmethod
-    def from_url(cls, url: str, name: str, wire_info: Mapping) -> CanTwin:
+    def from_url(cls, url: str, name: str, wire_info: Mapping[str, Any]) -> CanTwin:
         parsed = Url.parse(url)
         channel = f"twin-{uuid.uuid4().hex}"
         options = dict(parsed.options)

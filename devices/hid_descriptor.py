@@ -60,6 +60,7 @@ from __future__ import annotations
 import warnings
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -533,7 +534,8 @@ class ReportDecoder:
         top = np.int64(1) << (sizes - 1).astype(np.int64)
         v = np.where(signed & (v & top != 0), v - (top << 1), v)
         if self.raw:
-            return v.astype(np.float64)
+            raw: np.ndarray = v.astype(np.float64)
+            return raw
         lo = np.array([c.logical_min for c in self.channels])
         hi = np.array([c.logical_max for c in self.channels])
         kinds = np.array([c.kind for c in self.channels])
@@ -624,7 +626,7 @@ class FieldSpec:
     logical_max: int | None = None
     kind: str | None = None
     report_id: int = 0
-    extra: dict = field(default_factory=dict, compare=False)
+    extra: dict[str, Any] = field(default_factory=dict, compare=False)
 
     def channel(self) -> Channel:
         hi = self.logical_max if self.logical_max is not None else (1 << self.bit_size) - 1

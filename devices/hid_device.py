@@ -134,7 +134,8 @@ class HidDevice(Device):
                     and (self.interface is None or info.get("interface_number") == self.interface)
                     and (self.usage_page is None or info.get("usage_page") == self.usage_page)
                     and (self.usage is None or info.get("usage") == self.usage)):
-                return info["path"]
+                path: bytes = info["path"]
+                return path
         raise OSError(f"no HID device {self.vendor_id:04x}:{self.product_id:04x} with "
                       f"interface={self.interface} usage_page={self.usage_page} usage={self.usage}")
 
@@ -197,7 +198,7 @@ class HidDevice(Device):
             raise OSError(f"{self.name}: the HID report descriptor declares no input values")
         return layout
 
-    def wire_info(self) -> dict:
+    def wire_info(self) -> dict[str, Any]:
         """What names and places the channels, so a take can rebuild the same reports later: the
         fields given by hand (they may come from a mapping, not the URL), else the report
         descriptor read from the hardware (hex); ``{}`` before the descriptor was first read."""
@@ -265,13 +266,14 @@ class HidTwin(Twin):
     adapter's scaling produces come back exactly (buttons 0/1, hats in steps or -1, axes at
     raw / max, ...).
     """
+    device: HidDevice  # the adapter this twin feeds
 
     def __init__(self, device: HidDevice, hardware: FakeHidHardware, url: str) -> None:
         self.hardware = hardware
         super().__init__(device, url)
 
     @classmethod
-    def from_url(cls, url: str, name: str, wire_info: Mapping) -> HidTwin:
+    def from_url(cls, url: str, name: str, wire_info: Mapping[str, Any]) -> HidTwin:
         descriptor = wire_info.get("report_descriptor")
         fields = wire_info.get("fields")
         if descriptor is None and fields is None and "fields" not in Url.parse(url).options:
@@ -287,7 +289,7 @@ class HidTwin(Twin):
         return cls(device, module.hardware[0], url)
 
     def _put(self, values: Mapping[str, float]) -> int:
-        self.hardware.feed(self.device.layout.encode(values))
+        self.hardware.feed(self.device.layout.encode(values))  # type: ignore[union-attr]  # open: laid out
         return 1
 
 

@@ -29,6 +29,7 @@ import time
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from pathlib import Path
+from typing import Any
 from urllib.parse import quote
 
 import mido
@@ -40,7 +41,7 @@ POLL = 0.005
 WAIT = 0.03
 
 
-def open_port(name: str):
+def open_port(name: str) -> Any:
     """The first MIDI input port whose name contains ``name`` (OSError when there is none)."""
     names = input_names()
     matches = [n for n in names if name.lower() in n.lower()]
@@ -64,7 +65,7 @@ class MidiDevice(Device):
             raise DeviceError(f"{name}: 14-bit controllers are 0-31, got {sorted(self.cc14)}")
         self.port_name, self.channel = port, channel
         self._open_input = open_input
-        self._port = None
+        self._port: Any = None  # a mido input port while open
         self._msb: dict[tuple[int, int], int] = {}
 
     @classmethod
@@ -88,7 +89,7 @@ class MidiDevice(Device):
             if messages or time.monotonic() > deadline:
                 break
             time.sleep(POLL)
-        out = []
+        out: list[Mapping[str, float]] = []
         for message in messages:
             reading = self.reading(message)
             if reading:
@@ -151,6 +152,7 @@ class MidiTwin(Twin):
     a nonzero value, a note off for 0. Values are clamped to the message's range: what no
     message makes comes back different.
     """
+    device: MidiDevice  # the adapter this twin feeds
 
     def __init__(self, device: MidiDevice, port: MessagePort, url: str) -> None:
         self.port = port
@@ -158,7 +160,7 @@ class MidiTwin(Twin):
         super().__init__(device, url)
 
     @classmethod
-    def from_url(cls, url: str, name: str, wire_info: Mapping) -> MidiTwin:
+    def from_url(cls, url: str, name: str, wire_info: Mapping[str, Any]) -> MidiTwin:
         port = MessagePort()
         return cls(MidiDevice.from_url(Url.parse(url), name, open_input=lambda _name: port), port, url)
 
@@ -209,7 +211,8 @@ def input_names() -> list[str]:
     printed straight to file descriptor 2, is kept off the terminal)."""
     try:
         with _quiet_stderr():
-            return mido.get_input_names()
+            names: list[str] = mido.get_input_names()
+            return names
     except Exception as exc:  # rtmidi's own SystemError when the machine has no MIDI system
         detail = str(exc).splitlines()[0]
         if sys.platform.startswith("linux") and not Path(ALSA_SEQUENCER).exists():

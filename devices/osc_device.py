@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import socket
 from collections.abc import Mapping
+from typing import Any
 
 from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
 from pythonosc.osc_message import OscMessage
@@ -62,7 +63,8 @@ class OscDevice(Device):
         """Where the socket is bound (the real port when 0 was asked for)."""
         if self._socket is None:
             return self.host, self.port
-        return self._socket.getsockname()[:2]
+        host, port = self._socket.getsockname()[:2]
+        return host, port
 
     def _open(self) -> None:
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -77,22 +79,22 @@ class OscDevice(Device):
 
     def _read(self) -> list[Mapping[str, float]]:
         try:
-            datagram = self._socket.recv(DATAGRAM)
-        except socket.timeout:
+            datagram = self._socket.recv(DATAGRAM)  # type: ignore[union-attr]  # set by _open
+        except TimeoutError:
             return []
         try:
             messages = parse_datagram(datagram)
         except OscFormatError:
             self.counters.bad_frames += 1
             return []
-        out = []
+        out: list[Mapping[str, float]] = []
         for address, params in messages:
             reading = self._reading(address, params)
             if reading:
                 out.append(reading)
         return out
 
-    def _reading(self, address: str, params: list) -> dict[str, float] | None:
+    def _reading(self, address: str, params: list[Any]) -> dict[str, float] | None:
         """One message's channels, or None (pending blendshapes, or nothing usable)."""
         if address == BLEND_VALUE:
             usable = len(params) >= 2 and isinstance(params[0], str) and _is_number(params[1])
@@ -130,13 +132,14 @@ class OscTwin(Twin):
     ``/VMC/Ext/Blend/Apply``, in one bundle; so is a one-channel reading whose name is a VMC
     address (as a plain message it would be read as VMC).
     """
+    device: OscDevice  # the adapter this twin feeds
 
     def __init__(self, device: OscDevice, sender: socket.socket, url: str) -> None:
         self.sender = sender
         super().__init__(device, url)
 
     @classmethod
-    def from_url(cls, url: str, name: str, wire_info: Mapping) -> OscTwin:
+    def from_url(cls, url: str, name: str, wire_info: Mapping[str, Any]) -> OscTwin:
         OscDevice.from_url(Url.parse(url), name)  # the logged URL must be a valid one
         return cls(OscDevice(name, "127.0.0.1", 0), socket.socket(socket.AF_INET, socket.SOCK_DGRAM), url)
 

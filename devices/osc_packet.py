@@ -17,6 +17,7 @@ brackets are accepted and flattened.
 from __future__ import annotations
 
 import struct
+from typing import Any
 
 from devices.base import DeviceError
 
@@ -26,7 +27,7 @@ FIXED = {"i": (4, ">i"), "f": (4, ">f"), "d": (8, ">d"), "h": (8, ">q")}
 RAW = {"t": 8, "c": 4, "r": 4, "m": 4}
 CONSTANT = {"T": True, "F": False, "N": None, "I": None}
 
-Message = tuple[str, list]
+Message = tuple[str, list[Any]]
 
 
 class OscFormatError(DeviceError, ValueError):

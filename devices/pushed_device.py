@@ -20,6 +20,7 @@ import collections
 import math
 import threading
 from collections.abc import Mapping
+from typing import Any
 
 from devices.base import Device, Url
 from devices.twin import Twin
@@ -88,11 +89,12 @@ def checked_reading(device: str, values: Mapping[str, float]) -> dict[str, float
 
 class PushedTwin(Twin):
     """A pushed device's twin: a fresh device of the same class, pushed each logged reading."""
+    device: PushedDevice  # the adapter this twin feeds
 
     DEVICE: type[PushedDevice] = PushedDevice
 
     @classmethod
-    def from_url(cls, url: str, name: str, wire_info: Mapping) -> PushedTwin:
+    def from_url(cls, url: str, name: str, wire_info: Mapping[str, Any]) -> PushedTwin:
         return cls(cls.DEVICE.from_url(Url.parse(url), name), url)
 
     def _put(self, values: Mapping[str, float]) -> int:

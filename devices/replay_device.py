@@ -22,7 +22,7 @@ class ReplayDevice(Device):
 
     OPTIONS = frozenset({"speed", "device"})
 
-    def __init__(self, name: str, path: str | os.PathLike, speed: float = 1.0, device: str | None = None) -> None:
+    def __init__(self, name: str, path: str | os.PathLike[str], speed: float = 1.0, device: str | None = None) -> None:
         super().__init__(name)
         if speed < 0:
             raise DeviceError(f"replay: speed must be >= 0, got {speed}")
@@ -47,7 +47,7 @@ class ReplayDevice(Device):
             self._samples = (s for s in read_samples(self.path) if self.only in (None, s.device))
 
     def _read(self) -> list[Mapping[str, float]]:
-        sample = next(self._samples, None) if not self.finished else None
+        sample = next(self._samples, None) if not self.finished else None  # type: ignore[arg-type]  # set by _open
         if sample is None:
             self.finished = True
             time.sleep(0.02)

@@ -30,7 +30,7 @@ def sample_line(sample: Sample) -> str:
     return json.dumps({"t_ns": sample.t_ns, "device": sample.device, "values": dict(sample.values)})
 
 
-def read_records(path: str | os.PathLike) -> Iterator[tuple[str, object]]:
+def read_records(path: str | os.PathLike[str]) -> Iterator[tuple[str, object]]:
     """(``file:line``, the line's JSON value) for every line after the header, streamed; a line
     that is not JSON names the file and line (a partial last one warns and ends the log)."""
     with open(path, encoding="utf-8") as file:
@@ -74,6 +74,6 @@ def sample_from(data: object, where: str) -> Sample:
     raise SampleLogError(f"{where}: expected numbers as values, found {values!r:.80}")
 
 
-def read_samples(path: str | os.PathLike) -> Iterator[Sample]:
+def read_samples(path: str | os.PathLike[str]) -> Iterator[Sample]:
     """The Samples of a log, streamed (event lines skipped)."""
     return (sample_from(data, where) for where, data in read_records(path) if not is_event(data))

@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import contextlib
 from collections.abc import Mapping, Sequence
+from typing import Any
 from urllib.parse import urlencode
 
 import serial
@@ -51,7 +52,7 @@ READ_MAX = 16384        # most bytes taken from the port in one read (one timest
 
 # -- the device --------------------------------------------------------------------------------
 
-_PORT_OPTIONS = {
+_PORT_OPTIONS: dict[str, Any] = {
     "baudrate": int, "bytesize": int, "parity": str.upper, "stopbits": float,
     "xonxoff": "bool", "rtscts": "bool", "dsrdtr": "bool", "exclusive": "bool",
 }
@@ -91,7 +92,7 @@ class SerialDevice(Device):
             raise DeviceError(f"serial {port!r}: {exc}") from None
         self.port_url = port
         self.protocol, self.channels, self.fmt, self.checksum = protocol, channels, fmt, checksum
-        self._port_kwargs = dict(port_options, baudrate=baudrate, timeout=timeout)
+        self._port_kwargs: dict[str, Any] = dict(port_options, baudrate=baudrate, timeout=timeout)
         try:  # check the URL handler and settings now, so _open only fails when hardware does
             serial.serial_for_url(port, do_not_open=True, **self._port_kwargs)
         except (ValueError, TypeError) as exc:
@@ -106,7 +107,7 @@ class SerialDevice(Device):
             raise DeviceError("serial URL: expected serial:///dev/PORT or serial:HANDLER://..., "
                               "e.g. serial:///dev/ttyACM0?protocol=ascii")
         cls.check_options(url)
-        kwargs: dict[str, object] = {}
+        kwargs: dict[str, Any] = {}
         try:
             if "protocol" in options:
                 kwargs["protocol"] = options.pop("protocol")
@@ -137,7 +138,7 @@ class SerialDevice(Device):
         self._port = serial.serial_for_url(self.port_url, **self._port_kwargs)
 
     def _read(self) -> list[dict[str, float]]:
-        port = self._port
+        port: Any = self._port  # open here; pyserial's stub leaves in_waiting off SerialBase
         try:
             waiting = port.in_waiting
             data = port.read(min(waiting, READ_MAX) if waiting else 1)
@@ -155,8 +156,8 @@ class SerialDevice(Device):
             self.counters.bad_frames += parser.bad
             parser.bad = 0
             if self.checksum != "none":
-                self.counters.bad_checksums += parser.bad_checksums
-                parser.bad_checksums = 0
+                self.counters.bad_checksums += parser.bad_checksums  # type: ignore[attr-defined]  # ascii's parser
+                parser.bad_checksums = 0  # type: ignore[attr-defined]
         return readings
 
     def _close(self) -> None:
@@ -188,13 +189,14 @@ class SerialTwin(Twin):
     adapter's channel order, as int16 (integers -32768..32767 only) or float32 (float32 values
     only): anything else comes back different or cannot be packed.
     """
+    device: SerialDevice  # the adapter this twin feeds
 
     def __init__(self, device: SerialDevice, joystick: PtyJoystick, url: str) -> None:
         self.joystick = joystick
         super().__init__(device, url)
 
     @classmethod
-    def from_url(cls, url: str, name: str, wire_info: Mapping) -> SerialTwin:
+    def from_url(cls, url: str, name: str, wire_info: Mapping[str, Any]) -> SerialTwin:
         options = Url.parse(url).options
         joystick = PtyJoystick(rate=None)  # only a carrier: the twin writes the wire bytes
         decoding = {k: v for k, v in options.items() if k in ("protocol", "format", "channels", "checksum")}
@@ -229,7 +231,7 @@ def discover() -> list[Found]:
     return [Found("serial", f"serial://{p.device}", _serial_description(p))
             for p in sorted(list_ports.comports(), key=lambda p: p.device)]
 
-def _serial_description(port) -> str:
+def _serial_description(port: Any) -> str:
     usb = f"USB {port.vid:04x}:{port.pid:04x}" if port.vid is not None and port.pid is not None else None
     words = (port.manufacturer, port.product) if usb else (port.description,)
     return " ".join(dict.fromkeys(w for w in (*words, usb) if w and w != "n/a")) or "serial port"

@@ -316,9 +316,10 @@ class AsciiParser(_Splitter):
 
     def _decode(self, chunk: bytes) -> dict[str, float] | None:
         if self.checksum == "nmea":
-            chunk = self._checked(chunk)
-            if chunk is None:
+            checked = self._checked(chunk)
+            if checked is None:
                 return None
+            chunk = checked
         try:
             line = chunk.decode("ascii").strip(" \t,;")
         except UnicodeDecodeError:
@@ -331,7 +332,7 @@ class AsciiParser(_Splitter):
         if None in values:
             return None
         names = self._names_for(len(values))
-        return dict(zip(names, values)) if names else None
+        return dict(zip(names, values)) if names else None  # type: ignore[arg-type]  # no None left
 
     def _pairs(self, tokens: list[str]) -> dict[str, float] | None:
         out = {}

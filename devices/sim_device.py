@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
+from typing import Any
 
 from devices.base import DeviceError, Url
 from devices.serial_port import SerialDevice, SerialTwin
@@ -54,7 +55,7 @@ class SimulatedSerialDevice(SerialDevice):
 
     OPTIONS = frozenset({"protocol", "rate", "channels", "format", "style", "checksum", "motion", "rest", "seed"})
 
-    def __init__(self, name: str, joystick: PtyJoystick, **serial_options: object) -> None:
+    def __init__(self, name: str, joystick: PtyJoystick, **serial_options: Any) -> None:
         super().__init__(name, joystick.path, protocol=joystick.protocol, fmt=joystick.fmt,
                          channels=joystick.names, checksum=joystick.checksum, **serial_options)
         self.joystick = joystick
@@ -92,7 +93,7 @@ class SimTwin(SerialTwin):
     """``sim://joystick`` wires: the ``SimulatedSerialDevice`` itself, its joystick unpaced."""
 
     @classmethod
-    def from_url(cls, url: str, name: str, wire_info: Mapping) -> SimTwin:
+    def from_url(cls, url: str, name: str, wire_info: Mapping[str, Any]) -> SimTwin:
         joystick = _joystick(Url.parse(url), paced=False)
         return cls(SimulatedSerialDevice(name, joystick), joystick, url)
 

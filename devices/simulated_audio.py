@@ -22,6 +22,7 @@ from __future__ import annotations
 import threading
 import time
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -70,7 +71,7 @@ class FakeSoundDevice:
     def _plugged(self) -> list[FakeMicrophone]:
         return [mic for mic in self.microphones if mic.plugged]
 
-    def query_devices(self, which=None, kind=None):
+    def query_devices(self, which: int | str | None = None, kind: str | None = None) -> Any:
         plugged = self._plugged()
         infos = [{"name": m.name, "max_input_channels": 1, "default_samplerate": float(m.rate), "hostapi": 0}
                  for m in plugged]
@@ -79,10 +80,10 @@ class FakeSoundDevice:
         found = self._find(which)
         return infos[plugged.index(found)]
 
-    def query_hostapis(self, index: int) -> dict:
+    def query_hostapis(self, index: int) -> dict[str, Any]:
         return {"name": "Fake"}
 
-    def _find(self, which) -> FakeMicrophone:
+    def _find(self, which: int | str | None) -> FakeMicrophone:
         plugged = self._plugged()
         if which is None:
             if not plugged:
@@ -97,8 +98,9 @@ class FakeSoundDevice:
             raise ValueError(f"No input device matching {which!r}")
         return matches[0]
 
-    def InputStream(self, *, device=None, channels=1, samplerate=48000, blocksize=480, dtype="int16",
-                    callback=None, latency=None) -> FakeInputStream:
+    def InputStream(self, *, device: int | str | None = None, channels: int = 1, samplerate: float = 48000,
+                    blocksize: int = 480, dtype: str = "int16", callback: Any = None,
+                    latency: Any = None) -> FakeInputStream:
         return FakeInputStream(self._find(device), int(samplerate), int(blocksize), callback)
 
     def _terminate(self) -> None:
@@ -122,7 +124,7 @@ class FakeInputStream:
 
     latency = 0.005
 
-    def __init__(self, mic: FakeMicrophone, rate: int, block: int, callback) -> None:
+    def __init__(self, mic: FakeMicrophone, rate: int, block: int, callback: Any) -> None:
         self.mic, self.rate, self.block, self.callback = mic, rate, block, callback
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None

@@ -27,6 +27,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Iterable, Iterator, Sequence
+from typing import Any
 
 # A USB game pad's report descriptor, as a real one is written (HID 1.11 short items).
 # Report 1: four 16-bit signed sticks, two 8-bit triggers, 12 buttons, a 4-bit hat, a pad byte.
@@ -180,7 +181,7 @@ class FakeHidHardware:
     def plugged(self) -> bool:
         return self._plugged
 
-    def info(self) -> dict:
+    def info(self) -> dict[str, Any]:
         """Its entry in ``enumerate()``, with hidapi's keys."""
         return {"path": self.path, "vendor_id": self.vendor_id, "product_id": self.product_id,
                 "serial_number": self.serial, "release_number": 0x0100,
@@ -263,7 +264,7 @@ class FakeHidDevice:
     def read(self, max_length: int, timeout_ms: int = 0) -> list[int]:
         hw = self._handle()
         if timeout_ms > 0:
-            timeout = timeout_ms / 1000.0
+            timeout: float | None = timeout_ms / 1000.0
         else:
             timeout = None if self._blocking else 0.0
         report = hw._take(self._generation, timeout)
@@ -286,7 +287,7 @@ class FakeHidDevice:
     def get_serial_number_string(self) -> str:
         return self._handle().serial
 
-    def write(self, buff) -> int:
+    def write(self, buff: Any) -> int:
         self._handle()
         return len(bytes(buff))
 
@@ -305,7 +306,7 @@ class FakeHidModule:
     def device(self) -> FakeHidDevice:
         return FakeHidDevice(self)
 
-    def enumerate(self, vendor_id: int = 0, product_id: int = 0) -> list[dict]:
+    def enumerate(self, vendor_id: int = 0, product_id: int = 0) -> list[dict[str, Any]]:
         return [hw.info() for hw in self.hardware if hw.plugged
                 and (not vendor_id or hw.vendor_id == vendor_id)
                 and (not product_id or hw.product_id == product_id)]

@@ -49,6 +49,7 @@ import threading
 import time
 import tty
 from collections.abc import Callable, Iterable, Sequence
+from typing import cast
 
 from devices.serial_wire import STYLES, encode_reading, make_parser
 
@@ -179,7 +180,7 @@ class PtyJoystick:
             return
         for fd in (self._master, self._slave):
             try:
-                os.close(fd)
+                os.close(fd)  # type: ignore[arg-type]  # both open while _master is
             except OSError:
                 pass
         self._master = self._slave = None
@@ -242,7 +243,8 @@ class PtyJoystick:
     def _readings(self, start: int, stop: int) -> list[Sequence[float]]:
         if self._script is not None:
             return self._script[start:stop]
-        return [self._signal((i - self._origin) / self.rate) for i in range(start, stop)]
+        return [self._signal((i - self._origin) / self.rate)  # type: ignore[misc,operator]  # paced, no script
+                for i in range(start, stop)]
 
     def restart_motion(self) -> None:
         """Start the signal over from now: a hand doing what calibration asks (``motion=calibrate``)
@@ -250,13 +252,14 @@ class PtyJoystick:
         self._origin = self._next
 
     def _run(self) -> None:
-        if math.isinf(self.rate):
+        rate = cast(float, self.rate)  # only a paced joystick (one with a rate) runs
+        if math.isinf(rate):
             self._flood()
             return
-        period, t0, k = 1.0 / self.rate, time.monotonic(), 0
-        limit = max(1, int(self.rate * MAX_BATCH))
+        period, t0, k = 1.0 / rate, time.monotonic(), 0
+        limit = max(1, int(rate * MAX_BATCH))
         while not self._stop.is_set():
-            due = int((time.monotonic() - t0) * self.rate) + 1
+            due = int((time.monotonic() - t0) * rate) + 1
             if self._script is not None:
                 due = min(due, len(self._script))
                 if k >= due:
@@ -278,7 +281,7 @@ class PtyJoystick:
         if self._script is not None:
             readings = self._script
         else:
-            readings = [self._signal(i / 1000.0) for i in range(FLOOD_BLOCK)]
+            readings = [self._signal(i / 1000.0) for i in range(FLOOD_BLOCK)]  # type: ignore[misc]  # no script
         block = b"".join(map(self.encode, readings))
         while not self._stop.is_set():
             with self._lock:

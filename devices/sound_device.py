@@ -15,6 +15,7 @@ import re
 import time
 from abc import abstractmethod
 from collections.abc import Iterable, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -26,7 +27,7 @@ BLOCK_S = 0.010
 SOUND_OPTIONS = frozenset({"rate", "block", "gate"})
 
 
-def sound_options(url: Url) -> dict:
+def sound_options(url: Url) -> dict[str, Any]:
     """``rate``, ``block`` (frames) and ``gate`` (dBFS) from a sound URL's options, checked."""
     options = url.options
     try:
@@ -76,11 +77,11 @@ class SoundDevice(Device):
     def _read(self) -> Iterable[Mapping[str, float]]:
         raise NotImplementedError("a sound device queues its Samples in _pump")
 
-    def wire_info(self) -> dict:
+    def wire_info(self) -> dict[str, Any]:
         """The analysis's settings: a take's replay through ``wav://`` analyses its sound with them."""
         return {"rate": self.rate, "block": self.block, "gate": self.gate}
 
-    def _reading(self, pcm: np.ndarray) -> tuple[dict, dict[str, float]]:
+    def _reading(self, pcm: np.ndarray) -> tuple[dict[str, Any], dict[str, float]]:
         """The analysis's state before ``pcm``, and the reading of it."""
         state = self.voice.state()
         return state, self.voice(pcm)

@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 import os
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -24,7 +25,7 @@ class SoundFileError(DeviceError, ValueError):
     """A sound file that cannot be read as sound (names the file and what is wrong)."""
 
 
-def read_sound(path: str | os.PathLike, rate: int | None = None) -> tuple[np.ndarray, int]:
+def read_sound(path: str | os.PathLike[str], rate: int | None = None) -> tuple[np.ndarray, int]:
     """The file's sound as 16-bit mono PCM, and its rate: ``rate`` when given (resampled to it),
     else the file's own."""
     import soundfile
@@ -61,7 +62,7 @@ def to_pcm(sound: np.ndarray) -> np.ndarray:
     return np.clip(np.round(np.asarray(sound, dtype=np.float64) * 32768.0), -32768, 32767).astype(np.int16)
 
 
-def _check_claim(path: Path, file, size: int) -> None:
+def _check_claim(path: Path, file: Any, size: int) -> None:
     """Refuse a file that claims more sound than is sane, or (a WAV) more than its bytes hold:
     libsndfile itself counts what is there and would read a cut file without a word."""
     seconds = file.frames / max(file.samplerate, 1)
@@ -93,17 +94,18 @@ def _wav_data_bytes(path: Path) -> int | None:
     return None
 
 
-def _bytes_per_frame(file) -> int:
+def _bytes_per_frame(file: Any) -> int:
     bits = {"PCM_S8": 8, "PCM_U8": 8, "PCM_16": 16, "PCM_24": 24, "PCM_32": 32, "FLOAT": 32, "DOUBLE": 64,
             "ULAW": 8, "ALAW": 8}.get(file.subtype, 16)
-    return max(1, file.channels * bits // 8)
+    return max(1, int(file.channels) * bits // 8)
 
 
 def _resample(sound: np.ndarray, rate: int, target: int) -> np.ndarray:
     from scipy.signal import resample_poly
 
     common = math.gcd(rate, target)
-    return resample_poly(sound.astype(np.float64), target // common, rate // common)
+    resampled: np.ndarray = resample_poly(sound.astype(np.float64), target // common, rate // common)
+    return resampled
 
 
 def _reason(exc: Exception) -> str:

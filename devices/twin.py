@@ -19,7 +19,7 @@ import struct
 import time
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
-from typing import Self
+from typing import Any, Self
 
 from devices.base import Device, DeviceError, Sample, State
 
@@ -47,7 +47,7 @@ class Twin(ABC):
 
     @classmethod
     @abstractmethod
-    def from_url(cls, url: str, name: str, wire_info: Mapping) -> Twin:
+    def from_url(cls, url: str, name: str, wire_info: Mapping[str, Any]) -> Twin:
         """The twin of the device ``url`` (a valid URL of this twin's scheme) named ``name``,
         with the take's ``wire_info``."""
 

@@ -45,6 +45,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 
@@ -107,13 +108,13 @@ class Voice:
 
     # -- state, for a take to replay the analysis exactly ---------------------------------------
 
-    def state(self) -> dict:
+    def state(self) -> dict[str, Any]:
         """Everything the next reading depends on besides the next block (JSON-able once the
         window, ``ring``, is a list: ``json_state``)."""
         return {"ring": self._ring.copy(), "quiet_s": self._quiet_s, "gate": self._gate,
                 "pitch": self._pitch, "out": dict(self._out)}
 
-    def restore(self, state: Mapping) -> None:
+    def restore(self, state: Mapping[str, Any]) -> None:
         """Continue from a ``state()``; a ValueError names what does not fit this analysis."""
         ring = np.asarray(state["ring"], dtype=np.int64)
         if ring.shape != (self.n_pitch,) or np.any((ring < -32768) | (ring > 32767)):
@@ -201,7 +202,7 @@ class Voice:
         return _unit((f1 - 300.0) / 500.0), _unit((f2 - 1000.0) / 1400.0)
 
 
-def json_state(state: Mapping) -> dict:
+def json_state(state: Mapping[str, Any]) -> dict[str, Any]:
     """A ``Voice.state()`` (or any analysis state with arrays in it) as JSON can hold it."""
     return {key: value.tolist() if isinstance(value, np.ndarray) else value for key, value in state.items()}
 
@@ -272,4 +273,5 @@ def _zero_phase(values: np.ndarray, dt: float) -> np.ndarray:
     if len(values) < 4:
         return values.astype(np.float64)
     a = 1.0 - math.exp(-dt / OFFLINE_SMOOTH_S)
-    return filtfilt([a], [1.0, a - 1.0], values.astype(np.float64), padlen=min(len(values) - 1, 30))
+    smooth: np.ndarray = filtfilt([a], [1.0, a - 1.0], values.astype(np.float64), padlen=min(len(values) - 1, 30))
+    return smooth

@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 import shutil
 import subprocess
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
@@ -70,7 +70,7 @@ def shape_of(phone: str) -> str:
     return "other"
 
 
-def shape_scores(readings: list[Mapping[str, float]]) -> np.ndarray:
+def shape_scores(readings: Sequence[Mapping[str, float]]) -> np.ndarray:
     """(blocks, shapes) log-probabilities that each block sounds like each shape."""
     out = np.empty((len(readings), len(SHAPES)))
     for t, r in enumerate(readings):
@@ -90,7 +90,7 @@ def shape_scores(readings: list[Mapping[str, float]]) -> np.ndarray:
     return out
 
 
-def align(readings: list[Mapping[str, float]], words: list[list[str]]) -> list[str]:
+def align(readings: Sequence[Mapping[str, float]], words: list[list[str]]) -> list[str]:
     """Each block's shape: the script's phones laid over the readings in order (Viterbi)."""
     states = _states(words)
     if not readings:

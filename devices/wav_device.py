@@ -23,8 +23,9 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -45,7 +46,7 @@ class WavDevice(SoundDevice):
 
     def __init__(self, name: str, path: str | Path, *, speed: float = 1.0, loop: bool = False,
                  mode: str = "live", stepped: bool = False, script: str | None = None,
-                 language: str = "en-us", **options) -> None:
+                 language: str = "en-us", **options: Any) -> None:
         super().__init__(name, **options)
         if speed < 0 or mode not in MODES:
             raise DeviceError(f"wav://{path}: expected speed >= 0 and mode in {MODES}, got {speed:g} and {mode!r}")
@@ -92,9 +93,10 @@ class WavDevice(SoundDevice):
             self._offline = offline(self._split(), self.rate, self.gate, words)
 
     def _split(self) -> list[np.ndarray]:
-        return [self._pcm[k * self.block:(k + 1) * self.block] for k in range(self.blocks)]
+        pcm: np.ndarray = self._pcm  # type: ignore[assignment]  # loaded
+        return [pcm[k * self.block:(k + 1) * self.block] for k in range(self.blocks)]
 
-    def readings(self):
+    def readings(self) -> Iterator[tuple[Sound, dict[str, float]]]:
         """Every block from here to the end, unpaced and without the reader thread, as
         ``(Sound, reading)`` with ``start_ns`` counted from the file's start: what an offline
         pass (``puppet lipsync``) records as if the file had been heard live."""
@@ -106,7 +108,7 @@ class WavDevice(SoundDevice):
 
     def step(self) -> None:
         """Hand over the next block now (a stepped device, as a twin drives it)."""
-        self._steps.release()
+        self._steps.release()  # type: ignore[union-attr]  # a stepped device has steps
 
     def _open(self) -> None:
         self.load()
@@ -151,9 +153,9 @@ class WavDevice(SoundDevice):
     def _next(self, start_ns: int) -> tuple[np.ndarray, int]:
         k = self.block_index
         self.block_index += 1
-        return self._pcm[k * self.block:(k + 1) * self.block], start_ns
+        return self._pcm[k * self.block:(k + 1) * self.block], start_ns  # type: ignore[index]  # loaded
 
-    def _reading(self, pcm: np.ndarray) -> tuple[dict, dict[str, float]]:
+    def _reading(self, pcm: np.ndarray) -> tuple[dict[str, Any], dict[str, float]]:
         if self._offline is None:
             return super()._reading(pcm)
         k = self.block_index - 1
@@ -168,9 +170,10 @@ class SoundTwin(Twin):
     stepped ``WavDevice`` with the device's analysis settings and the state it had before the
     take's first block (``wire_info``: ``rate``, ``block``, ``gate`` from the device;
     ``sound_file`` and ``sound_state`` from the take)."""
+    device: WavDevice  # the adapter this twin feeds
 
     @classmethod
-    def from_url(cls, url: str, name: str, wire_info: Mapping) -> SoundTwin:
+    def from_url(cls, url: str, name: str, wire_info: Mapping[str, Any]) -> SoundTwin:
         parsed = Url.parse(url)
         if "sound_file" not in wire_info:
             raise DeviceError(f"{name}: the take kept no sound for {url!r}, so it cannot be replayed through it")

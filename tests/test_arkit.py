@@ -34,7 +34,7 @@ def write_csv(path: Path, rows: int = 60, fps: int = 60) -> Path:
     lines = ["Timecode,BlendShapeCount," + ",".join(NAMES)]
     for i in range(rows):
         jaw = 0.0 if i < rows // 2 else (i - rows // 2) / (rows - rows // 2 - 1)
-        values = {n: 0.0 for n in NAMES}
+        values = dict.fromkeys(NAMES, 0.0)
         values.update(JawOpen=jaw, EyeBlinkLeft=0.5 if i == 10 else 0.0, MouthSmileLeft=0.25,
                       HeadYaw=0.01)
         lines.append(f"{timecode(i, fps)},{len(NAMES)}," + ",".join(f"{values[n]:.6f}" for n in NAMES))

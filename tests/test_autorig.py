@@ -194,8 +194,8 @@ def test_a_bare_default_face_rigs_with_few_folds_and_creases(default, bare_defau
     holds) and 54 creases (main had 51 and 709), asserted so they cannot grow back. Its mesh is as
     coarse as the default face's, so nothing is smoothed (``puppet.runtime.creasesmoothing``)."""
     from puppet.face.default import load_default_rig
-    from puppet.runtime.posecheck import pose_flaws
     from puppet.runtime.foldlimits import fold_limited
+    from puppet.runtime.posecheck import pose_flaws
     reference = Runtime(default, load_default_rig())
     rig = build_rig(bare_default)
     found = pose_flaws(Runtime(bare_default, rig), reference)

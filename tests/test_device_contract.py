@@ -22,16 +22,16 @@ from polling import wait_for
 from pythonosc.udp_client import SimpleUDPClient
 
 from devices import BACKENDS, DeviceError, backends, open_device, open_twin
+from devices.audio_device import AudioDevice
 from devices.base import Device, DeviceLost, State, Url
 from devices.can_device import CanSignal, SignalDecoder
 from devices.hid_device import HidDevice
 from devices.midi_device import MessagePort, MidiDevice
+from devices.simulated_audio import FakeMicrophone, FakeSoundDevice
 from devices.simulated_can import EXTRA_ID, JOYSTICK_SIGNALS, CanJoystick
 from devices.simulated_hid import FakeHidModule, gamepad, gamepad_report
 from devices.simulated_serial import PtyJoystick
-from devices.simulated_audio import FakeMicrophone, FakeSoundDevice
 from devices.twin import Twin
-from devices.audio_device import AudioDevice
 from devices.voice import CHANNELS, Voice
 from puppet.io.wavwriter import WavWriter
 
@@ -215,7 +215,7 @@ class SoundHarness(Harness):
         self.twin_wire = {"sound_file": str(self.path), "rate": 48000, "block": 480, "gate": -45.0}
 
     def send(self) -> dict[str, float]:
-        return {name: None for name in CHANNELS}  # it hears by itself: any reading of the voice's channels
+        return dict.fromkeys(CHANNELS)  # it hears by itself: any reading of the voice's channels
 
 
 class WavHarness(SoundHarness):

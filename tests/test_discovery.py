@@ -21,7 +21,7 @@ def test_each_backend_that_can_look_reports_devices_or_why_not(monkeypatch):
         raise OSError("no MIDI system (ALSA)")
 
     finders = {"serial": lambda: [Found("serial", "serial:///dev/ttyACM0", "Arduino Uno")],
-               "hid": missing, "midi": no_system, "can": lambda: [], "osc": None}
+               "hid": missing, "midi": no_system, "can": list, "osc": None}
     for kind, find in finders.items():
         module = types.ModuleType(f"fake_{kind}_backend")
         if find is not None:

@@ -16,8 +16,8 @@ from puppet.face.rig import load_rig, save_rig
 from puppet.fap.highlevel import high_level_faps
 from puppet.fap.table import clamp_ranges, fap
 from puppet.io.fapfile import read_fap, write_fap
-from puppet.runtime.lids import LID_PARTS
 from puppet.runtime.foldlimits import LIP_PAIRS, lid_faded, lid_unfaded
+from puppet.runtime.lids import LID_PARTS
 from puppet.runtime.musclesolver import folded_triangles
 
 

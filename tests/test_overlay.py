@@ -151,7 +151,7 @@ def test_calibration_from_the_window_guides_rest_then_sweep_and_writes_the_mappi
         assert isinstance(calibration, GuidedCalibration)
         start = time.monotonic()
         ends = {"ready": start, "rest": start + 1e6, "get ready to sweep": start + 2e6, "sweep": start + 3e6}
-        frames = {phase: 0 for phase in ends}
+        frames = dict.fromkeys(ends, 0)
         swept_from = None
         while live.calibration is not None:
             calibration._ends = list(ends.items())

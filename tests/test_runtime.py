@@ -51,7 +51,7 @@ def test_translating_every_control_point_of_a_region_translates_the_region(face)
         rig.control_points[index[name]].driver = None
     rt = Runtime(face, rig, dtype=np.float64, cache=False)
     move = np.array([0.01, 0.02, -0.015])
-    out = rt.deform(_displace(rt, {n: move for n in nose.control_points}))
+    out = rt.deform(_displace(rt, dict.fromkeys(nose.control_points, move)))
     np.testing.assert_allclose(out[nose.vertices] - face.vertices[nose.vertices], np.broadcast_to(move, (len(nose.vertices), 3)), atol=1e-12)
 
 

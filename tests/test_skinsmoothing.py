@@ -11,6 +11,7 @@ import pytest
 import trimesh.remesh
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from test_creases import sheet
 
 from puppet.face.autorig import build_rig
 from puppet.face.default import load_default_rig
@@ -21,7 +22,6 @@ from puppet.runtime.creasesmoothing import crease_smoothed
 from puppet.runtime.posecheck import PoseCheck
 from puppet.runtime.runtime import Runtime
 from puppet.runtime.skinsmoothing import skin_triangles, smoothing_matrix
-from test_creases import sheet
 
 
 def tent(vertices: np.ndarray) -> np.ndarray:

@@ -437,7 +437,7 @@ class Arch:
         inset = np.interp(s, self.s, self.inset)
         return np.array([x, y, z]) - inset * n, t, n
 
-    def offset(self, amount: float) -> "Arch":
+    def offset(self, amount: float) -> Arch:
         """A copy whose labial line lies ``amount`` further inward."""
         other = Arch.__new__(Arch)
         other.__dict__ = {k: (v.copy() if isinstance(v, np.ndarray) else v) for k, v in self.__dict__.items()}
@@ -678,7 +678,7 @@ class SkinDistance:
         return np.einsum("ij,ij->i", p - self.points[i], self.normals[i])
 
 
-def fit_jaw(arch: Arch, build, skin: SkinDistance, name: str) -> tuple[Arch, "Jaw", dict]:
+def fit_jaw(arch: Arch, build, skin: SkinDistance, name: str) -> tuple[Arch, Jaw, dict]:
     """Build a jaw, then fit it inside the mouth bag with CLEARANCE: where the crowns or gum
     margins come too close to the bag's skin (or through it), move the arch inward there
     (smoothly along the arch) and rebuild; then draw the gum's deep rows back toward the teeth
@@ -1309,7 +1309,7 @@ def json_document(src, V, T, parts, fp_doc, contours, cand, eye_centres, radius,
         "units": "decimetre",
         "frame": "MPEG-4 face frame: +x the face's own left, +y up, +z forward (out of the face)",
         "counts": {"vertices": int(len(V)), "triangles": int(len(T))},
-        "vertex_order": [part for part in sorted(parts, key=lambda p: offset[p])],
+        "vertex_order": sorted(parts, key=lambda p: offset[p]),
         "parts": part_doc,
         "cut": {
             "neck_loop": {"base_vertices": [int(v) for v in neck_loop], "front": NECK_LOOP_FRONT,

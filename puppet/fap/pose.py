@@ -20,8 +20,8 @@ class Pose:
     newest input it includes (``time.monotonic_ns``), where it comes from one."""
 
     fap: np.ndarray
-    viseme: tuple | None = None
-    expression: tuple | None = None
+    viseme: tuple[float, ...] | None = None
+    expression: tuple[float, ...] | None = None
     muscles: dict[str, float] = field(default_factory=dict)
     t_ns: int | None = None
 

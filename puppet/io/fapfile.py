@@ -73,8 +73,9 @@ import math
 import os
 import re
 import warnings
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
-from typing import IO, Iterator, Sequence
+from typing import IO
 
 import numpy as np
 
@@ -477,8 +478,8 @@ class FapWriter:
 
     def write_frame(self, values: Sequence[float] | np.ndarray,
                     mask: Sequence[bool] | np.ndarray | None = None,
-                    viseme: Sequence[int] | np.ndarray | None = None,
-                    expression: Sequence[int] | np.ndarray | None = None) -> None:
+                    viseme: Sequence[float] | np.ndarray | None = None,
+                    expression: Sequence[float] | np.ndarray | None = None) -> None:
         """Append one frame.
 
         ``values`` (68,) in FAPU units. ``mask`` None = FAPs 3..68, plus FAP 1 / FAP 2 when
@@ -536,8 +537,8 @@ def _portable_fps(fps: float) -> int:
 
 def _format_frame(number: int, values: Sequence[float] | np.ndarray,
                   mask: Sequence[bool] | np.ndarray | None,
-                  viseme: Sequence[int] | np.ndarray | None,
-                  expression: Sequence[int] | np.ndarray | None) -> bytes:
+                  viseme: Sequence[float] | np.ndarray | None,
+                  expression: Sequence[float] | np.ndarray | None) -> bytes:
     values = np.asarray(values, dtype=float)
     if values.shape != (N_FAPS,):
         raise ValueError(f"values must be {N_FAPS} numbers, got shape {values.shape}")
@@ -560,7 +561,7 @@ def _format_frame(number: int, values: Sequence[float] | np.ndarray,
     return f"{mask_line}\n{' '.join(tokens)}\n".encode()
 
 
-def _field_tokens(fields: Sequence[int] | np.ndarray | None, select: float, size: int,
+def _field_tokens(fields: Sequence[float] | np.ndarray | None, select: float, size: int,
                   defaults: tuple[int, ...]) -> list[str]:
     if fields is None:
         fields = [select, *defaults]

@@ -20,7 +20,7 @@ class OutputError(PuppetError, OSError):
         return str(self.args[0])
 
 
-def writable(path: str | os.PathLike, what: str = "file") -> Path:
+def writable(path: str | os.PathLike[str], what: str = "file") -> Path:
     """``path`` as a Path, if a ``what`` can be written there: its folder exists and is writable,
     and it is not itself a folder."""
     path = Path(path)

@@ -20,7 +20,7 @@ import os
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import IO
+from typing import IO, Any
 
 from devices.base import Sample
 from devices.samplelines import HEADER, SampleLogError, is_event, read_records, sample_from, sample_line
@@ -34,13 +34,13 @@ class LogEvent:
 
     t_ns: int
     kind: str
-    data: dict = field(default_factory=dict)
+    data: dict[str, Any] = field(default_factory=dict)
 
 
 class SampleLogWriter:
     """Appends Samples (and events) to a log, one flushed line each."""
 
-    def __init__(self, path: str | os.PathLike) -> None:
+    def __init__(self, path: str | os.PathLike[str]) -> None:
         self.path = Path(path)
         self._file: IO[str] = open(self.path, "w", encoding="utf-8")
         self._file.write(json.dumps(HEADER) + "\n")
@@ -65,14 +65,14 @@ class SampleLogWriter:
         self.close()
 
 
-def read_take_log(path: str | os.PathLike) -> Iterator[Sample | LogEvent]:
+def read_take_log(path: str | os.PathLike[str]) -> Iterator[Sample | LogEvent]:
     """The Samples and events of a log, streamed in order; a bad line names the file and line
     (a partial last one warns)."""
     for where, data in read_records(path):
-        yield _event(data, where) if is_event(data) else sample_from(data, where)
+        yield _event(data, where) if is_event(data) else sample_from(data, where)  # type: ignore[arg-type]  # a dict
 
 
-def _event(data: dict, where: str) -> LogEvent:
+def _event(data: dict[str, Any], where: str) -> LogEvent:
     kind, t_ns = data.pop("event"), data.pop("t_ns", None)
     if kind not in EVENTS or not isinstance(t_ns, int):
         raise SampleLogError(f"{where}: expected an event {EVENTS} with an integer t_ns, found {kind!r} at {t_ns!r}")

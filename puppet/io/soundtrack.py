@@ -33,7 +33,7 @@ class Soundtrack:
         return len(self.pcm) / self.rate
 
 
-def soundtrack(take: str | os.PathLike) -> Soundtrack | None:
+def soundtrack(take: str | os.PathLike[str]) -> Soundtrack | None:
     """The sound of the take at ``take`` (its folder, or the take.fap in it), aligned to frame 0;
     None for a take without sound (a bare .fap, a take no microphone was recorded in)."""
     path = Path(take)

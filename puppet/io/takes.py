@@ -38,6 +38,7 @@ import warnings
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -66,7 +67,7 @@ def check_take_name(name: str) -> str:
     return name
 
 
-def next_take_folder(root: str | os.PathLike, name: str) -> Path:
+def next_take_folder(root: str | os.PathLike[str], name: str) -> Path:
     """Create and return ``root/NAME_NNN`` with the next free number (never an existing one)."""
     check_take_name(name)
     root = Path(root)
@@ -96,15 +97,15 @@ def exact_take_folder(folder: Path) -> Path:
 class TakeRecorder:
     """Records one take: raw Samples as they come, Pose frames at the take's fps."""
 
-    def __init__(self, root: str | os.PathLike, name: str, fps: int = 25, *,
-                 mapping_path: str | os.PathLike | None = None, devices: Mapping[str, str] | None = None,
+    def __init__(self, root: str | os.PathLike[str], name: str, fps: int = 25, *,
+                 mapping_path: str | os.PathLike[str] | None = None, devices: Mapping[str, str] | None = None,
                  extra: Mapping[str, object] | None = None, exact: bool = False) -> None:
         if fps not in FPS_CHOICES:
             raise TakeError(f"take fps {fps}: choose one of {FPS_CHOICES}")
         self.folder = exact_take_folder(Path(root) / name) if exact else next_take_folder(root, name)
         self.fps = fps
-        self.meta = {
-            "name": name, "fps": fps, "started": _dt.datetime.now(_dt.timezone.utc).isoformat(),
+        self.meta: dict[str, Any] = {
+            "name": name, "fps": fps, "started": _dt.datetime.now(_dt.UTC).isoformat(),
             "mapping": None if mapping_path is None else str(mapping_path),
             "mapping_text": None if mapping_path is None else Path(mapping_path).read_text("utf-8"),
             "devices": dict(devices or {}), **dict(extra or {}), "frames": None, "samples": None,
@@ -128,22 +129,24 @@ class TakeRecorder:
     def _sound(self, sample: Sample) -> None:
         """Append a Sample's sound to its device's WAV (the first block opens it, and the
         metadata says where it falls and what the analysis's state was)."""
+        sound = sample.sound
+        assert sound is not None  # the caller passes Samples with sound
         writer = self._sounds.get(sample.device)
         if writer is None:
-            sound = sample.sound
             name = SOUND_NAME if not self._sounds else f"take.{sample.device}.wav"
             state = None if sound.state is None else json_state(sound.state)
             self.meta.setdefault("sound", {})[sample.device] = {
                 "file": name, "rate": sound.rate, "first_ns": sound.start_ns, "frames": 0, "state": state}
             writer = self._sounds[sample.device] = WavWriter(self.folder / name, sound.rate)
             self._write_meta()
-        writer.write(sample.sound.pcm)
+        writer.write(sound.pcm)
 
     def event(self, event: LogEvent) -> None:
         """Log one event (hold, resume, reset, frame) in its place among the Samples."""
         self._log.event(event)
 
-    def frame(self, fap: np.ndarray, viseme: tuple | None = None, expression: tuple | None = None) -> None:
+    def frame(self, fap: np.ndarray, viseme: tuple[float, ...] | None = None,
+              expression: tuple[float, ...] | None = None) -> None:
         """Write one frame: 68 low-level FAP values (FAPU; FAP 1/2 columns ignored) and the blends."""
         write_pose(self._fap, fap, viseme, expression)
         self.frames += 1
@@ -194,8 +197,8 @@ class TakeRecorder:
         partial.replace(self.folder / META_NAME)
 
 
-def write_pose(writer: FapWriter, fap: np.ndarray, viseme: tuple | None = None,
-               expression: tuple | None = None) -> None:
+def write_pose(writer: FapWriter, fap: np.ndarray, viseme: tuple[float, ...] | None = None,
+               expression: tuple[float, ...] | None = None) -> None:
     """Write a Pose's values as one .fap frame: FAPs 3..68 always, FAP 1 / 2 when given."""
     mask = np.ones(68, dtype=bool)
     mask[:2] = viseme is not None, expression is not None
@@ -213,7 +216,7 @@ class TakeSound:
     path: Path
     rate: int
     first_ns: int
-    state: dict | None = None
+    state: dict[str, Any] | None = None
 
 
 @dataclass
@@ -221,7 +224,7 @@ class Take:
     """A recorded take, read back."""
 
     folder: Path
-    meta: dict
+    meta: dict[str, Any]
 
     @property
     def fap_path(self) -> Path:
@@ -254,7 +257,7 @@ class Take:
             raise TakeError(f"{self.folder}: the take has no {name} (deleted or never written)")
         return path
 
-    def _log(self, read: Callable[[Path], Iterator]) -> Iterator:
+    def _log(self, read: Callable[[Path], Iterator[Any]]) -> Iterator[Any]:
         """``read``'s entries of the log; whatever the log's reader refuses becomes a TakeError."""
         path = self.present(LOG_NAME)
         count = 0
@@ -293,7 +296,7 @@ def _layer(value: object) -> bool:
             and _of(bool)(value.get("viseme")) and _of(bool)(value.get("expression")))
 
 
-_COUNT = _optional(lambda v: _of(int)(v) and v >= 0)
+_COUNT = _optional(lambda v: _of(int)(v) and v >= 0)  # type: ignore[operator]  # an int by then
 
 
 def _sound(value: object) -> bool:
@@ -324,7 +327,7 @@ META_TYPES: dict[str, tuple[Callable[[object], bool], str]] = {
 }
 
 
-def open_take(folder: str | os.PathLike) -> Take:
+def open_take(folder: str | os.PathLike[str]) -> Take:
     """Read a take folder's metadata (its .fap and log are read on demand), checked against
     ``META_TYPES``: a TakeError names the file and the first key that is wrong."""
     folder = Path(folder)
@@ -360,7 +363,7 @@ def _check_meta(meta: object, path: Path) -> None:
             raise TakeError(f"{path}: {key!r}: expected {expected}, found {json.dumps(meta[key])[:60]}")
 
 
-def take_fap(path: str | os.PathLike) -> Path:
+def take_fap(path: str | os.PathLike[str]) -> Path:
     """The .fap of a take given as its folder (its metadata checked too) or as the .fap itself.
 
     A folder whose ``take.json`` is missing but whose ``take.fap`` is there gives that .fap, with

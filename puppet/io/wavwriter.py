@@ -20,7 +20,7 @@ HEADER_BYTES = 44
 class WavWriter:
     """Appends blocks of 16-bit mono PCM to a WAV file, its header true after every block."""
 
-    def __init__(self, path: str | os.PathLike, rate: int) -> None:
+    def __init__(self, path: str | os.PathLike[str], rate: int) -> None:
         self.path, self.rate = Path(path), int(rate)
         self.frames = 0
         self._file = open(self.path, "wb")
