@@ -584,7 +584,7 @@ def _default_video(take: str) -> Path:
 def _render_many(args: argparse.Namespace) -> int:
     """``puppet render TAKE... -o DIR/``: a line per take as it finishes (video, frames, sha256, or
     the error); exit code 2 if any take failed, the others rendered all the same."""
-    from puppet.view.batch import RenderSettings, choose_runner, render_batch, render_serial
+    from puppet.view.batch import RenderSettings, check_takes, choose_runner, render_batch, render_serial
 
     def report(result) -> None:
         if result.ok:
@@ -594,6 +594,7 @@ def _render_many(args: argparse.Namespace) -> int:
 
     settings = RenderSettings(size=args.size, view=args.view, fps=args.fps, face=args.face,
                               antialias=args.antialias)
+    check_takes(args.take, args.output)  # two takes for one video: refused before anything is said
     runner = choose_runner(args.take, scheduler=args.scheduler, workers=args.workers)
     print(f"rendering {len(args.take)} takes {runner.why}", file=sys.stderr, flush=True)
     if runner.dask:

@@ -111,7 +111,7 @@ def render_serial(takes: Iterable[str], out_dir: str, settings: RenderSettings, 
                   on_result: Callable[[TakeResult], None] | None = None) -> list[TakeResult]:
     """Every take, one after another in this process: the reference a batch must equal (and
     what a small batch runs, ``choose_runner``). ``on_result`` sees each result as it is made."""
-    takes = _checked(takes, out_dir)
+    takes = check_takes(takes, out_dir)
     Path(out_dir).mkdir(parents=True, exist_ok=True)
     results = []
     for take in takes:
@@ -132,7 +132,7 @@ def render_batch(takes: Iterable[str], out_dir: str, settings: RenderSettings, *
     that fails is a result with ``error`` set; a task that dies for another reason (a worker
     lost, a bug) is reported the same way, its exception in one line.
     """
-    takes = _checked(takes, out_dir)
+    takes = check_takes(takes, out_dir)
     Path(out_dir).mkdir(parents=True, exist_ok=True)
     try:
         from dask.distributed import Client, LocalCluster, as_completed
@@ -217,7 +217,7 @@ def _face_and_runtime(face_path: str | None) -> tuple[Face, Runtime]:
     return face, Runtime(face)
 
 
-def _checked(takes: Iterable[str], out_dir: str | os.PathLike) -> list[str]:
+def check_takes(takes: Iterable[str], out_dir: str | os.PathLike) -> list[str]:
     """The takes as a list; a BatchError if two would write the same video."""
     takes = [str(take) for take in takes]
     seen: dict[Path, str] = {}
