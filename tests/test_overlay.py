@@ -278,3 +278,23 @@ def test_k_starts_the_simulated_hand_over_however_long_the_window_took_to_open(t
     finally:
         live.close()
         session.close()
+
+
+def test_a_take_saved_with_no_window_is_said_with_its_length_and_frames(tmp_path, capsys):
+    """``puppet live --no-window``: a take stopped by the control API is said as the window says it."""
+    from puppet.view.livewindow import LiveStats
+    from puppet.view.liveoutput import HeadlessLive
+
+    session = open_session(shipped_mappings()["arduino_sliders"], devices=SIM_BOX, record_root=tmp_path)
+    live = HeadlessLive(session, [], LiveStats())
+    try:
+        session.start_recording()
+        for _ in range(10):
+            live.step()
+            time.sleep(0.02)
+        session.stop_recording()
+        live.step()
+    finally:
+        session.close()
+    saved = [line for line in capsys.readouterr().err.splitlines() if line.startswith("take saved: ")]
+    assert len(saved) == 1 and re.search(r"take_001 \(\d+\.\d s, \d+ frames at 30 fps, \d+ readings\)$", saved[0])

@@ -41,10 +41,10 @@ from typing import Any
 
 from devices.keys_device import KeysDevice, key_channels
 from puppet.io.shipped import mappings_folder
-from puppet.io.takes import TakeError, check_take_name, open_take
+from puppet.io.takes import TakeError, check_take_name
 from puppet.live.calibrate import CalibrationError, GuidedCalibration, calibration_channels, device_overrides
 from puppet.live.mappingfile import load_mapping
-from puppet.view.liveoutput import HeadlessLive, LiveOutput, close_outputs, live_status, publish
+from puppet.view.liveoutput import HeadlessLive, LiveOutput, close_outputs, live_status, publish, saved_line
 from puppet.view.overlay import Cockpit, device_lines
 from puppet.view.renderer import Renderer
 from puppet.view.rendertake import VIEWS, aim_at_head
@@ -91,15 +91,6 @@ def live_title(name: str, fps: float, latency_ms: float | None, states: dict[str
     if recording:
         parts.append(f"REC {recording}")
     return " | ".join(parts)
-
-
-def saved_line(folder: str | os.PathLike) -> str:
-    """A saved take as the terminal says it: its folder, length, frames and what it keeps."""
-    meta = open_take(folder).meta
-    frames, fps = meta.get("frames") or 0, meta["fps"]
-    sound = ", with its sound" if meta.get("sound") else ""
-    return (f"{folder} ({frames / fps:.1f} s, {frames} frames at {fps} fps, "
-            f"{meta.get('samples') or 0} readings{sound})")
 
 
 class LiveView:
