@@ -649,13 +649,13 @@ def _face(path: str | None):
 
 def _export(args: argparse.Namespace) -> int:
     """``puppet export``: a take to .glb."""
-    from puppet.view.gltf import export_glb
+    from puppet.face.default import DEFAULT_UNIT_MM
+    from puppet.view.gltf import error_words, export_glb
 
     info = export_glb(args.take, args.output, mode=args.mode, max_frames=args.max_frames, face=_face(args.face),
                       step=lambda k, n, what: _step("export", k, n, what))
-    print(f"{args.output}: {info['frames']} frames, {info['targets']} morph targets, "
-          f"largest vertex error {info['max_error']:.2g} mesh units ({100 * info['max_error'] / info['extent']:.2g}% "
-          f"of the face's {info['extent']:.3g}-unit size), {info['bytes']:,} bytes")
+    error = error_words(info["max_error"], info["extent"], DEFAULT_UNIT_MM if args.face is None else None)
+    print(f"{args.output}: {info['frames']} frames, {info['targets']} morph targets, {error}, {info['bytes']:,} bytes")
     return 0
 
 
