@@ -68,17 +68,21 @@ def test_the_cockpit_draws_over_the_face_and_hidden_draws_nothing(tmp_path, head
         session.close()
 
 
-def test_a_lost_device_shows_why():
-    class Counters:
-        last_error = "[Errno 2] could not open port /dev/ttyACM0"
+def test_a_lost_device_shows_why_and_one_never_there_is_unavailable_not_lost():
+    from devices.base import Counters
 
     class Device:
-        counters = Counters()
+        def __init__(self, counters: Counters) -> None:
+            self.counters = counters
 
-    states = {"box": type("S", (), {"value": "lost"})(), "pad": type("S", (), {"value": "open"})()}
-    lines = device_lines(states, {"box": Device(), "pad": Device()})
+    unplugged = Counters(samples=120, reconnects=1, last_error="[Errno 2] could not open port /dev/ttyACM0")
+    never = Counters(last_error="no MIDI system (no /dev/snd/seq: load the ALSA sequencer, sudo modprobe snd-seq)")
+    lost, opened = type("S", (), {"value": "lost"})(), type("S", (), {"value": "open"})()
+    lines = device_lines({"box": lost, "pad": opened, "faders": lost},
+                         {"box": Device(unplugged), "pad": Device(Counters(samples=5)), "faders": Device(never)})
     assert [(d.name, d.state, d.reason) for d in lines] == [
-        ("box", "lost", "[Errno 2] could not open port /dev/ttyACM0"), ("pad", "open", "")]
+        ("box", "lost", "[Errno 2] could not open port /dev/ttyACM0"), ("pad", "open", ""),
+        ("faders", "unavailable", never.last_error)]
 
 
 def _cockpit_parts(pixels: np.ndarray) -> set[str]:

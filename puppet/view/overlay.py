@@ -214,14 +214,16 @@ def targets_label(targets: tuple[str, ...], width: int = 26) -> str:
 
 
 def device_lines(states: Mapping[str, Any], devices: Mapping[str, Any]) -> list[DeviceLine]:
-    """Each device's state (``LiveFrame.states``) and, when it is not open, the reason its adapter
-    gave; an audio input's level, gate and xruns."""
+    """Each device's state (``LiveFrame.states``; "unavailable" for one lost before it ever opened)
+    and, when it is not open, the reason its adapter gave; an audio input's level, gate and xruns."""
     lines = []
     for name, state in states.items():
         text = getattr(state, "value", str(state)).lower()
         device = devices.get(name)
         counters = getattr(device, "counters", None)
         reason = counters.last_error if counters is not None and text != "open" else ""
+        if text == "lost" and counters is not None and not (counters.samples or counters.reconnects):
+            text = "unavailable"  # never opened: "lost" would say it had been there (no MIDI system)
         line = DeviceLine(name, text, reason)
         if hasattr(device, "level_db"):
             line.level_db, line.gate_db = device.level_db, device.gate
