@@ -302,3 +302,32 @@ def test_a_take_saved_with_no_window_is_said_with_its_length_and_frames(tmp_path
         session.close()
     saved = [line for line in capsys.readouterr().err.splitlines() if line.startswith("take saved: ")]
     assert len(saved) == 1 and re.search(r"take_001 \(\d+\.\d s, \d+ frames at 30 fps, \d+ readings\)$", saved[0])
+
+
+def test_a_calibration_that_leaves_channels_as_they_were_says_so_in_red_in_the_cockpit(tmp_path, headless_window):
+    """Nobody sweeps (the simulated hand rests all along): every channel is left as it was, and the
+    cockpit says so in red for FAILURE_S, not only the terminal."""
+    from puppet.view.livewindow import FAILURE_S
+
+    mapping, session, live = _calibrating_box(tmp_path, headless_window(SIZE), rest=600)
+    before = mapping.read_bytes()
+    try:
+        live._on_key(_Keys.K, _Keys.ACTION_PRESS, None)
+        calibration, start = live.calibration, time.monotonic()
+        frames = dict.fromkeys(("ready", "rest", "get ready to sweep", "sweep"), 0)
+        while live.calibration is not None:  # each phase moved on after 5 frames, however slow they are
+            now = time.monotonic()
+            calibration._ends = [(phase, now - 1 if n >= 5 else now + 1e6) for phase, n in frames.items()]
+            live.step()
+            phase = calibration.phase()[0]
+            frames[phase] = frames.get(phase, 0) + 1
+            assert now - start < 60
+        _steps(live, 2)
+        assert live.notice.startswith("calibrated 0 of 6 channels") and live.notice_failed
+        assert live._notice_until - time.monotonic() > FAILURE_S - 5
+        panel = _pixels(window=live.window)[8:400, 8:600].reshape(-1, 3).astype(int)
+        assert np.all(np.abs(panel - (255, 77, 77)) < 12, axis=1).sum() > 30  # the notice's red
+        assert mapping.read_bytes() == before
+    finally:
+        live.close()
+        session.close()

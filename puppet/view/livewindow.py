@@ -53,6 +53,9 @@ from puppet.view.window import NoDisplayError, WindowError, check_display, open_
 WINDOW_S = 1.0
 """The span, in seconds, of the measured fps and the latency median."""
 
+FAILURE_S = 20.0
+"""How long the cockpit shows a failure (a calibration not written, or channels left as they were)."""
+
 
 class LiveStats:
     """Frames drawn and sample->drawn latencies over the last ``WINDOW_S`` (times in ns)."""
@@ -113,7 +116,7 @@ class LiveView:
         self._quit = False
         self._take_started = 0.0
         self.calibration: GuidedCalibration | None = None
-        self.notice, self._notice_until = "", 0.0
+        self.notice, self._notice_until, self.notice_failed = "", 0.0, False
         self._title = ""
         window.exit_key = None  # Escape is ours: the take is finished before the window goes
         window.key_event_func = self._on_key
@@ -243,24 +246,27 @@ class LiveView:
         calibration = self.calibration
         calibration.feed(self.session.mapping.channels())
         if calibration.phase()[0] != "done":
-            self.notice, self._notice_until = calibration.instruction(), time.monotonic() + 0.5
+            self.notice, self.notice_failed = calibration.instruction(), False
+            self._notice_until = time.monotonic() + 0.5
             return
         self.calibration = None
         try:
             result, warnings = calibration.finish()
         except (CalibrationError, OSError) as error:
-            self._say(f"calibration not written: {error}")
+            self._say(f"calibration not written: {error}", FAILURE_S, failed=True)
             return
         self.session.mapping = load_mapping(calibration.path)  # the new ranges from the next frame on
         for line in warnings:
             print(f"calibrate: {line}", file=sys.stderr)
         first = f": {warnings[0]}" + (" ..." if len(warnings) > 1 else "") if warnings else ""
         self._say(f"calibrated {len(result) - len(warnings)} of {len(result)} channels into "
-                  f"{calibration.path.name} ({len(warnings)} left as they were{first})")
+                  f"{calibration.path.name} ({len(warnings)} left as they were{first})",
+                  FAILURE_S if warnings else 6.0, failed=bool(warnings))
 
-    def _say(self, text: str, seconds: float = 6.0) -> None:
-        """A notice in the cockpit for ``seconds`` (and on the terminal)."""
-        self.notice, self._notice_until = text, time.monotonic() + seconds
+    def _say(self, text: str, seconds: float = 6.0, failed: bool = False) -> None:
+        """A notice in the cockpit for ``seconds`` (and on the terminal); ``failed`` draws it as a
+        failure (red), so a calibration that left channels as they were is not missed."""
+        self.notice, self._notice_until, self.notice_failed = text, time.monotonic() + seconds, failed
         print(text, file=sys.stderr)
 
     # -- drawing -----------------------------------------------------------------------------
@@ -284,7 +290,7 @@ class LiveView:
         channels = self.session.mapping.channels() if self.cockpit.monitor else ()
         notice = self.notice if time.monotonic() < self._notice_until else ""
         self.cockpit.draw(self.stats.fps, self.stats.latency_ms, device_lines(states, self.session.devices),
-                          recording, channels, notice, layer=self.session.layer_status(),
+                          recording, channels, notice, layer=self.session.layer_status(), failed=self.notice_failed,
                           triggers=self.session.mapping.trigger_states(pose_ns))
 
     def _set_title(self, states: dict[str, Any]) -> None:
