@@ -253,7 +253,8 @@ def test_a_layered_pass_shows_its_base_take_in_the_cockpit(tmp_path, headless_wi
     live = LiveView(session, window)
     try:
         _steps(live, 3)
-        assert session.layer_status().startswith("over demo_take.fap, frame 1 of 98 (0:00.00 of 0:03.92); armed: open_jaw")
+        said = session.layer_status()
+        assert said.startswith("over demo_take.fap, frame 1 of 98 (0:00.00 of 0:03.92); armed: open_jaw")
         panel = _pixels(window)[8:320, 8:400].reshape(-1, 3).astype(int)
         assert np.all(np.abs(panel - (140, 204, 255)) < 40, axis=1).sum() > 30  # the layer line's blue
     finally:
