@@ -287,8 +287,8 @@ def test_k_starts_the_simulated_hand_over_however_long_the_window_took_to_open(t
 
 def test_a_take_saved_with_no_window_is_said_with_its_length_and_frames(tmp_path, capsys):
     """``puppet live --no-window``: a take stopped by the control API is said as the window says it."""
-    from puppet.view.livewindow import LiveStats
     from puppet.view.liveoutput import HeadlessLive
+    from puppet.view.livewindow import LiveStats
 
     session = open_session(shipped_mappings()["arduino_sliders"], devices=SIM_BOX, record_root=tmp_path)
     live = HeadlessLive(session, [], LiveStats())
