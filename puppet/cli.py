@@ -102,8 +102,8 @@ def _demo(args: argparse.Namespace) -> int:
 
 
 def _render_arguments(render: argparse.ArgumentParser) -> None:
-    render.add_argument("take", nargs="+", help="the take folder or .fap file (or several, one video each with -o DIR/); "
-                                                "a take's sound goes into the video")
+    render.add_argument("take", nargs="+", help="the take folder or .fap file (or several, one video each with "
+                                                "-o DIR/); a take's sound goes into the video")
     render.add_argument("-o", "--output", default=None,
                         help="the video to write (.mp4; default: take.mp4 in the take folder, or X.mp4 beside "
                              "X.fap), or for several takes a folder (DIR/): one TAKE.mp4 each")
