@@ -102,15 +102,17 @@ def _demo(args: argparse.Namespace) -> int:
 
 
 def _render_arguments(render: argparse.ArgumentParser) -> None:
-    render.add_argument("take", nargs="+", help="the take folder or .fap file (or several, rendered in parallel); "
-                                                "a take's sound goes into the video")
+    render.add_argument("take", nargs="+", help="the take folder or .fap file (or several, one video each with "
+                                                "-o DIR/); a take's sound goes into the video")
     render.add_argument("-o", "--output", default=None,
                         help="the video to write (.mp4; default: take.mp4 in the take folder, or X.mp4 beside "
                              "X.fap), or for several takes a folder (DIR/): one TAKE.mp4 each")
     render.add_argument("--scheduler", default=None,
-                        help="many takes: a running Dask scheduler (tcp://host:8786); default a local cluster")
+                        help="many takes: render on a running Dask scheduler (tcp://host:8786); default: one after "
+                             "another for a small batch, a local Dask cluster for a big one")
     render.add_argument("--workers", type=int, default=None,
-                        help="many takes: local worker processes (default: one per core)")
+                        help="many takes: render on a local Dask cluster of N worker processes (default: chosen by "
+                             "the batch's size)")
     render.add_argument("--size", type=_size, default=(640, 480), help="video size WxH (default 640x480)")
     render.add_argument("--view", choices=VIEWS, default="front", help="camera (default front)")
     render.add_argument("--fps", type=_seconds_or_rate("fps", 0.1, 1000), default=None,
@@ -582,7 +584,7 @@ def _default_video(take: str) -> Path:
 def _render_many(args: argparse.Namespace) -> int:
     """``puppet render TAKE... -o DIR/``: a line per take as it finishes (video, frames, sha256, or
     the error); exit code 2 if any take failed, the others rendered all the same."""
-    from puppet.view.batch import RenderSettings, render_batch
+    from puppet.view.batch import RenderSettings, check_takes, choose_runner, render_batch, render_serial
 
     def report(result) -> None:
         if result.ok:
@@ -592,8 +594,14 @@ def _render_many(args: argparse.Namespace) -> int:
 
     settings = RenderSettings(size=args.size, view=args.view, fps=args.fps, face=args.face,
                               antialias=args.antialias)
-    results = render_batch(args.take, args.output, settings, scheduler=args.scheduler,
-                           workers=args.workers, on_result=report)
+    check_takes(args.take, args.output)  # two takes for one video: refused before anything is said
+    runner = choose_runner(args.take, scheduler=args.scheduler, workers=args.workers)
+    print(f"rendering {len(args.take)} takes {runner.why}", file=sys.stderr, flush=True)
+    if runner.dask:
+        results = render_batch(args.take, args.output, settings, scheduler=args.scheduler,
+                               workers=runner.workers, on_result=report)
+    else:
+        results = render_serial(args.take, args.output, settings, on_result=report)
     return 0 if all(result.ok for result in results) else 2
 
 
@@ -641,13 +649,13 @@ def _face(path: str | None):
 
 def _export(args: argparse.Namespace) -> int:
     """``puppet export``: a take to .glb."""
-    from puppet.view.gltf import export_glb
+    from puppet.face.default import DEFAULT_UNIT_MM
+    from puppet.view.gltf import error_words, export_glb
 
     info = export_glb(args.take, args.output, mode=args.mode, max_frames=args.max_frames, face=_face(args.face),
                       step=lambda k, n, what: _step("export", k, n, what))
-    print(f"{args.output}: {info['frames']} frames, {info['targets']} morph targets, "
-          f"largest vertex error {info['max_error']:.2g} mesh units ({100 * info['max_error'] / info['extent']:.2g}% "
-          f"of the face's {info['extent']:.3g}-unit size), {info['bytes']:,} bytes")
+    error = error_words(info["max_error"], info["extent"], DEFAULT_UNIT_MM if args.face is None else None)
+    print(f"{args.output}: {info['frames']} frames, {info['targets']} morph targets, {error}, {info['bytes']:,} bytes")
     return 0
 
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from puppet.io.fapfile import read_fap, write_fap
@@ -87,9 +88,47 @@ def test_puppet_render_many_takes_into_a_folder(takes, serial, tmp_path, capsys,
     out = tmp_path / "videos"
     assert cli.main(["render", *takes, "-o", f"{out}/", "--size", "160x120", "--workers", "2"]) == 2
     captured = capsys.readouterr()
-    assert captured.err.count("\n") == 1 and "corrupt.fap" in captured.err
+    said, error = captured.err.splitlines()
+    assert said == "rendering 4 takes on a local Dask cluster of 2 worker(s), as asked" and "corrupt.fap" in error
     for want in expected:
         if want.ok:
             video = out / Path(want.video).name
             assert f"{video}: 8 frames sha256 {want.sha256}" in captured.out
             assert batch.sha256_file(video) == want.sha256
+
+
+def _still(path: Path, frames: int) -> str:
+    """A take of ``frames`` frames at rest."""
+    write_fap(path, (np.zeros((frames, 68)), np.ones((frames, 68), dtype=bool)), fps=25)
+    return str(path)
+
+
+def test_a_small_batch_renders_one_take_after_another_and_a_big_one_on_dask(tmp_path) -> None:
+    """A cold local cluster costs more than a small batch gains (batch.DASK_MIN_FRAMES), and never
+    pays on fewer than DASK_MIN_CORES cores; asking for workers or a scheduler is always Dask."""
+    small = [_still(tmp_path / f"s{i}.fap", 98) for i in range(3)]
+    big = [_still(tmp_path / f"b{i}.fap", 300) for i in range(3)]
+    chosen = batch.choose_runner(small, cores=16)
+    assert not chosen.dask and chosen.why.startswith("one after another (294 frames on 16 core(s)")
+    assert not batch.choose_runner(big, cores=2).dask
+    assert not batch.choose_runner(big[:1], cores=16).dask  # one take: nothing to share out
+    assert batch.choose_runner(big, cores=16) == batch.Runner(
+        True, 3, "on a local Dask cluster of 3 workers (500+ frames on 16 cores)")
+    assert batch.choose_runner(small, cores=16, workers=2) == batch.Runner(
+        True, 2, "on a local Dask cluster of 2 worker(s), as asked")
+    assert batch.choose_runner(small, scheduler="tcp://h:8786").dask
+    assert batch.choose_runner([str(tmp_path / "missing.fap")] * 2, cores=16).why.startswith("one after another (0 ")
+
+
+def test_puppet_render_of_a_small_batch_says_it_renders_them_in_turn(takes, serial, tmp_path, capsys, egl) -> None:
+    from puppet import cli
+
+    _, expected = serial
+    out = tmp_path / "videos"
+    assert cli.main(["render", *takes, "-o", f"{out}/", "--size", "160x120"]) == 2
+    captured = capsys.readouterr()
+    said, error = captured.err.splitlines()
+    assert said.startswith("rendering 4 takes one after another (122 frames") and "corrupt.fap" in error
+    for want in expected:
+        if want.ok:
+            assert f"{out / Path(want.video).name}: 8 frames sha256 {want.sha256}" in captured.out

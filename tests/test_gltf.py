@@ -157,3 +157,12 @@ def test_the_khronos_validator_finds_no_errors(take, tmp_path):
         assert run.returncode == 0, run.stderr
         issues = json.loads(run.stdout)
         assert issues["numErrors"] == 0 and issues["numWarnings"] == 0, issues["messages"]
+
+
+def test_the_vertex_error_is_said_in_millimetres_on_the_default_face_and_in_the_files_units_else():
+    from puppet.face.default import DEFAULT_UNIT_MM
+    from puppet.view.gltf import error_words
+
+    assert error_words(0.0028, 2.86, DEFAULT_UNIT_MM) == "largest vertex error 0.28 mm (0.098% of the face's 286 mm size)"
+    assert error_words(0.0028, 2.86) == ("largest vertex error 0.0028 mesh units (the face file's own unit; "
+                                         "0.098% of the face's 2.86-unit size)")

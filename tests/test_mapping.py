@@ -388,6 +388,23 @@ def test_a_line_indented_too_little_is_the_line_named_not_the_one_after_it():
     assert str(yaml_error(deeper, "deeper.yaml")).startswith("deeper.yaml:6: YAML syntax error at line 6")
 
 
+def test_a_plain_value_that_lost_its_indentation_is_named_not_the_line_after_it():
+    """After ``key: 0.1`` (a plain value, which YAML could carry on to the next line) PyYAML says
+    "mapping values are not allowed" at the next, deeper line; the line that went wrong is named."""
+    text = ("devices:\n  box: {url: 'serial:///dev/x'}\nchannels:\n  box.ch0:\n    min: 0\n"
+            "  dead_zone: 0.1\n    max: 1023\n")
+    err = str(yaml_error(text, "plain.yaml"))
+    assert err.startswith("plain.yaml:6: YAML indentation: line 6 is indented 2 spaces") and "line 7" in err
+
+
+def test_a_line_between_two_indentations_says_which_two():
+    text = "devices:\n  box: {url: 'serial:///dev/x'}\nchannels:\n  box.ch0:\n    min: 0\n   max: 1023\n"
+    err = str(yaml_error(text, "between.yaml"))
+    assert err == ("between.yaml:6: YAML indentation: line 6 is indented 3 spaces, less than line 5 (4) and more "
+                   "than the keys from line 4 (2), so it fits in neither; give it the indentation of the keys it "
+                   "belongs with")
+
+
 @pytest.mark.parametrize("text, got", [("- 1\n- 2\n", "[1, 2]"), ("hello\n", "'hello'"), ("", "nothing"),
                                        ("# only a comment\n", "nothing")])
 def test_non_mapping_root(text, got):

@@ -68,17 +68,21 @@ def test_the_cockpit_draws_over_the_face_and_hidden_draws_nothing(tmp_path, head
         session.close()
 
 
-def test_a_lost_device_shows_why():
-    class Counters:
-        last_error = "[Errno 2] could not open port /dev/ttyACM0"
+def test_a_lost_device_shows_why_and_one_never_there_is_unavailable_not_lost():
+    from devices.base import Counters
 
     class Device:
-        counters = Counters()
+        def __init__(self, counters: Counters) -> None:
+            self.counters = counters
 
-    states = {"box": type("S", (), {"value": "lost"})(), "pad": type("S", (), {"value": "open"})()}
-    lines = device_lines(states, {"box": Device(), "pad": Device()})
+    unplugged = Counters(samples=120, reconnects=1, last_error="[Errno 2] could not open port /dev/ttyACM0")
+    never = Counters(last_error="no MIDI system (no /dev/snd/seq: load the ALSA sequencer, sudo modprobe snd-seq)")
+    lost, opened = type("S", (), {"value": "lost"})(), type("S", (), {"value": "open"})()
+    lines = device_lines({"box": lost, "pad": opened, "faders": lost},
+                         {"box": Device(unplugged), "pad": Device(Counters(samples=5)), "faders": Device(never)})
     assert [(d.name, d.state, d.reason) for d in lines] == [
-        ("box", "lost", "[Errno 2] could not open port /dev/ttyACM0"), ("pad", "open", "")]
+        ("box", "lost", "[Errno 2] could not open port /dev/ttyACM0"), ("pad", "open", ""),
+        ("faders", "unavailable", never.last_error)]
 
 
 def _cockpit_parts(pixels: np.ndarray) -> set[str]:
@@ -249,7 +253,8 @@ def test_a_layered_pass_shows_its_base_take_in_the_cockpit(tmp_path, headless_wi
     live = LiveView(session, window)
     try:
         _steps(live, 3)
-        assert session.layer_status().startswith("over demo_take.fap, frame 1 of 98; armed: open_jaw")
+        said = session.layer_status()
+        assert said.startswith("over demo_take.fap, frame 1 of 98 (0:00.00 of 0:03.92); armed: open_jaw")
         panel = _pixels(window)[8:320, 8:400].reshape(-1, 3).astype(int)
         assert np.all(np.abs(panel - (140, 204, 255)) < 40, axis=1).sum() > 30  # the layer line's blue
     finally:
@@ -275,6 +280,55 @@ def test_k_starts_the_simulated_hand_over_however_long_the_window_took_to_open(t
         live._on_key(_Keys.K, _Keys.ACTION_PRESS, None)
         _steps(live, 30)
         assert live.calibration.phase()[0] == "ready" and away_from_rest() < 40  # at rest again
+    finally:
+        live.close()
+        session.close()
+
+
+def test_a_take_saved_with_no_window_is_said_with_its_length_and_frames(tmp_path, capsys):
+    """``puppet live --no-window``: a take stopped by the control API is said as the window says it."""
+    from puppet.view.liveoutput import HeadlessLive
+    from puppet.view.livewindow import LiveStats
+
+    session = open_session(shipped_mappings()["arduino_sliders"], devices=SIM_BOX, record_root=tmp_path)
+    live = HeadlessLive(session, [], LiveStats())
+    try:
+        session.start_recording()
+        for _ in range(10):
+            live.step()
+            time.sleep(0.02)
+        session.stop_recording()
+        live.step()
+    finally:
+        session.close()
+    saved = [line for line in capsys.readouterr().err.splitlines() if line.startswith("take saved: ")]
+    assert len(saved) == 1 and re.search(r"take_001 \(\d+\.\d s, \d+ frames at 30 fps, \d+ readings\)$", saved[0])
+
+
+def test_a_calibration_that_leaves_channels_as_they_were_says_so_in_red_in_the_cockpit(tmp_path, headless_window):
+    """Nobody sweeps (the simulated hand rests all along): every channel is left as it was, and the
+    cockpit says so in red for FAILURE_S, not only the terminal."""
+    from puppet.view.livewindow import FAILURE_S
+
+    mapping, session, live = _calibrating_box(tmp_path, headless_window(SIZE), rest=600)
+    before = mapping.read_bytes()
+    try:
+        live._on_key(_Keys.K, _Keys.ACTION_PRESS, None)
+        calibration, start = live.calibration, time.monotonic()
+        frames = dict.fromkeys(("ready", "rest", "get ready to sweep", "sweep"), 0)
+        while live.calibration is not None:  # each phase moved on after 5 frames, however slow they are
+            now = time.monotonic()
+            calibration._ends = [(phase, now - 1 if n >= 5 else now + 1e6) for phase, n in frames.items()]
+            live.step()
+            phase = calibration.phase()[0]
+            frames[phase] = frames.get(phase, 0) + 1
+            assert now - start < 60
+        _steps(live, 2)
+        assert live.notice.startswith("calibrated 0 of 6 channels") and live.notice_failed
+        assert live._notice_until - time.monotonic() > FAILURE_S - 5
+        panel = _pixels(window=live.window)[8:400, 8:600].reshape(-1, 3).astype(int)
+        assert np.all(np.abs(panel - (255, 77, 77)) < 12, axis=1).sum() > 30  # the notice's red
+        assert mapping.read_bytes() == before
     finally:
         live.close()
         session.close()

@@ -267,11 +267,13 @@ def test_a_layered_pass_says_its_base_take_where_it_is_and_what_is_armed(live_ta
     try:
         _open(session)
         total = live_take.meta["frames"]
-        assert session.layer_status() == f"over {live_take.folder.name}, frame 1 of {total}; armed: open_jaw, viseme"
+        length = f"0:{total / live_take.meta['fps']:05.2f}"
+        assert session.layer_status() == (f"over {live_take.folder.name}, frame 1 of {total} (0:00.00 of {length}); "
+                                          "armed: open_jaw, viseme")
         start = time.monotonic_ns()
         session.start_recording(start)
-        assert session.layer_status(start + 500_000_000) == (f"over {live_take.folder.name}, frame 16 of {total}; "
-                                                             "armed: open_jaw, viseme")
+        assert session.layer_status(start + 500_000_000) == (f"over {live_take.folder.name}, frame 16 of {total} "
+                                                             f"(0:00.50 of {length}); armed: open_jaw, viseme")
         session.stop_recording()
     finally:
         session.close()

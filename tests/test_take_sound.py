@@ -206,8 +206,7 @@ def test_lipsync_makes_a_take_that_renders_replays_and_exports_with_its_sound(tm
     assert main(["export", str(folder), "-o", str(tmp_path / "t.glb")]) == 0
     out, err = capsys.readouterr()
     assert [line.split(":")[0] for line in err.splitlines()] == ["export 1/3", "export 2/3", "export 3/3"]
-    said = re.search(r"largest vertex error ([\d.e-]+) mesh units \(([\d.e-]+)% of the face's ([\d.]+)-unit size\)",
-                     out)
+    said = re.search(r"largest vertex error ([\d.e-]+) mm \(([\d.e-]+)% of the face's ([\d.]+) mm size\)", out)
     assert said and float(said[2]) == pytest.approx(100 * float(said[1]) / float(said[3]), rel=0.1)
     assert main(["lipsync", str(wav), "-o", str(folder)]) == 2        # never over a take
 

@@ -10,6 +10,7 @@ import warnings
 
 import numpy as np
 import pytest
+from window_keys import WindowKeys as _Keys
 
 from puppet import cli
 from puppet.face.load import load_face
@@ -233,11 +234,6 @@ def test_play_on_a_display_that_does_not_answer_exits_2(monkeypatch, capsys):
 # -- the player's loop, drawing offscreen ----------------------------------------------------
 
 
-class _Keys:
-    ACTION_PRESS, ACTION_RELEASE = "press", "release"
-    SPACE, RIGHT, LEFT, HOME, Q, ESCAPE = "space", "right", "left", "home", "q", "escape"
-
-
 class _FakeTime:
     def __init__(self) -> None:
         self.now = 100.0
@@ -261,6 +257,8 @@ def test_the_player_draws_frames_and_obeys_the_keys(tmp_path, runtime, monkeypat
 
     def press(key):
         play._on_key(key, _Keys.ACTION_PRESS, None)
+
+    press(_Keys.H)  # the status line hidden: the face alone is compared (its own test is below)
 
     def shown():
         play._update()
@@ -299,3 +297,43 @@ def test_the_player_draws_frames_and_obeys_the_keys(tmp_path, runtime, monkeypat
         assert play._quit
         play.run()  # returns at once, releasing the renderer and the window
     assert play.renderer is None and play.table.complete
+
+
+def test_the_status_line_says_frame_time_length_fps_and_pause():
+    from puppet.view.playbar import play_status
+
+    assert play_status(11, 98, 25.0, False) == "frame 12/98   0:00.44 / 0:03.92   25 fps   playing"
+    assert play_status(1499, None, 25.0, True) == "frame 1500/?   0:59.96 / ?   25 fps   paused"
+
+
+def test_the_window_itself_shows_frame_time_and_pause_and_h_hides_it(tmp_path, runtime, monkeypatch,
+                                                                       headless_window):
+    """Many window managers show no title: the frame, the time and "paused" are drawn in the
+    window (bottom left), redrawn when only the pause changes, and H hides them."""
+    clock = _FakeTime()
+    monkeypatch.setattr(player, "time", types.SimpleNamespace(perf_counter=clock.perf_counter,
+                                                               sleep=clock.sleep))
+    size = (480, 360)
+    window = headless_window(size, _Keys)
+    play = player.Player(FapPlayback(_take(tmp_path / "take.fap", frames=12, fps=10), runtime.face, runtime),
+                         window)
+    corner = (slice(size[1] - 40, size[1] - 4), slice(4, size[0] - 4))  # the status line, bottom left
+
+    def drawn():
+        play._update()
+        pixels = np.frombuffer(window.fbo.read(components=3), dtype=np.uint8).reshape(size[1], size[0], 3)
+        return pixels[::-1][corner].astype(int)
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FapWarning)
+        play.clock.seek(clock.now, 0)
+        playing = drawn()
+        assert play._bar_shown == ("frame 1/12   0:00.00 / 0:01.20   10 fps   playing", True)
+        play._on_key(_Keys.SPACE, _Keys.ACTION_PRESS, None)
+        paused = drawn()  # the same frame, only paused: drawn again all the same
+        assert play._bar_shown[0].endswith("paused") and np.abs(paused - playing).max() > 60
+        play._on_key(_Keys.H, _Keys.ACTION_PRESS, None)
+        hidden = drawn()
+        assert np.abs(paused - hidden).mean() > 10 and np.abs(playing - hidden).mean() > 10  # even the first
+    play._on_key(_Keys.Q, _Keys.ACTION_PRESS, None)
+    play.run()

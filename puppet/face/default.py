@@ -25,6 +25,8 @@ DEFAULT_NAME = "default"
 DEFAULT_NPZ = "default_face.npz"
 DEFAULT_JSON = "default_face.json"
 DEFAULT_RIG = "default_rig.json"
+DEFAULT_UNIT_MM = 100.0
+"""The default face's unit in millimetres: MakeHuman's decimetre (the head is 2.9 units tall)."""
 
 
 def default_face() -> Face:

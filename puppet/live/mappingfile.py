@@ -54,6 +54,7 @@ which shapes the channels and makes the Poses.
 from __future__ import annotations
 
 import difflib
+import itertools
 import math
 import os
 import re
@@ -157,18 +158,28 @@ def load_mapping(path: str | os.PathLike) -> Mapping:
 
 def _misindented(text: str, line: int) -> int | None:
     """The line whose indentation went wrong when PyYAML stops at ``line`` (0-based): the line
-    before it, when that one is indented less and opens no block (``key: value`` or a flow
-    value), so ``line`` cannot belong under it; PyYAML only notices at the deeper line."""
+    before it, when that one is indented less, opens no block (``key: value`` or a flow value), so
+    ``line`` cannot belong under it, and the line before that is indented as ``line`` is (the keys
+    it belongs with). PyYAML only notices at the deeper line ("expected <block end>", or "mapping
+    values are not allowed" after a plain value, which it reads as going on)."""
     lines = text.splitlines()
     if not 0 < line < len(lines):
         return None
-    previous = next((k for k in range(line - 1, -1, -1) if lines[k].strip() and not lines[k].lstrip().startswith("#")),
-                    None)
-    if previous is None:
+    previous, before = itertools.islice(_content_lines_before(lines, line), 2)
+    if previous is None or before is None:
         return None
     body = lines[previous].split(" #", 1)[0].rstrip()
     deeper = _indent(lines[line]) > _indent(lines[previous])
-    return previous if deeper and not body.endswith(":") and not body.lstrip().startswith("- ") else None
+    among = _indent(lines[before]) == _indent(lines[line])
+    return previous if deeper and among and not body.endswith(":") and not body.lstrip().startswith("- ") else None
+
+
+def _content_lines_before(lines: list[str], line: int):
+    """The line numbers before ``line`` that hold more than a comment, nearest first (then Nones)."""
+    for k in range(line - 1, -1, -1):
+        if lines[k].strip() and not lines[k].lstrip().startswith("#"):
+            yield k
+    yield from itertools.repeat(None, 2)
 
 
 def _indent(line: str) -> int:
@@ -180,6 +191,21 @@ def _indent_problem(text: str, culprit: int, stopped: int) -> str:
     return (f"YAML indentation: line {culprit + 1} is indented {_indent(lines[culprit])} spaces and opens no "
             f"block, so line {stopped + 1}, indented {_indent(lines[stopped])}, fits nowhere; line "
             f"{culprit + 1} is most likely indented wrong (give it the indentation of the keys it belongs with)")
+
+
+def _between(text: str, exc: yaml.YAMLError, stopped: int) -> str | None:
+    """Where PyYAML stops at a line indented less than the line before it but more than the keys
+    of the block around them (its ``context_mark``): that line fits neither, and is named."""
+    block, lines = getattr(exc, "context_mark", None), text.splitlines()
+    previous = next(itertools.islice(_content_lines_before(lines, stopped), 1), None) if stopped < len(lines) else None
+    if block is None or previous is None or block.line >= stopped:
+        return None
+    indent, above = _indent(lines[stopped]), _indent(lines[previous])
+    if not block.column < indent < above:
+        return None
+    return (f"YAML indentation: line {stopped + 1} is indented {indent} space{'s' * (indent != 1)}, less than "
+            f"line {previous + 1} ({above}) and more than the keys from line {block.line + 1} ({block.column}), so it fits in neither; "
+            f"give it the indentation of the keys it belongs with")
 
 
 def parse_mapping(text: str, file: str = "<mapping>") -> Mapping:
@@ -196,9 +222,13 @@ def parse_mapping(text: str, file: str = "<mapping>") -> Mapping:
         if isinstance(exc, yaml.constructor.ConstructorError):  # a !!python/... tag, say
             kind, what = "unsupported YAML", f"{what}; expected plain data (mappings, lists, strings, numbers)"
         at = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
-        culprit = _misindented(text, mark.line) if mark is not None and "expected" in what else None
+        noticed = "expected" in what or "mapping values are not allowed" in what
+        culprit = _misindented(text, mark.line) if mark is not None and noticed else None
         if culprit is not None:
             raise MappingError(file, [Problem("", culprit + 1, _indent_problem(text, culprit, mark.line))]) from None
+        between = _between(text, exc, mark.line) if mark is not None and "block mapping" in what else None
+        if between is not None:
+            raise MappingError(file, [Problem("", mark.line + 1, between)]) from None
         raise MappingError(file, [Problem("", mark.line + 1 if mark else None, f"{kind}{at}: {what}")]) from None
     except RecursionError:
         raise MappingError(file, [Problem("", None, "the YAML is nested too deeply")]) from None

@@ -76,6 +76,7 @@ class Layer:
         self.viseme, self.expression = viseme, expression
         with iter_fap(self.base_fap) as reader:
             self.total = reader.header.declared_frames  # the base's frame count, as its header says
+            self.fps = reader.header.fps
         self._frames: Iterator = iter(iter_fap(self.base_fap))
         self._held = HeldFaps.neutral()
         self._index = -1
@@ -101,9 +102,11 @@ class Layer:
         return fap, viseme, expression
 
     def describe(self, k: int) -> str:
-        """The pass as the performer needs it: the base take, where it is, and what is armed."""
+        """The pass as the performer needs it: the base take, where it is (frame and time, of its
+        length), and what is armed: ``over take_001, frame 16 of 98 (0:00.60 of 0:03.92); armed: open_jaw``."""
         where = f"frame {k + 1}" + (f" of {self.total}" if self.total else "")
-        return f"over {self._said[0]}, {where}; armed: {self._said[1]}"
+        when = _clock(k / self.fps) + (f" of {_clock(self.total / self.fps)}" if self.total else "")
+        return f"over {self._said[0]}, {where} ({when}); armed: {self._said[1]}"
 
     @functools.cached_property
     def _said(self) -> tuple[str, str]:
@@ -213,3 +216,8 @@ class TakeClock:
             else:
                 self.write(*self.layer.merge(self.frames, pose))
             self.frames += 1
+
+
+def _clock(seconds: float) -> str:
+    """``m:ss.ss``, a time into the base take."""
+    return f"{int(seconds) // 60}:{seconds % 60:05.2f}"

@@ -238,3 +238,14 @@ def _max_error(playback: FapPlayback, rest32: np.ndarray, weights32: np.ndarray,
         err = np.linalg.norm(built.reshape(-1, 3).astype(np.float64) - vertices, axis=1).max()
         worst = max(worst, float(err))
     return worst
+
+
+def error_words(max_error: float, extent: float, mm_per_unit: float | None = None) -> str:
+    """``export_glb``'s largest vertex error as the terminal says it: in millimetres when the face's
+    unit is known (``mm_per_unit``: the default face's), else in the mesh file's own units; and as a
+    share of the face's size either way."""
+    share = f"{100 * max_error / extent:.2g}% of the face's"
+    if mm_per_unit is None:
+        return (f"largest vertex error {max_error:.2g} mesh units (the face file's own unit; {share} "
+                f"{extent:.3g}-unit size)")
+    return f"largest vertex error {max_error * mm_per_unit:.2g} mm ({share} {extent * mm_per_unit:.0f} mm size)"

@@ -14,6 +14,7 @@ moving on its own (smoothing settling, idle life).
 
 from __future__ import annotations
 
+import os
 import sys
 import time
 from collections.abc import Iterable, Sequence
@@ -21,6 +22,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from puppet.io.takes import open_take
 from puppet.live.session import close_each
 
 MAX_FPS = 60
@@ -55,6 +57,15 @@ def publish(outputs: Sequence[LiveOutput], frame: Any, status: dict) -> None:
 def close_outputs(outputs: Iterable[LiveOutput]) -> None:
     """Close each output, even if another fails; the first failure is raised after."""
     close_each(outputs)
+
+
+def saved_line(folder: str | os.PathLike) -> str:
+    """A saved take as the terminal says it: its folder, length, frames and what it keeps."""
+    meta = open_take(folder).meta
+    frames, fps = meta.get("frames") or 0, meta["fps"]
+    sound = ", with its sound" if meta.get("sound") else ""
+    return (f"{folder} ({frames / fps:.1f} s, {frames} frames at {fps} fps, "
+            f"{meta.get('samples') or 0} readings{sound})")
 
 
 class HeadlessLive:
@@ -94,7 +105,7 @@ class HeadlessLive:
         folder = self.session.take_folder
         if folder != self._take:
             if self._take is not None:
-                print(f"take saved: {self._take}" if not self.session.record_error
+                print(f"take saved: {saved_line(self._take)}" if not self.session.record_error
                       else f"take not complete: {self.session.record_error}", file=sys.stderr)
             if folder is not None:
                 print(f"recording {folder.resolve()}", file=sys.stderr)

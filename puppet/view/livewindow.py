@@ -41,10 +41,10 @@ from typing import Any
 
 from devices.keys_device import KeysDevice, key_channels
 from puppet.io.shipped import mappings_folder
-from puppet.io.takes import TakeError, check_take_name, open_take
+from puppet.io.takes import TakeError, check_take_name
 from puppet.live.calibrate import CalibrationError, GuidedCalibration, calibration_channels, device_overrides
 from puppet.live.mappingfile import load_mapping
-from puppet.view.liveoutput import HeadlessLive, LiveOutput, close_outputs, live_status, publish
+from puppet.view.liveoutput import HeadlessLive, LiveOutput, close_outputs, live_status, publish, saved_line
 from puppet.view.overlay import Cockpit, device_lines
 from puppet.view.renderer import Renderer
 from puppet.view.rendertake import VIEWS, aim_at_head
@@ -52,6 +52,9 @@ from puppet.view.window import NoDisplayError, WindowError, check_display, open_
 
 WINDOW_S = 1.0
 """The span, in seconds, of the measured fps and the latency median."""
+
+FAILURE_S = 20.0
+"""How long the cockpit shows a failure (a calibration not written, or channels left as they were)."""
 
 
 class LiveStats:
@@ -93,15 +96,6 @@ def live_title(name: str, fps: float, latency_ms: float | None, states: dict[str
     return " | ".join(parts)
 
 
-def saved_line(folder: str | os.PathLike) -> str:
-    """A saved take as the terminal says it: its folder, length, frames and what it keeps."""
-    meta = open_take(folder).meta
-    frames, fps = meta.get("frames") or 0, meta["fps"]
-    sound = ", with its sound" if meta.get("sound") else ""
-    return (f"{folder} ({frames / fps:.1f} s, {frames} frames at {fps} fps, "
-            f"{meta.get('samples') or 0} readings{sound})")
-
-
 class LiveView:
     """A LiveSession in a window: the loop, keys and title. ``run()`` returns when closed.
 
@@ -122,7 +116,7 @@ class LiveView:
         self._quit = False
         self._take_started = 0.0
         self.calibration: GuidedCalibration | None = None
-        self.notice, self._notice_until = "", 0.0
+        self.notice, self._notice_until, self.notice_failed = "", 0.0, False
         self._title = ""
         window.exit_key = None  # Escape is ours: the take is finished before the window goes
         window.key_event_func = self._on_key
@@ -252,24 +246,27 @@ class LiveView:
         calibration = self.calibration
         calibration.feed(self.session.mapping.channels())
         if calibration.phase()[0] != "done":
-            self.notice, self._notice_until = calibration.instruction(), time.monotonic() + 0.5
+            self.notice, self.notice_failed = calibration.instruction(), False
+            self._notice_until = time.monotonic() + 0.5
             return
         self.calibration = None
         try:
             result, warnings = calibration.finish()
         except (CalibrationError, OSError) as error:
-            self._say(f"calibration not written: {error}")
+            self._say(f"calibration not written: {error}", FAILURE_S, failed=True)
             return
         self.session.mapping = load_mapping(calibration.path)  # the new ranges from the next frame on
         for line in warnings:
             print(f"calibrate: {line}", file=sys.stderr)
         first = f": {warnings[0]}" + (" ..." if len(warnings) > 1 else "") if warnings else ""
         self._say(f"calibrated {len(result) - len(warnings)} of {len(result)} channels into "
-                  f"{calibration.path.name} ({len(warnings)} left as they were{first})")
+                  f"{calibration.path.name} ({len(warnings)} left as they were{first})",
+                  FAILURE_S if warnings else 6.0, failed=bool(warnings))
 
-    def _say(self, text: str, seconds: float = 6.0) -> None:
-        """A notice in the cockpit for ``seconds`` (and on the terminal)."""
-        self.notice, self._notice_until = text, time.monotonic() + seconds
+    def _say(self, text: str, seconds: float = 6.0, failed: bool = False) -> None:
+        """A notice in the cockpit for ``seconds`` (and on the terminal); ``failed`` draws it as a
+        failure (red), so a calibration that left channels as they were is not missed."""
+        self.notice, self._notice_until, self.notice_failed = text, time.monotonic() + seconds, failed
         print(text, file=sys.stderr)
 
     # -- drawing -----------------------------------------------------------------------------
@@ -293,7 +290,7 @@ class LiveView:
         channels = self.session.mapping.channels() if self.cockpit.monitor else ()
         notice = self.notice if time.monotonic() < self._notice_until else ""
         self.cockpit.draw(self.stats.fps, self.stats.latency_ms, device_lines(states, self.session.devices),
-                          recording, channels, notice, layer=self.session.layer_status(),
+                          recording, channels, notice, layer=self.session.layer_status(), failed=self.notice_failed,
                           triggers=self.session.mapping.trigger_states(pose_ns))
 
     def _set_title(self, states: dict[str, Any]) -> None:

@@ -12,7 +12,8 @@ is rendered into the window's framebuffer:
   it is on (``puppet.live.triggers``);
 * **REC**: the take's name and how long it has been recording; for a layered pass, the base take
   playing under it (its frame) and what is armed;
-* a **notice** line: the steps of a calibration run from the window (K), then its result;
+* a **notice** line: the steps of a calibration run from the window (K), then its result (red, for
+  20 s, when channels were left as they were or nothing was written);
 * **channel monitor** (M): per channel a bar of its raw value within its calibrated range and one
   of its shaped value's size (the signed value written on it), with the first target it drives;
 * **the keys**.
@@ -32,6 +33,9 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+
+FAILURE_RGBA = (1.0, 0.3, 0.3, 1.0)
+"""The colour of a notice that says something failed (a calibration that left channels as they were)."""
 
 HISTORY = 240
 """Frames the rolling fps and latency graphs show."""
@@ -87,12 +91,13 @@ class Cockpit:
 
     def draw(self, fps: float, latency_ms: float | None, devices: Iterable[DeviceLine],
              recording: tuple[str, float] | None, channels: Iterable[Any], notice: str = "",
-             layer: str | None = None, triggers: Iterable[Any] = ()) -> None:
+             layer: str | None = None, triggers: Iterable[Any] = (), failed: bool = False) -> None:
         """Draw the cockpit over the current framebuffer (nothing when hidden: the caller skips
         gathering what it shows too). ``recording``: (take name, seconds) while a take runs;
         ``channels``: ``Mapping.channels()``; ``notice``: a line for the performer (the window's
         calibration steps, its result); ``layer``: a layered pass's base take and what is armed
-        (``LiveSession.layer_status``); ``triggers``: ``Mapping.trigger_states``."""
+        (``LiveSession.layer_status``); ``triggers``: ``Mapping.trigger_states``; ``failed``: the
+        notice says a failure (drawn red)."""
         if not self.visible:
             return
         imgui = self.imgui
@@ -103,7 +108,7 @@ class Cockpit:
         io.display_size = self.window.size
         self._last = now
         imgui.new_frame()
-        self._status(fps, latency_ms, list(devices), recording, notice, layer)
+        self._status(fps, latency_ms, list(devices), recording, notice, layer, failed)
         self._triggers(list(triggers))
         if self.monitor:
             self._monitor(list(channels))
@@ -117,7 +122,8 @@ class Cockpit:
     # -- panels --------------------------------------------------------------------------------
 
     def _status(self, fps: float, latency_ms: float | None, devices: list[DeviceLine],
-                recording: tuple[str, float] | None, notice: str, layer: str | None = None) -> None:
+                recording: tuple[str, float] | None, notice: str, layer: str | None = None,
+                failed: bool = False) -> None:
         imgui = self.imgui
         imgui.set_next_window_pos((8, 8), imgui.Cond_.first_use_ever)
         imgui.set_next_window_bg_alpha(0.7)
@@ -144,7 +150,7 @@ class Cockpit:
             imgui.text_colored((0.55, 0.8, 1.0, 1.0), f"layer {layer}" if recording else
                                f"layer {layer} (R records a pass)")
         if notice:
-            imgui.text_colored((1.0, 0.85, 0.3, 1.0), notice)
+            imgui.text_colored(FAILURE_RGBA if failed else (1.0, 0.85, 0.3, 1.0), notice)
         imgui.separator()
         for k, (key, what) in enumerate(KEYS):
             if k % 2:
@@ -214,14 +220,16 @@ def targets_label(targets: tuple[str, ...], width: int = 26) -> str:
 
 
 def device_lines(states: Mapping[str, Any], devices: Mapping[str, Any]) -> list[DeviceLine]:
-    """Each device's state (``LiveFrame.states``) and, when it is not open, the reason its adapter
-    gave; an audio input's level, gate and xruns."""
+    """Each device's state (``LiveFrame.states``; "unavailable" for one lost before it ever opened)
+    and, when it is not open, the reason its adapter gave; an audio input's level, gate and xruns."""
     lines = []
     for name, state in states.items():
         text = getattr(state, "value", str(state)).lower()
         device = devices.get(name)
         counters = getattr(device, "counters", None)
         reason = counters.last_error if counters is not None and text != "open" else ""
+        if text == "lost" and counters is not None and not (counters.samples or counters.reconnects):
+            text = "unavailable"  # never opened: "lost" would say it had been there (no MIDI system)
         line = DeviceLine(name, text, reason)
         if hasattr(device, "level_db"):
             line.level_db, line.gate_db = device.level_db, device.gate

@@ -5,8 +5,10 @@ and the ``glfw`` package is installed) and draws the take with ``render.Renderer
 the window's framebuffer.
 
 Keys: space pauses and resumes; right / left arrow step one frame forward / back (and pause);
-Home goes to the first frame (keeping play or pause); Q or Escape closes the window. The title
-shows the file name, the frame (counted from 1) of the total, the take's fps and "paused".
+Home goes to the first frame (keeping play or pause); H hides the status line; Q or Escape closes
+the window. The title shows the file name, the frame (counted from 1) of the total, the take's fps
+and "paused"; the window itself says the same and the time, at the bottom left (``playbar``), for
+window managers that show no title.
 
 Decisions
 ---------
@@ -57,6 +59,7 @@ from puppet.io.fapfile import FapError, FapReader, FapWarning, iter_fap
 from puppet.io.soundtrack import soundtrack
 from puppet.runtime.runtime import Runtime
 from puppet.view.liveoutput import LiveOutput, close_outputs
+from puppet.view.playbar import PlayBar, play_status
 from puppet.view.renderer import Renderer, software_rasteriser
 from puppet.view.rendertake import VIEWS, FapPlayback, aim_at_head
 from puppet.view.soundout import ClockedSound
@@ -403,6 +406,8 @@ class Player:
         self._pose: tuple[np.ndarray, np.ndarray] | None = None
         self._drawn_at = -math.inf
         self._title = ""
+        self.bar = PlayBar(window)
+        self._bar_shown: tuple[str, bool] | None = None
         # moderngl-window's pyglet window keeps the pyglet one as ``_window``: its events can be
         # handled without drawing. Other backends handle them in swap_buffers only.
         native = getattr(window, "_window", None) if window.name == "pyglet" else None
@@ -428,6 +433,7 @@ class Player:
             if self.renderer is not None:
                 self.renderer.release()
                 self.renderer = None
+            self.bar.release()
             self.table.close()
             close_outputs(self.outputs)
             window.close()
@@ -449,8 +455,9 @@ class Player:
         if min(size) < 1:  # minimised
             self._publish(k, None)
             return self._events()
+        bar = (play_status(k, self.table.total, self.clock.fps, self.clock.paused), self.bar.visible)
         stale = (self.renderer is None or self.renderer.size != size or k != self._shown
-                 or now - self._drawn_at > self.REFRESH)
+                 or bar != self._bar_shown or now - self._drawn_at > self.REFRESH)
         if not stale and self._dispatch_events is not None:
             return self._events()
         if self.renderer is None or self.renderer.size != size:
@@ -459,7 +466,8 @@ class Player:
             self._pose, self._shown = self.table.mesh(k, normals=not self.renderer.gpu_normals), k
         self._publish(k, self._pose[0])
         self.renderer.draw(*self._pose, framebuffer=self.window.fbo)
-        self._drawn_at = now
+        self.bar.draw(bar[0])
+        self._drawn_at, self._bar_shown = now, bar
         self.window.swap_buffers()  # also handles the window's events
 
     def _publish(self, k: int, vertices: np.ndarray | None) -> None:
@@ -527,6 +535,8 @@ class Player:
             self._step(now, -1)
         elif key == keys.HOME:
             self.clock.home(now)
+        elif key == keys.H:
+            self.bar.toggle()
 
     def _step(self, now: float, delta: int) -> None:
         if delta > 0 and not self.table.complete:
@@ -586,7 +596,7 @@ def play_take(path: str | os.PathLike, *, size: tuple[int, int] = (960, 720),
         window.close()
         window.destroy()
         raise
-    print("keys: space pause/play, right/left step a frame, Home first frame, Q/Esc quit",
+    print("keys: space pause/play, right/left step a frame, Home first frame, H hide the status line, Q/Esc quit",
           file=sys.stderr)
     try:
         Player(playback, window, view, table, outputs=made).run()
