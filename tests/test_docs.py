@@ -13,6 +13,7 @@ import shlex
 import subprocess
 import sys
 import time
+import tomllib
 from pathlib import Path
 
 import can
@@ -235,3 +236,12 @@ def test_every_python_name_the_schema_cites_exists():
     assert cited
     for module, name in cited:
         assert hasattr(importlib.import_module(module), name), f"schema.json cites {module}.{name}"
+
+
+def test_the_version_is_the_same_in_pyproject_the_cli_and_the_changelog(capsys):
+    version = tomllib.loads((ROOT / "pyproject.toml").read_text("utf-8"))["project"]["version"]
+    with pytest.raises(SystemExit):
+        cli.main(["--version"])
+    assert capsys.readouterr().out.split()[-1] == version
+    released = re.findall(r"^## \[(\d+\.\d+\.\d+)\]", (ROOT / "CHANGELOG.md").read_text("utf-8"), re.M)
+    assert released and released[0] == version, "CHANGELOG.md's newest version is not pyproject's"
