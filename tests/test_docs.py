@@ -243,5 +243,5 @@ def test_the_version_is_the_same_in_pyproject_the_cli_and_the_changelog(capsys):
     with pytest.raises(SystemExit):
         cli.main(["--version"])
     assert capsys.readouterr().out.split()[-1] == version
-    released = re.findall(r"^## \[(\d+\.\d+\.\d+)\]", (ROOT / "CHANGELOG.md").read_text("utf-8"), re.M)
+    released = re.findall(r"^## \[(\d+\.\d+\.\d+)\]", (ROOT / "CHANGELOG.md").read_text("utf-8"), re.MULTILINE)
     assert released and released[0] == version, "CHANGELOG.md's newest version is not pyproject's"
