@@ -245,3 +245,15 @@ def test_the_version_is_the_same_in_pyproject_the_cli_and_the_changelog(capsys):
     assert capsys.readouterr().out.split()[-1] == version
     released = re.findall(r"^## \[(\d+\.\d+\.\d+)\]", (ROOT / "CHANGELOG.md").read_text("utf-8"), re.MULTILINE)
     assert released and released[0] == version, "CHANGELOG.md's newest version is not pyproject's"
+
+
+def test_the_readme_is_a_short_front_page_whose_links_and_picture_exist():
+    text = (ROOT / "README.md").read_text("utf-8")
+    assert len(text.splitlines()) <= 150
+    assert "bash tools/demo.sh" in text and "bash tools/test.sh" in text
+    links = re.findall(r"\]\(([^)#]+)(?:#[^)]*)?\)", text)
+    assert "docs/readme.gif" in links and len(links) > 10
+    for link in links:
+        if not link.startswith("http"):
+            assert (ROOT / link).exists(), f"README.md links to {link}, which is not there"
+    assert (ROOT / "docs" / "readme.gif").stat().st_size < 1_500_000
