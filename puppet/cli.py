@@ -78,7 +78,7 @@ def _one_line(exc: BaseException) -> str:
 
 def _parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="puppet", description="facepuppet: live facial puppeteering")
-    parser.add_argument("--version", action="version", version="puppet (facepuppet) 0.1.0")
+    parser.add_argument("--version", action="version", version="puppet (facepuppet) 0.2.0")
     commands = parser.add_subparsers(dest="command", required=True)
     for name, command in COMMANDS.items():
         command.arguments(commands.add_parser(name, help=command.help))

@@ -13,6 +13,7 @@ import shlex
 import subprocess
 import sys
 import time
+import tomllib
 from pathlib import Path
 
 import can
@@ -235,3 +236,24 @@ def test_every_python_name_the_schema_cites_exists():
     assert cited
     for module, name in cited:
         assert hasattr(importlib.import_module(module), name), f"schema.json cites {module}.{name}"
+
+
+def test_the_version_is_the_same_in_pyproject_the_cli_and_the_changelog(capsys):
+    version = tomllib.loads((ROOT / "pyproject.toml").read_text("utf-8"))["project"]["version"]
+    with pytest.raises(SystemExit):
+        cli.main(["--version"])
+    assert capsys.readouterr().out.split()[-1] == version
+    released = re.findall(r"^## \[(\d+\.\d+\.\d+)\]", (ROOT / "CHANGELOG.md").read_text("utf-8"), re.MULTILINE)
+    assert released and released[0] == version, "CHANGELOG.md's newest version is not pyproject's"
+
+
+def test_the_readme_is_a_short_front_page_whose_links_and_picture_exist():
+    text = (ROOT / "README.md").read_text("utf-8")
+    assert len(text.splitlines()) <= 150
+    assert "bash tools/demo.sh" in text and "bash tools/test.sh" in text
+    links = re.findall(r"\]\(([^)#]+)(?:#[^)]*)?\)", text)
+    assert "docs/readme.gif" in links and len(links) > 10
+    for link in links:
+        if not link.startswith("http"):
+            assert (ROOT / link).exists(), f"README.md links to {link}, which is not there"
+    assert (ROOT / "docs" / "readme.gif").stat().st_size < 1_500_000

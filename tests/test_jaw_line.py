@@ -15,7 +15,7 @@ JAW_POSES = [{"open_jaw": 250}, {"open_jaw": 500}, {"open_jaw": 824},
              {"open_jaw": 824, "shift_jaw": 104}]
 """Over the range the artist's shapes span (jawOpen: open_jaw 824; jawLeft / jawRight: shift_jaw
 +-52, here twice that; thrust_jaw 0..600 MNS). Beyond, the calibrated motions extrapolate and fold
-(the README's limits)."""
+(the limits in the guide's contributors/realism.md)."""
 
 
 @pytest.fixture(scope="module")

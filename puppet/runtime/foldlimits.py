@@ -49,7 +49,7 @@ at any range end, in any expression or viseme, and faded they cost the eye-look 
 lids' follow near the corners (eyeLookIn/Out 0.34 -> 0.40 relative residual, eyeLookUp/Down
 0.30 -> 0.31-0.32; the lower lids' alone, eyeLookUp 0.296 -> 0.304).
 
-The README's realism section lists what the limits cap on the default face.
+The guide's contributors/realism.md lists what the limits cap on the default face.
 """
 
 from __future__ import annotations

@@ -727,8 +727,8 @@ def _pruned(B: sp.csr_matrix, prune: float) -> sp.csr_matrix:
     row's largest removes about 30% of B's entries (and of the per-frame work). The error is
     bounded row by row: a vertex moves by at most the magnitude its row dropped (under 1e-3 of
     its largest entry per entry dropped) times the largest difference between two of its inputs'
-    displacements; on the demo take that is at most 0.2-0.4% of the largest displacement (README,
-    "How the face deforms"). Keeping each row's sum keeps what matters exactly: a region
+    displacements; on the demo take that is at most 0.2-0.4% of the largest displacement (the guide,
+    contributors/deformation.md). Keeping each row's sum keeps what matters exactly: a region
     translates with its points, a direct point moves its vertex by exactly its displacement, no
     displacement gives the rest mesh.
     """
