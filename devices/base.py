@@ -243,6 +243,12 @@ class Device(ABC):
         """Samples read and waiting to be drained (at most ``QUEUE``)."""
         return len(self._queue)
 
+    def tally(self) -> tuple[int, int]:
+        """(Samples read so far, Samples of them still queued), read together: what a caller
+        has taken (or lost to a full queue) is their difference, exactly."""
+        with self._ready:
+            return self.counters.samples, len(self._queue)
+
     def drain(self) -> list[Sample]:
         """Every Sample read since the last call, oldest first (never blocks)."""
         with self._ready:
@@ -303,16 +309,20 @@ class Device(ABC):
     def _pump(self) -> None:
         while not self._stop.is_set():
             readings = self._read()
-            t_ns = time.monotonic_ns()
-            for values in readings:
-                self._push(Sample(t_ns, self.name, dict(values)))
+            if readings:
+                t_ns = time.monotonic_ns()
+                self._push_all([Sample(t_ns, self.name, dict(values)) for values in readings])
 
     def _push(self, sample: Sample) -> None:
+        self._push_all([sample])
+
+    def _push_all(self, samples: list[Sample]) -> None:
+        """Queue the Samples of one read together: one lock and one wake-up for the lot (a
+        device sending thousands a second reads tens at a time)."""
         with self._ready:
-            if len(self._queue) == self._queue.maxlen:
-                self.counters.dropped += 1
-            self._queue.append(sample)
-            self.counters.samples += 1
+            self.counters.dropped += max(0, len(self._queue) + len(samples) - self.QUEUE)
+            self._queue.extend(samples)
+            self.counters.samples += len(samples)
             self._ready.notify_all()
         if self.wake is not None:
             self.wake.set()

@@ -382,7 +382,9 @@ def _bench_arguments(bench: argparse.ArgumentParser) -> None:
     bench.add_argument("--frames", type=_positive, default=300, help="frames per measurement")
     bench.add_argument("--no-ict", action="store_true", help="skip the ICT face even when present")
     bench.add_argument("--flood-seconds", type=_seconds_or_rate("seconds", 0.1, 3600), default=60.0,
-                       help="how long the 10,000 readings/s flood runs (default 60)")
+                       help="how long the flood runs (default 60)")
+    bench.add_argument("--flood-rate", type=_seconds_or_rate("readings/s", 1, 100_000), default=10_000.0,
+                       help="readings a second the flood's device sends (default 10000)")
     bench.add_argument("--take-seconds", type=_seconds_or_rate("seconds", 0.1, 86400), default=3600.0,
                        help="length of the accelerated long take (default 3600)")
     bench.add_argument("--quick", action="store_true",
@@ -397,7 +399,7 @@ def _bench(args: argparse.Namespace) -> int:
 
     return run_bench(frames=args.frames, as_json=args.json, ict=not args.no_ict,
                      flood_seconds=args.flood_seconds, take_seconds=args.take_seconds,
-                     only=args.only or BENCH_SECTIONS, quick=args.quick)
+                     only=args.only or BENCH_SECTIONS, quick=args.quick, flood_rate=args.flood_rate)
 
 
 def _rig_arguments(rig: argparse.ArgumentParser) -> None:

@@ -76,7 +76,7 @@ BAD = [
     "calibrate-face --examples /nonexistent -o {tmp}/c.rig", "calibrate-face --examples {folder} -o {tmp}/c.rig",
     "calibrate-face --examples {tmp} -o {tmp}/c.rig", "calibrate-face --examples {folder} -o /nonexistent/c.rig",
     "calibrate-face --examples {folder} -o {tmp}/c.rig --face {mesh}",
-    "bench --frames 0", "bench --flood-seconds inf", "demo --size 1x1",
+    "bench --frames 0", "bench --flood-seconds inf", "bench --flood-rate 0", "demo --size 1x1",
     "live", "live --mapping /nonexistent.yaml", "live --mapping {bad_yaml}", "live --mapping {mapping} --fps 24",
     "live --mapping {mapping} --device nonsense", "live --mapping {mapping} --layer-over {take}",
     "play /nonexistent.fap", "play {binary}", "play {listed}", "play {take} --size 99999x99999",

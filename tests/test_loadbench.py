@@ -25,6 +25,7 @@ def test_a_flood_of_input_is_taken_in_without_anything_growing(shared_runtime, e
                                                  # most reach the mapping while the test runs
     assert result["backlog_max"] < Device.QUEUE  # the loop keeps up: the queue never fills
     assert result["dropped"] == 0
+    assert result["readings_missing"] == 0 and result["readings_logged"] > 4_000  # every reading in the take
     assert result["rss_growth_mb"] < 8           # flat, while a take of megabytes is written
     assert result["take_mb"] > 1
     assert result["fps"] > 5

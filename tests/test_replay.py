@@ -166,6 +166,7 @@ def test_a_full_disk_ends_the_take_marked_incomplete_and_the_face_goes_on(shared
         _frames_for(session, 0.3)
         recorder = session._recorder
         written = recorder.frames
+        recorder._log.sync()  # the log's writer thread idle (nothing queued) while its file is swapped
         recorder._log._file.close()
         recorder._log._file = open("/dev/full", "w", encoding="utf-8")  # the kernel's own ENOSPC
         _frames_for(session, 0.2)

@@ -6,10 +6,14 @@
   with the live window's settings (``session.measure_latency``): every Sample, from its
   timestamp to the first frame that shows it, mesh ready and frame drawn; medians and p99, over
   ``BOX_CYCLE_S`` (``puppet bench --quick``: 3 s).
-* ``flood``: the same loop, recording a take, while the box sends ``rate`` readings a second
-  (COBS frames) for ``seconds``: frames per second against a baseline run in the same call at
-  200 readings/s, the samples taken in, the process's resident memory over time (flat: nothing
-  grows), and the device queue's longest backlog (bounded by ``Device.QUEUE``).
+* ``flood``: the same loop, recording a take, while the box (a process of its own, as in
+  ``latency``) sends ``rate`` readings a second (COBS frames) for ``seconds``: frames per second
+  against a baseline run in the same call, recording too, at 200 readings/s; the samples taken
+  in; the readings the device took in while recording against those in the take's raw log
+  (``readings_missing``: none, however far the loop falls behind); the process's resident
+  memory over time (flat: nothing grows; and its peak); and the device queue's longest backlog
+  (bounded by ``Device.QUEUE``). Past ``LiveSession.FLOOD`` readings a frame the loop maps each
+  channel's newest reading per frame (``puppet.live.session``, *Floods*).
 * ``long_take``: a take of ``take_seconds`` made at an accelerated clock -- the recorder and
   take clock, the parts that grow with a take's length, fed ``rate`` readings a second through
   the shipped mapping (its muscles written as FAPs) as fast as they go -- with the resident
@@ -33,7 +37,7 @@ from devices.simulated_serial import sine_sliders
 from puppet.fap.pose import Pose
 from puppet.io.samplelog import LogEvent
 from puppet.io.shipped import shipped_mapping
-from puppet.io.takes import TakeRecorder
+from puppet.io.takes import TakeRecorder, open_take
 from puppet.live.mappingfile import load_mapping
 from puppet.live.session import LiveSession, measure_latency
 from puppet.live.takeclock import TakeClock, default_muscle_faps
@@ -90,31 +94,40 @@ def live_box(runtime: Runtime, size: tuple[int, int],
     of its own, a live session reading it once it sends (and the ``extra`` devices, name: URL,
     read beside it), and an offscreen renderer of ``size`` with the live window's settings; all
     closed on leaving."""
-    spawn = multiprocessing.get_context("spawn")  # a clean process: no GL or threads of ours forked
-    with tempfile.TemporaryDirectory() as root:
-        link, stop = os.path.join(root, "box"), spawn.Event()
-        box = spawn.Process(target=serve_joystick, args=(link, 200.0, stop), daemon=True)
-        box.start()
+    with tempfile.TemporaryDirectory() as root, box_process(root, 200.0, "ascii") as url:
+        session = _session(runtime, url, root, extra)
+        renderer = live_renderer(runtime, size)
         try:
-            _wait_for(link, box)
-            session = _session(runtime, f"serial://{link}?protocol=ascii", root, extra)
-            renderer = live_renderer(runtime, size)
-            try:
-                yield session, renderer
-            finally:
-                renderer.release()
-                session.close()
+            yield session, renderer
         finally:
-            stop.set()
-            box.join(5)
+            renderer.release()
+            session.close()
 
 
-def serve_joystick(link: str, rate: float, stop) -> None:
-    """A six-slider box sending ascii lines at ``rate`` on a pty behind ``link`` until ``stop``
-    is set: the external device of ``latency``, run in a process of its own."""
+@contextlib.contextmanager
+def box_process(root: str, rate: float, protocol: str) -> Iterator[str]:
+    """The URL of a six-slider box sending ``rate`` readings a second in ``protocol`` on a pty
+    under ``root``, from a process of its own, as a real device sends from outside the process
+    reading it (so the process measured pays for reading the device, not for simulating it);
+    stopped on leaving."""
+    spawn = multiprocessing.get_context("spawn")  # a clean process: no GL or threads of ours forked
+    link, stop = os.path.join(root, f"box-{protocol}-{rate:g}"), spawn.Event()
+    box = spawn.Process(target=serve_joystick, args=(link, rate, stop, protocol), daemon=True)
+    box.start()
+    try:
+        _wait_for(link, box)
+        yield f"serial://{link}?protocol={protocol}"
+    finally:
+        stop.set()
+        box.join(5)
+
+
+def serve_joystick(link: str, rate: float, stop, protocol: str = "ascii") -> None:
+    """A six-slider box sending ``protocol`` readings at ``rate`` on a pty behind ``link`` until
+    ``stop`` is set: the external device of ``latency`` and ``flood``, run in a process of its own."""
     from devices.simulated_serial import PtyJoystick
 
-    with PtyJoystick("ascii", rate, 6, link=link) as joystick:
+    with PtyJoystick(protocol, rate, 6, link=link) as joystick:
         joystick.start()
         stop.wait()
 
@@ -146,33 +159,51 @@ def _loop(session: LiveSession, renderer: Renderer, seconds: float) -> dict:
             "backlog_max": backlog, "dropped": device.counters.dropped}
 
 
+def _taken(device) -> int:
+    """Readings the device has read and no longer queues: taken by the loop, or lost to its queue."""
+    read, queued = device.tally()
+    return read - queued
+
+
 def flood(runtime: Runtime, seconds: float = 60.0, rate: float = 10_000.0,
           size: tuple[int, int] = (320, 240)) -> dict:
     """The live loop, recording, under ``rate`` readings a second (see the module docstring)."""
     renderer = live_renderer(runtime, size)
     try:
         with tempfile.TemporaryDirectory() as root:
-            calm = _session(runtime, "sim://joystick?protocol=cobs&rate=200&channels=6", root)
-            try:
-                baseline = _loop(calm, renderer, min(5.0, seconds))
-            finally:
-                calm.close()
-            session = _session(runtime, f"sim://joystick?protocol=cobs&rate={rate:g}&channels=6", root)
-            try:
-                session.start_recording()
-                loaded = _loop(session, renderer, seconds)
-                take = session.stop_recording()
-                take_mb = sum(p.stat().st_size for p in take.iterdir()) / 2**20
-            finally:
-                session.close()
+            baseline = _recorded(runtime, renderer, root, 200.0, min(5.0, seconds))
+            loaded = _recorded(runtime, renderer, root, rate, seconds)
     finally:
         renderer.release()
     rss = loaded["rss_mb"]
     settled = rss[min(len(rss) - 1, 2):] or rss
     return {"seconds": seconds, "rate": rate, "baseline_fps": baseline["fps"], "fps": loaded["fps"],
             "fps_ratio": loaded["fps"] / baseline["fps"], "samples_s": loaded["samples_s"],
-            "rss_start_mb": settled[0], "rss_end_mb": rss[-1], "rss_growth_mb": rss[-1] - settled[0],
-            "backlog_max": loaded["backlog_max"], "dropped": loaded["dropped"], "take_mb": take_mb}
+            "readings_sent": loaded["sent"], "readings_logged": loaded["logged"],
+            "readings_missing": loaded["sent"] - loaded["logged"],
+            "rss_start_mb": settled[0], "rss_end_mb": rss[-1], "rss_peak_mb": max(rss),
+            "rss_growth_mb": rss[-1] - settled[0],
+            "backlog_max": loaded["backlog_max"], "dropped": loaded["dropped"], "take_mb": loaded["take_mb"]}
+
+
+def _recorded(runtime: Runtime, renderer: Renderer, root: str, rate: float, seconds: float) -> dict:
+    """``_loop`` recording a take of the box (a process of its own) sending ``rate`` readings a
+    second, COBS frames; with the readings the device took in while recording (``sent``), those
+    in the take's raw log (``logged``) and the take's size."""
+    with box_process(root, rate, "cobs") as url:
+        session = _session(runtime, url, root)
+        device = session.devices["box"]
+        try:
+            session.start_recording()
+            before = _taken(device)
+            result = _loop(session, renderer, seconds)
+            sent = _taken(device) - before
+            take = session.stop_recording()
+        finally:
+            session.close()
+    logged = sum(1 for _ in open_take(take).samples())
+    take_mb = sum(p.stat().st_size for p in take.iterdir()) / 2**20
+    return {**result, "sent": sent, "logged": logged, "take_mb": take_mb}
 
 
 def box_poses(seconds: float = BOX_CYCLE_S, rate: float = 200.0, fps: float = 190.0) -> list[Pose]:

@@ -27,7 +27,8 @@ SECTIONS = ("deform", "frames", "muscles", "inputs", "rig", "latency", "voice", 
 
 
 def run_bench(frames: int = 300, as_json: bool = False, ict: bool = True, flood_seconds: float = 60.0,
-              take_seconds: float = 3600.0, only: tuple[str, ...] = SECTIONS, quick: bool = False) -> int:
+              take_seconds: float = 3600.0, only: tuple[str, ...] = SECTIONS, quick: bool = False,
+              flood_rate: float = 10_000.0) -> int:
     """Measure the ``only`` sections (every mesh, the inputs, the live pipeline); print tables (or
     JSON) and report progress on stderr; return the process exit code. ``quick``: a minute's
     worth (30 frames, no subdivided meshes, a 3 s flood, a 1 minute take)."""
@@ -36,7 +37,7 @@ def run_bench(frames: int = 300, as_json: bool = False, ict: bool = True, flood_
         raise ValueError(f"unknown bench sections {unknown}: expected some of {', '.join(SECTIONS)}")
     if quick:
         frames, flood_seconds, take_seconds = min(frames, 30), min(flood_seconds, 3.0), min(take_seconds, 60.0)
-    steps = _steps(frames, ict, flood_seconds, take_seconds, only, quick)
+    steps = _steps(frames, ict, flood_seconds, take_seconds, only, quick, flood_rate)
     report: dict[str, object] = {}
     with Steps(len(steps)) as progress:
         for section, label, measure in steps:
@@ -54,7 +55,7 @@ def run_bench(frames: int = 300, as_json: bool = False, ict: bool = True, flood_
 
 
 def _steps(frames: int, ict: bool, flood_seconds: float, take_seconds: float, only: tuple[str, ...],
-           quick: bool) -> list[tuple[str, str, Callable[[], object]]]:
+           quick: bool, flood_rate: float = 10_000.0) -> list[tuple[str, str, Callable[[], object]]]:
     """(section, label, measurement) for each step of the run, faces made on first use."""
     faces = functools.cache(lambda: bench_faces(ict and not quick, subdivided=not quick))
     default = functools.cache(lambda: Runtime(faces()[0][0]))
@@ -76,17 +77,18 @@ def _steps(frames: int, ict: bool, flood_seconds: float, take_seconds: float, on
     if "rig" in only:
         rig_runs, rig_ict = (1, False) if quick else (3, ict)
         steps.append(("rig", "puppet rig, fold limits before and after", lambda: bench_rig(rig_runs, ict=rig_ict)))
-    live = _live_sections(default, flood_seconds, take_seconds, 3.0 if quick else pipeline.BOX_CYCLE_S)
+    live = _live_sections(default, flood_seconds, take_seconds, 3.0 if quick else pipeline.BOX_CYCLE_S, flood_rate)
     steps += [(name, label, fn) for name, (label, fn) in live.items() if name in only]
     return steps
 
 
 def _live_sections(runtime: Callable[[], Runtime], flood_seconds: float, take_seconds: float,
-                   latency_seconds: float) -> dict[str, tuple[str, Callable[[], dict]]]:
+                   latency_seconds: float, flood_rate: float = 10_000.0) -> dict[str, tuple[str, Callable[[], dict]]]:
     """The live pipeline on the default face: latency, a flood of input, a long take."""
     return {"latency": ("sim slider box -> drawn frame", lambda: pipeline.latency(runtime(), latency_seconds)),
             "voice": ("wav:// bursts -> drawn frame", lambda: voice(runtime())),
-            "flood": (f"{flood_seconds:g} s of 10,000 readings/s", lambda: pipeline.flood(runtime(), flood_seconds)),
+            "flood": (f"{flood_seconds:g} s of {flood_rate:,.0f} readings/s",
+                      lambda: pipeline.flood(runtime(), flood_seconds, flood_rate)),
             "long_take": (f"a {take_seconds:g} s take", lambda: pipeline.long_take(take_seconds)),
             "show": ("program feed in Chromium, live loop with 0 / 4 clients",
                      lambda: show(runtime(), min(latency_seconds, 10.0)))}
@@ -141,8 +143,10 @@ def _print_live(report: dict) -> None:
         flood = report["flood"]
         print(f"flood {flood['rate']:,.0f} readings/s for {flood['seconds']:g} s, recording: {flood['fps']:.1f} fps "
               f"(baseline {flood['baseline_fps']:.1f}, ratio {flood['fps_ratio']:.2f}), {flood['samples_s']:,.0f} "
-              f"samples/s taken, memory {flood['rss_start_mb']:.1f} -> {flood['rss_end_mb']:.1f} MiB, "
-              f"longest backlog {flood['backlog_max']}, dropped {flood['dropped']}")
+              f"samples/s taken, memory {flood['rss_start_mb']:.1f} -> {flood['rss_end_mb']:.1f} MiB "
+              f"(peak {flood['rss_peak_mb']:.1f}), longest backlog {flood['backlog_max']}, dropped {flood['dropped']}; "
+              f"raw log {flood['readings_logged']:,} of {flood['readings_sent']:,} readings sent "
+              f"({flood['readings_missing']} missing)")
     if "show" in report:
         _print_show(report["show"])
     if "long_take" in report:

@@ -5,7 +5,8 @@ succeeds twice, so two recorders can never write into one take) with
 
 * ``take.fap``: the Pose sampled at the take's frame rate (25, 30, 50 or 60 frames/s), written by
   ``FapWriter``: flushed every frame, its header count exact after every frame;
-* ``samples.jsonl``: every raw Sample as it arrived (``puppet.io.samplelog``), flushed per sample,
+* ``samples.jsonl``: every raw Sample as it arrived (``puppet.io.samplelog``), written by a thread
+  of its own (the live loop only queues them) and all on the file before each frame of the .fap,
   so the take can be re-mapped later;
 * ``take.wav`` (and ``take.NAME.wav`` for a second audio device NAME): the sound each audio
   device heard while recording, block by block (``puppet.io.wavwriter``: readable up to the last
@@ -30,6 +31,7 @@ intact ``take.fap`` and no ``take.json`` still plays and renders (``take_fap`` w
 
 from __future__ import annotations
 
+import contextlib
 import datetime as _dt
 import json
 import os
@@ -126,6 +128,13 @@ class TakeRecorder:
         if sample.sound is not None:
             self._sound(sample)
 
+    def samples(self, samples: list[Sample]) -> None:
+        """Log a run of raw Samples (as ``sample`` each, queued together)."""
+        self._log.write_all(samples)
+        for sample in samples:
+            if sample.sound is not None:
+                self._sound(sample)
+
     def _sound(self, sample: Sample) -> None:
         """Append a Sample's sound to its device's WAV (the first block opens it, and the
         metadata says where it falls and what the analysis's state was)."""
@@ -147,7 +156,10 @@ class TakeRecorder:
 
     def frame(self, fap: np.ndarray, viseme: tuple[float, ...] | None = None,
               expression: tuple[float, ...] | None = None) -> None:
-        """Write one frame: 68 low-level FAP values (FAPU; FAP 1/2 columns ignored) and the blends."""
+        """Write one frame: 68 low-level FAP values (FAPU; FAP 1/2 columns ignored) and the blends.
+        The log's entries queued so far reach its file first: a take cut short anywhere has a log
+        holding every entry that decided its frames."""
+        self._log.sync()
         write_pose(self._fap, fap, viseme, expression)
         self.frames += 1
 
@@ -165,10 +177,8 @@ class TakeRecorder:
         in the metadata, if it can still be written, that the take is incomplete and why. What
         reached the disk stays readable to its last complete frame and line."""
         for part in (self._fap, self._log):
-            try:
+            with contextlib.suppress(Exception):  # the log's thread raises whatever failed it
                 part.close()
-            except OSError:
-                pass
         try:
             self._close_sounds()
         except OSError:

@@ -364,6 +364,7 @@ class Mapping:
         for spec in channels.values():
             self._by_device.setdefault(spec.device, {})[spec.channel] = self._channels[spec.name]
         self._timed = tuple(c for c in self._channels.values() if c.timed)
+        self._edges: dict[str, frozenset[str]] = {}  # per device: channels whose every reading counts
         self._guard = _Guard()
         compiled = []
         for spec in targets:
@@ -382,6 +383,10 @@ class Mapping:
         for spec in triggers:
             if spec.source is not None:
                 self._channels[spec.source].targets.append(f"trigger {spec.name}")
+        for device, by_name in self._by_device.items():
+            edges = frozenset(name for name, c in by_name.items() if c.button is not None or c.name in self._watched)
+            if edges:
+                self._edges[device] = edges
         self.muscle_names = tuple(dict.fromkeys([*(t.key for t in self._muscles), *self.triggers.muscle_names]))
         self._ranks_visemes = bool(self._visemes or self.triggers.visemes)
         self._ranks_expressions = bool(self._expressions or self.triggers.expressions)
@@ -417,6 +422,29 @@ class Mapping:
             channel.update(raw, t_ns, self._seq)
             if watched and channel.name in watched:
                 self.triggers.input(channel.name, channel.pre, t_ns)
+
+    def feed_newest(self, samples: list[Sample]) -> None:
+        """Shape a run of Samples (in time order) as one: each channel takes its newest reading,
+        at that reading's device's newest time, so the filters step once for the run -- what a
+        loop that cannot map every reading of a flood does, once a frame. Buttons and the
+        channels triggers watch still see every reading (a press and release inside the run
+        still toggles, still fires)."""
+        newest: dict[str, tuple[int, dict]] = {}
+        edges = self._edges
+        for sample in samples:
+            device = sample.device
+            if device in edges and not edges[device].isdisjoint(sample.values):
+                self.feed(Sample(sample.t_ns, device, {k: v for k, v in sample.values.items() if k in edges[device]}))
+            entry = newest.get(device)
+            if entry is None:
+                newest[device] = (sample.t_ns, dict(sample.values))
+            else:
+                entry[1].update(sample.values)
+                newest[device] = (sample.t_ns, entry[1])
+        for device, (t_ns, values) in sorted(newest.items(), key=lambda item: item[1][0]):
+            if device in edges:
+                values = {k: v for k, v in values.items() if k not in edges[device]}
+            self.feed(Sample(t_ns, device, values))
 
     def pose(self, t_ns: int | None = None, trigger_ns: int | None = None) -> Pose:
         """The Pose for the channels as last fed; with ``t_ns``, smoothing and rate limits are

@@ -34,6 +34,15 @@ Recording
     at t0 in the take's metadata, so that ``puppet.live.retake`` rebuilds the .fap exactly.
     ``layer=`` (a ``takeclock.Layer``) records a pass over an earlier take: the face shows and
     the take gets the base take's frames with the armed FAPs replaced by the live pose.
+Floods
+    Mapping a Sample costs the loop about 10 µs, so a device sending thousands a second would
+    starve the face. A frame that drains more than ``FLOOD`` Samples takes each channel's newest
+    reading instead (``Mapping.feed_newest``: the filters step once per frame of the take, or
+    of the loop when not recording; buttons and trigger sources still see every reading), and
+    keeps drawing. Nothing is lost: every Sample still goes to the take's raw log, marked as a
+    run (``newest``) so a replay takes it the same way, and the log is written by a thread of
+    its own (``SampleLogWriter``), so the loop only queues each line. At calm rates every
+    reading is mapped, as before.
 Faults
     A write to the take that fails in any way ends the take, marked incomplete with the error
     (``record_error``), and the live face goes on; a frame that fails while recording ends the
@@ -96,6 +105,10 @@ class LiveFrame:
 
 class LiveSession:
     """Devices -> mapping -> face runtime, one ``frame()`` at a time; optionally recording a take."""
+
+    FLOOD = 100
+    """More Samples than this in one frame is a flood: each channel takes its newest reading
+    (per frame, the filters stepped once) instead of every reading (see *Floods*)."""
 
     def __init__(self, mapping_path: str | os.PathLike, *, face=None,
                  devices: dict[str, Device] | None = None, record_root: str | os.PathLike | None = None,
@@ -210,8 +223,13 @@ class LiveSession:
         else:
             samples = list(heapq.merge(*batches, key=lambda s: s.t_ns))
         triggered = [self._triggered.popleft() for _ in range(len(self._triggered))]
-        for entry in heapq.merge(samples, triggered, key=lambda e: e.t_ns) if triggered else samples:
-            self._apply(entry)
+        if len(samples) > self.FLOOD:
+            self._apply_newest(samples)
+            for event in triggered:
+                self._apply(event)
+        else:
+            for entry in heapq.merge(samples, triggered, key=lambda e: e.t_ns) if triggered else samples:
+                self._apply(entry)
         for sample in samples:
             if self.newest_sample_ns is None or sample.t_ns > self.newest_sample_ns:
                 self.newest_sample_ns = sample.t_ns
@@ -289,6 +307,24 @@ class LiveSession:
             self.mapping.recentre(entry.data["centres"])
         elif entry.kind == "trigger" and entry.data["name"] in self.mapping.trigger_names:
             self.mapping.trigger(entry.data["name"], entry.data["action"], entry.t_ns)
+
+    def _apply_newest(self, samples: list[Sample]) -> None:
+        """A flood (more than ``FLOOD`` Samples in one frame): every Sample into the take's log
+        (queued for its writer thread), marked as a run (``newest``), and the mapping takes
+        each channel's newest reading per frame of the take (``TakeClock.apply_newest``), or
+        per loop frame when not recording (``Mapping.feed_newest``). A failed write ends the
+        take, as in ``_apply``."""
+        if self._clock is not None:
+            try:
+                self._recorder.event(LogEvent(samples[0].t_ns, "newest", {"count": len(samples)}))
+                self._recorder.samples(samples)
+                self._clock.apply_newest(samples)
+                return
+            except OSError as exc:
+                self._end_take(str(exc.strerror or exc))
+            except Exception as exc:  # noqa: BLE001 -- any failed write ends the take, not the face
+                self._end_take(f"{type(exc).__name__}: {exc}")
+        self.mapping.feed_newest(samples)
 
     def _end_take(self, why: str) -> None:
         """End the take now, marked incomplete with ``why`` (``record_error``)."""

@@ -15,7 +15,10 @@ writes exactly the frames the live session wrote:
 * ``reset``: ticks before t are written, then every channel goes back to rest (neutral);
 * ``recentre``: ticks before t are written, then the bipolar channels take the logged centres;
 * ``trigger``: ticks before t are written, then the named trigger is pressed, released or fired
-  (``Mapping.trigger``; a mapping without that trigger, re-mapping a take, lets it pass).
+  (``Mapping.trigger``; a mapping without that trigger, re-mapping a take, lets it pass);
+* ``newest`` with ``count`` n: the next n Samples are a flood the live loop took as a run
+  (``apply_newest``): between two ticks, each channel takes its newest reading
+  (``Mapping.feed_newest``), so the take's filters step once a frame, as the face's did.
 
 Layered passes: with a ``Layer``, each frame is the base take's frame with the armed FAPs
 replaced by the pose, as animators layer one pass over another.
@@ -27,6 +30,7 @@ FAPs plus ``encode_muscles(pose.muscles)``, the FAPs the muscles' motion measure
 
 from __future__ import annotations
 
+import bisect
 import dataclasses
 import functools
 import os
@@ -62,6 +66,10 @@ def _default_runtime():
     from puppet.runtime.runtime import Runtime
 
     return Runtime(load_face())
+
+
+def _time(sample: Sample) -> int:
+    return sample.t_ns
 
 
 class Layer:
@@ -173,6 +181,8 @@ class TakeClock:
         self.layer = layer
         self.encode_muscles = encode_muscles
         self.frames = 0
+        self._run: list[Sample] = []   # a ``newest`` run being gathered, and how many it takes
+        self._run_left = 0
 
     def tick_ns(self, k: int) -> int:
         return self.t0_ns + (k * 1_000_000_000) // self.fps
@@ -182,6 +192,16 @@ class TakeClock:
         return self.tick_ns(self.frames) <= t_ns
 
     def apply(self, entry: Sample | LogEvent) -> None:
+        if self._run_left:
+            if not isinstance(entry, Sample):
+                raise ValueError(f"a {entry.kind!r} event inside a run of newest readings "
+                                 f"({self._run_left} Samples still to come)")
+            self._run.append(entry)
+            self._run_left -= 1
+            if not self._run_left:
+                run, self._run = self._run, []
+                self.apply_newest(run)
+            return
         if isinstance(entry, Sample):
             self._until(entry.t_ns)
             self.mapping.feed(entry)
@@ -201,8 +221,22 @@ class TakeClock:
             self._until(entry.t_ns)
             if entry.data["name"] in self.mapping.trigger_names:
                 self.mapping.trigger(entry.data["name"], entry.data["action"], entry.t_ns)
+        elif entry.kind == "newest":
+            self._run_left = int(entry.data["count"])
         else:
             raise ValueError(f"unknown log event {entry.kind!r}")
+
+    def apply_newest(self, samples: list[Sample]) -> None:
+        """A run of Samples (in time order) taken as the live loop takes a flood: the readings
+        between two ticks are fed as one (``Mapping.feed_newest``), each tick written before
+        the readings after it, as ``apply`` writes them."""
+        i = 0
+        while i < len(samples):
+            self._until(samples[i].t_ns)
+            tick = self.tick_ns(self.frames)  # the next tick, at or after this reading
+            j = bisect.bisect_right(samples, tick, lo=i + 1, key=_time)
+            self.mapping.feed_newest(samples[i:j])
+            i = j
 
     def _until(self, before_ns: int) -> None:
         """Write every tick strictly before ``before_ns`` not yet written."""
