@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import NamedTuple
 
 from devices.base import DeviceError
+from devices.serial_wire import FORMATS, PROTOCOLS, STYLES
 from puppet.errors import PuppetError
 from puppet.io.shipped import copy_mapping, mapping_path, mappings_folder, shipped_mappings
 
@@ -346,6 +347,68 @@ def _devices(args: argparse.Namespace) -> int:
 
     print(report(discover()))
     return 0
+
+
+def _sim_arguments(sim: argparse.ArgumentParser) -> None:
+    sim.add_argument("device", choices=("joystick",),
+                     help="joystick: a serial slider box on a pseudo-terminal, behind a stable path")
+    sim.add_argument("--protocol", choices=PROTOCOLS, default="ascii",
+                     help="the wire: ASCII lines, COBS or SLIP frames (default ascii)")
+    sim.add_argument("--rate", type=_seconds_or_rate("readings a second", 0, 1e6), default=200.0,
+                     help="readings a second (default 200; 0: as fast as they are read)")
+    sim.add_argument("--channels", type=_positive, default=6, help="sliders (default 6)")
+    sim.add_argument("--format", choices=sorted(FORMATS), default="i16",
+                     help="cobs and slip: the value type (default i16)")
+    sim.add_argument("--style", choices=sorted(STYLES), default="csv",
+                     help="ascii: csv (512,300), space (512 300) or pairs (ch0=512,ch1=300) (default csv)")
+    sim.add_argument("--link", default=None, metavar="PATH",
+                     help="the stable path, a symlink to the current /dev/pts/N (default: pty-joystick in the "
+                          "temporary folder)")
+
+
+def _sim(args: argparse.Namespace) -> int:
+    """``puppet sim joystick``: sine sliders on a pseudo-terminal until Ctrl+C; Enter pulls the plug
+    or puts it back (a new pty behind the same path), so a rig reading it sees LOST and a reconnect."""
+    import signal
+    import tempfile
+    import threading
+    import time
+
+    from devices.simulated_serial import PtyJoystick
+
+    signal.signal(signal.SIGTERM, _interrupt)  # terminated, it removes its symlink as on Ctrl+C
+    link = args.link or os.path.join(tempfile.gettempdir(), "pty-joystick")
+    query = f"protocol={args.protocol}" + (f"&format={args.format}" if args.format != "i16" else "")
+    with PtyJoystick(args.protocol, args.rate or math.inf, args.channels, fmt=args.format, style=args.style,
+                     link=link) as joystick:
+        print(f"sim joystick: {args.protocol}, {args.channels} channels, "
+              f"{f'{args.rate:g}/s' if args.rate else 'as fast as read'}")
+        print(f"  stable path: {joystick.path} -> {joystick.tty}")
+        print(f"  device URL:  serial://{joystick.path}?{query}")
+        print("  Enter: unplug / replug;  Ctrl+C: stop", flush=True)
+        threading.Thread(target=_plug_toggle, args=(joystick,), daemon=True).start()
+        try:
+            while True:
+                time.sleep(1.0)
+        except KeyboardInterrupt:
+            pass
+    print(f"sent {joystick.sent} readings, dropped {joystick.dropped}")
+    return 0
+
+
+def _interrupt(*_: object) -> None:
+    raise KeyboardInterrupt
+
+
+def _plug_toggle(joystick) -> None:
+    """Each line on stdin pulls the joystick's plug, or puts it back."""
+    for _ in sys.stdin:
+        if joystick.plugged:
+            joystick.unplug()
+            print("  unplugged", flush=True)
+        else:
+            joystick.replug()
+            print(f"  plugged in: {joystick.path} -> {joystick.tty}", flush=True)
 
 
 def _mappings_arguments(mappings: argparse.ArgumentParser) -> None:
@@ -919,6 +982,8 @@ COMMANDS: dict[str, Command] = {
                        _program_arguments, _program),
     "devices": Command("list the controllers that are connected (serial, HID, MIDI, CAN, sound inputs)",
                        _no_arguments, _devices),
+    "sim": Command("run a simulated controller to point the rig at: a serial joystick on a pseudo-terminal",
+                   _sim_arguments, _sim),
     "mappings": Command("list the shipped mappings, or write an editable copy of one", _mappings_arguments,
                         _mappings),
     "calibrate": Command("record rest and a sweep per channel; write them into the mapping", _calibrate_arguments,

@@ -17,7 +17,7 @@ from puppet.face.load import load_face
 from puppet.face.meshfile import write_bare_obj
 from puppet.face.rig import rig_to_dict
 from puppet.runtime.runtime import Runtime
-from tools.rig_faces import ict_inputs, mediapipe_inputs
+from tools.figures.rig_faces import ict_inputs, mediapipe_inputs
 
 
 def _rotation(axis, angle):

@@ -1,5 +1,5 @@
 """The six expressions and the rounded visemes O and U read as the artist made them: built from the
-FACS recipes (puppet/fap/facs.py) by tools/build_high_level_faps.py, they reproduce the artist's
+FACS recipes (puppet/fap/facs.py) by tools/builders/build_high_level_faps.py, they reproduce the artist's
 summed shapes, show what each emotion is known by, and the face shows them whole."""
 
 from __future__ import annotations
@@ -14,14 +14,14 @@ from puppet.fap.highlevel import high_level_faps
 from puppet.fap.table import clamp_ranges
 from puppet.runtime.fapcalibration import relative_residual
 from puppet.runtime.musclesolver import folded_triangles
-from tools.build_high_level_faps import MARKER, unfolded, write
+from tools.builders.build_high_level_faps import MARKER, unfolded, write
 
 EXAMPLES = shared_assets() / "makehuman" / "faceunits_arkit"
 
 RESIDUAL_AT_MOST = {("expressions", 1): 0.64, ("expressions", 2): 0.50, ("expressions", 3): 0.34,
                     ("expressions", 4): 0.30, ("expressions", 5): 0.60, ("expressions", 6): 0.35,
                     ("visemes", 13): 0.41, ("visemes", 14): 0.36}
-"""|V(f) - V0 - D| / |D| against the summed artist shape, as tools/build_high_level_faps.py
+"""|V(f) - V0 - D| / |D| against the summed artist shape, as tools/builders/build_high_level_faps.py
 measures it (0.613, 0.473, 0.313, 0.274, 0.572, 0.315, 0.376, 0.332) plus about 0.03. The hand-made
 tables before them left 0.75, 0.83, 1.16, 0.66, 1.05, 0.50, 0.56, 0.66."""
 

@@ -447,7 +447,7 @@ def test_missing_and_unreadable_files(tmp_path):
 @needs_shared
 def test_builder_reproduces_the_shipped_face(tmp_path):
     out = tmp_path / "data"
-    subprocess.run([sys.executable, str(REPO / "tools" / "build_default_face.py"), "--out", str(out)],
+    subprocess.run([sys.executable, str(REPO / "tools" / "builders" / "build_default_face.py"), "--out", str(out)],
                    check=True, capture_output=True, cwd=REPO)
     shipped = REPO / "puppet" / "data"
     with np.load(shipped / "default_face.npz") as a, np.load(out / "default_face.npz") as b:

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import copy
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -220,15 +219,12 @@ def test_a_shape_held_out_on_one_side_is_learned_from_its_mirror_twin(face, exam
 
 
 def test_the_arkit_mappings_are_written_from_the_solved_vectors(tmp_path):
-    sys.path.insert(0, str(ROOT / "tools"))
-    try:
-        import build_arkit_mappings
-    finally:
-        sys.path.remove(str(ROOT / "tools"))
+    from tools.builders import build_arkit_mappings
+
     build_arkit_mappings.main(["--out", str(tmp_path)])
     for name in ("arkit_csv.yaml", "arkit_osc.yaml"):
         assert (tmp_path / name).read_text() == (ROOT / "mappings" / name).read_text(), \
-            "run tools/build_arkit_mappings.py"
+            "run tools/builders/build_arkit_mappings.py"
     vectors = json.loads((ROOT / "puppet" / "data" / "arkit_faps.json").read_text())["faps"]
     mapping = puppet.load_mapping(ROOT / "mappings" / "arkit_csv.yaml")
     assert mapping is not None and vectors["jawOpen"]["open_jaw"] > 0

@@ -268,7 +268,7 @@ def _unguarded(runtime):
 
 
 def test_the_turned_quads_fold_split_makehuman_s_way_and_not_as_turned(runtime, face):
-    """tools/build_default_face.py splits the ``triangulation`` quads beside the lip corners along
+    """tools/builders/build_default_face.py splits the ``triangulation`` quads beside the lip corners along
     their other diagonal: of each mirror pair, MakeHuman's split folds a triangle with the jaw open
     wide (at its reach, 912 MNS), and the turned split folds none (nor at any other range end:
     ``test_no_fap_folds_...``)."""

@@ -4,7 +4,7 @@ addresses, and take folders with a part garbled (HID
 descriptors: tests/test_hid_descriptors.py). Only documented errors may come out (``PuppetError`` and its
 subclasses; ``MappingError`` and ``DeviceError`` for a take's mapping and devices), each input in
 bounded time (hypothesis's deadline) and bounded memory (tracemalloc's peak). Set
-PUPPET_FUZZ_SCALE (default 1) to multiply the examples; ``-s`` prints the tally. ``tools/fuzz.py``
+PUPPET_FUZZ_SCALE (default 1) to multiply the examples; ``-s`` prints the tally. ``tools/checks/fuzz.py``
 runs these same properties for as long as it is given and prints the counts."""
 
 from __future__ import annotations

@@ -11,7 +11,7 @@ import pytest
 from puppet.fap.highlevel import fap_values
 from puppet.runtime.lidclosure import ONSET, LidClosure
 from puppet.runtime.musclesolver import folded_triangles
-from tools.eye_closure import opening
+from tools.checks.eye_closure import opening
 
 SIDES = [("l", 19, 21), ("r", 20, 22)]  # the eye, its upper and lower lid FAPs
 

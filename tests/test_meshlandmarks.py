@@ -53,7 +53,7 @@ def test_the_default_faces_landmarks_are_found_near_its_own(found):
     own = {f: int(v) for f, v in default_face().feature_vertices.items()}
     error = errors(found, own)
     assert set(FDP_NEEDED) <= set(found.fdp) and len(error) >= 40
-    assert np.median(list(error.values())) < 0.03  # 1.8% measured (tools/landmark_accuracy.py)
+    assert np.median(list(error.values())) < 0.03  # 1.8% measured (tools/checks/landmark_accuracy.py)
     assert np.percentile(list(error.values()), 90) < 0.10
     assert max(error[f] for f in ("3.7", "3.8", "3.11", "3.12", "8.3", "8.4", "9.3")) < 0.03  # corners, nose tip
     assert found.views_found == 5 and "5 of 5 views" in found.summary()
@@ -195,7 +195,7 @@ def test_a_face_of_another_shape_gets_its_jaw_angles_and_hairline_near_the_given
     the face oval's points found lie within 15% of the face width of the given ones: placed by
     ``apply_landmarks`` from the points MediaPipe gives, they lay 20-85% off (the jaw angle 2.13
     76% on seed 1; the hairline 80%) and the transfer's residual rose from 0.35 to 0.40 and 0.52
-    (``tools/transfer_check.py --found``); carried, 0.38 and 0.42."""
+    (``tools/checks/transfer_check.py --found``); carried, 0.38 and 0.42."""
     from puppet.photo.shapemodel import load_shape_model
     from puppet.view.meshlandmarks import found_face
 

@@ -20,7 +20,7 @@ from puppet.face.load import load_face
 from puppet.face.motiontransfer import feature_warp
 from puppet.runtime.posecheck import POSES, pose_flaws
 from puppet.runtime.runtime import Runtime
-from tools.transfer_check import in_face_frame, median_residual, shaped_face
+from tools.checks.transfer_check import in_face_frame, median_residual, shaped_face
 
 ARKIT = shared_assets() / "makehuman" / "faceunits_arkit"
 

@@ -111,7 +111,7 @@ EVERYTHING = {"device open", "device lost", "REC", "text and graphs", "channel b
 
 @pytest.mark.slow
 def test_a_screenshot_of_the_real_window_under_xvfb_shows_everything_and_so_does_the_one_in_docs(tmp_path):
-    """tools/live_screenshot.py under Xvfb (the real pyglet window): the status with a device open
+    """tools/figures/live_screenshot.py under Xvfb (the real pyglet window): the status with a device open
     and one LOST with its reason, REC, the graphs and keys, the channel monitor's bars; and the
     picture in docs/ that the same tool took shows them all too."""
     root = Path(__file__).resolve().parents[1]
@@ -120,9 +120,9 @@ def test_a_screenshot_of_the_real_window_under_xvfb_shows_everything_and_so_does
     if shutil.which("xvfb-run") is None:
         pytest.skip("no xvfb-run here (tools/setup.sh installs xvfb where it can)")
     shot = tmp_path / "live.png"
-    subprocess.run(["xvfb-run", "-a", "-s", "-screen 0 1280x800x24", sys.executable, str(root / "tools" / "live_screenshot.py"),
-                    str(shot)], check=True, cwd=root, env={**os.environ, "PYTHONPATH": str(root)},
-                   capture_output=True, timeout=120)
+    tool = root / "tools" / "figures" / "live_screenshot.py"
+    subprocess.run(["xvfb-run", "-a", "-s", "-screen 0 1280x800x24", sys.executable, str(tool), str(shot)],
+                   check=True, cwd=root, env={**os.environ, "PYTHONPATH": str(root)}, capture_output=True, timeout=120)
     pixels = np.asarray(Image.open(shot).convert("RGB")).astype(int)
     assert pixels.shape == (720, 960, 3) and _cockpit_parts(pixels) == EVERYTHING
     face = pixels[300:600, 380:580]

@@ -123,9 +123,9 @@ def test_the_shipped_demo_take_is_what_the_tool_makes_today(tmp_path):
 
     root = Path(__file__).resolve().parents[1]
     out = tmp_path / "demo_take.fap"
-    subprocess.run([sys.executable, str(root / "tools" / "make_demo_take.py"), "--out", str(out)],
+    subprocess.run([sys.executable, str(root / "tools" / "builders" / "make_demo_take.py"), "--out", str(out)],
                    check=True, capture_output=True, env={"PYTHONPATH": str(root), "PATH": ""})
-    assert out.read_bytes() == demo_take().read_bytes(), "run tools/make_demo_take.py"
+    assert out.read_bytes() == demo_take().read_bytes(), "run tools/builders/make_demo_take.py"
 
 
 def test_render_shows_a_bar_when_asked_and_always_ends_with_a_summary_line(tmp_path, egl, capsys):

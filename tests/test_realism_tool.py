@@ -1,4 +1,4 @@
-"""tools/realism.py: its cheap parts (fold counter, FAP ends, fits on a few example shapes, the
+"""tools/checks/realism.py: its cheap parts (fold counter, FAP ends, fits on a few example shapes, the
 targets line) behave as the figures it prints claim."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import puppet
 from puppet.bench.assets import shared_assets
 from puppet.face.autorig import build_rig
 from puppet.face.examples import load_examples
-from tools.realism import TARGETS, fap_ends, fits, fold_count, folds, residuals, summary, targets
+from tools.checks.realism import TARGETS, fap_ends, fits, fold_count, folds, residuals, summary, targets
 
 EXAMPLES = shared_assets() / "makehuman" / "faceunits_arkit"
 

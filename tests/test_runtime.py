@@ -258,7 +258,7 @@ def test_the_shipped_rig_is_what_autorig_builds_today(face):
     built = json.loads(json.dumps(rig_to_dict(build_rig(face, calibrated=False))))
     for calibrated in ("fap_motions", "fap_reach", "fap_follow"):  # calibration and fold limits add them
         del shipped[calibrated], built[calibrated]
-    assert shipped == built, "run tools/build_default_rig.py"
+    assert shipped == built, "run tools/builders/build_default_rig.py"
 
 
 def test_hybrid_eyelid_turns_its_margin_about_the_eyeball_and_the_lid_follows(runtime, face):

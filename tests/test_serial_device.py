@@ -4,8 +4,12 @@ frame parsers."""
 
 from __future__ import annotations
 
+import os
 import struct
+import subprocess
+import sys
 import time
+from pathlib import Path
 
 import pytest
 from hypothesis import HealthCheck, assume, given, settings
@@ -336,6 +340,39 @@ def test_sim_url_reads_its_own_pty_joystick():
     assert len(samples) == 10 and all(set(s.values) == {"jaw", "smile"} for s in samples)
     assert all(0 <= v <= 1023 for s in samples for v in s.values.values())
     assert device.counters.bad_frames == 0
+
+
+def test_puppet_sim_joystick_is_a_port_whose_plug_enter_pulls(tmp_path):
+    """``puppet sim joystick`` prints a URL a serial device reads its sliders at; Enter unplugs it
+    (the device goes LOST), Enter again plugs it back (it reads again); terminated, it removes its
+    stable path."""
+    link = tmp_path / "stick"
+    root = Path(__file__).resolve().parents[1]
+    command = [sys.executable, "-m", "puppet.cli", "sim", "joystick", "--protocol", "cobs", "--channels", "3",
+               "--link", str(link)]
+    stick = subprocess.Popen(command, cwd=root, env={**os.environ, "PYTHONPATH": str(root)}, text=True,
+                             stdin=subprocess.PIPE, stdout=subprocess.PIPE)
+    try:
+        shown = [stick.stdout.readline() for _ in range(4)]
+        assert shown[2].split() == ["device", "URL:", f"serial://{link}?protocol=cobs"], shown
+        device = serial_device(shown[2].split()[-1])
+        with device:
+            samples = collect(device, 20)
+            assert len(samples) == 20 and all(len(s.values) == 3 for s in samples)
+            assert all(0 <= v <= 1023 for s in samples for v in s.values.values())
+            stick.stdin.write("\n")
+            stick.stdin.flush()
+            assert stick.stdout.readline().strip() == "unplugged"
+            assert device.wait_state(State.LOST, 5)
+            stick.stdin.write("\n")
+            stick.stdin.flush()
+            assert stick.stdout.readline().split()[:2] == ["plugged", "in:"]
+            assert device.wait_state(State.OPEN, 5) and len(collect(device, 5)) == 5
+    finally:
+        stick.terminate()
+        out, _ = stick.communicate(timeout=10)
+    assert stick.returncode == 0 and out.startswith("sent "), out
+    assert not link.is_symlink()
 
 
 # -- properties of the frame parsers ---------------------------------------------------------

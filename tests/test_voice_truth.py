@@ -1,5 +1,5 @@
 """The mouth follows a speaker better than "mouth open = loud": measured against real speakers'
-lips when their clips are at hand (``FACEPUPPET_VOICE_DATA``: see tools/voice_truth.py; they are
+lips when their clips are at hand (``FACEPUPPET_VOICE_DATA``: see tools/checks/voice_truth.py; they are
 not shipped), and always against a synthetic speaker whose lips are known, where an oo as loud
 as an ah must not open the mouth as far."""
 
@@ -55,7 +55,7 @@ def test_on_a_synthetic_speaker_the_rig_tells_open_vowels_from_loud_ones(tmp_pat
 
 
 @pytest.mark.skipif(not VOICE_DATA, reason="no real speakers' clips here (set FACEPUPPET_VOICE_DATA; "
-                                           "tools/voice_truth.py says what they hold)")
+                                           "tools/checks/voice_truth.py says what they hold)")
 def test_against_real_speakers_the_mouth_follows_better_than_loudness():
     assert clips(VOICE_DATA), f"{VOICE_DATA}: no NAME.wav with NAME_lips.csv"
     result = measure(VOICE_DATA)

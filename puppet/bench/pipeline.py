@@ -210,7 +210,7 @@ def box_poses(seconds: float = BOX_CYCLE_S, rate: float = 200.0, fps: float = 19
     """The Poses a live loop drawing ``fps`` frames a second shows over ``seconds`` of the slider
     box of ``latency`` (``sine_sliders`` sending ``rate`` readings a second, through the shipped
     mapping, its filters and muscles included): that run's frame work without its pty, GL or
-    clock, to time in CPU time (``tools/bench_cpu.py``)."""
+    clock, to time in CPU time (``tools/bench/bench_cpu.py``)."""
     mapping = load_mapping(MAPPING)
     signal = sine_sliders(6)
     step, frame = 1e9 / rate, 1e9 / fps

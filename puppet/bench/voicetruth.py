@@ -9,8 +9,8 @@ face's inner-lip gap (feature points 2.2 to 2.3) is measured in every frame. The
 "mouth open = loud": the sound's RMS envelope over a centred 20 ms window. Each is correlated with
 the measured opening (Pearson) at every lag up to ``MAX_LAG_S``; a positive lag is the rig's mouth
 moving after the speaker's. ``measure(folder)`` gives per clip and pooled (Fisher z mean)
-figures; ``tools/voice_truth.py`` prints them. ``clip_from_video`` makes a clip from a video
-with sound (``tools/voice_lips.py``): its sound track, and the lips measured in every frame by
+figures; ``tools/checks/voice_truth.py`` prints them. ``clip_from_video`` makes a clip from a video
+with sound (``tools/checks/voice_lips.py``): its sound track, and the lips measured in every frame by
 MediaPipe in the photo environment (``puppet/photo/mediapipe_lips.py``), each frame's time
 taken on the sound's clock.
 """

@@ -2,7 +2,7 @@
 
 The rig is built by rules stated in terms of the feature points (FDP ids, ISO/IEC 14496-2
 Annex C), so any face that has them gets a rig the same way; the default face's shipped rig is
-the output of this module (``tools/build_default_face.py`` writes it).
+the output of this module (``tools/builders/build_default_face.py`` writes it).
 
 Regions (Zhang & Chen's functional regions), decided per skin vertex, first rule that matches:
 

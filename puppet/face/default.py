@@ -1,11 +1,11 @@
 """The embedded default face and its shipped rig.
 
 The default face is a head cut from the MakeHuman hm08 base mesh (CC0) by
-``tools/build_default_face.py``: skin, eyeballs, teeth and tongue, with all 84 MPEG-4 feature
+``tools/builders/build_default_face.py``: skin, eyeballs, teeth and tongue, with all 84 MPEG-4 feature
 points (FDP, ISO/IEC 14496-2 Annex C), pivots, lip and lid contours and an albedo per vertex. Its
 data files are ``puppet/data/default_face.npz`` (arrays) and ``puppet/data/default_face.json``
 (the human-readable tables); ``PROVENANCE.md`` beside them says where it comes from and what was
-changed. Its rig, ``puppet/data/default_rig.json``, is what ``tools/build_default_rig.py`` makes of
+changed. Its rig, ``puppet/data/default_rig.json``, is what ``tools/builders/build_default_rig.py`` makes of
 it with ``puppet.face.autorig`` and the calibration.
 """
 
@@ -81,7 +81,7 @@ def _default_meta() -> dict:
 
 def load_default_rig() -> Rig | None:
     """The default face's shipped rig (``puppet/data/default_rig.json``), or None when the package
-    ships none (while ``tools/build_default_rig.py`` makes it)."""
+    ships none (while ``tools/builders/build_default_rig.py`` makes it)."""
     resource = _data_file(DEFAULT_RIG)
     if not resource.is_file():
         return None

@@ -12,7 +12,7 @@ jaw's opening draws the lower lip's points back): those motions go to the same f
 the new face (3% of the motion, but without them the ARKit fits' median residual on the default
 face itself rose from 0.30 to 0.35).
 
-Two alternatives were measured with ``tools/transfer_check.py`` and left out:
+Two alternatives were measured with ``tools/checks/transfer_check.py`` and left out:
 
 * in local frames: a motion travels in the frame of the skin under its point (the surface normal, and
   the face's x axis laid into the tangent plane), not in the face frame, so that a brow raise

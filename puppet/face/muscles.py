@@ -113,7 +113,7 @@ def place_coefficients(point: np.ndarray, feature_points: Mapping[str, np.ndarra
 # r_e and r_f are multiples of the muscle's length, pull a multiple of r_e (``PULL`` unless given).
 # The levators and the inner frontalis pull less, and the levators have narrower zones, than the
 # rest: at contraction 1 their zones drag the nostril's and the brow's control points hardest, and
-# DFFD folded the nostril and the upper lip there (tools/muscle_experiment.py: no muscle alone at
+# DFFD folded the nostril and the upper lip there (tools/checks/muscle_experiment.py: no muscle alone at
 # c <= 1, nor all of them at 0.5, folds a triangle in the control-point mode without the guard).
 LINEAR_RECIPES = {
     # name: (fixed end, insertion, alpha (deg), r_e / length, r_f / length[, pull / r_e])

@@ -1,5 +1,5 @@
 """The six basic emotions and the rounded visemes as FACS action units, each unit as the ARKit
-blendshapes that show it: the recipes ``tools/build_high_level_faps.py`` turns into FAPs.
+blendshapes that show it: the recipes ``tools/builders/build_high_level_faps.py`` turns into FAPs.
 
 MPEG-4 names its six expressions (FAP 2) after Ekman's basic emotions but leaves their shapes to
 the face model. Ekman and Friesen described each emotion's prototype in action units of the

@@ -11,7 +11,7 @@ w x the vector: a row ``{fap: F, source: S, range: [0, v]}`` per FAP of the vect
 shape the vector leaves unexplained (``write_routes``). Head and eye angles (the CSV's) keep
 their hand-written rows: they are angles, not shapes.
 
-Two callers, one code: ``tools/build_default_rig.py`` and ``tools/build_arkit_mappings.py`` solve
+Two callers, one code: ``tools/builders/build_default_rig.py`` and ``tools/builders/build_arkit_mappings.py`` solve
 and write the shipped route of the default face (``puppet/data/arkit_faps.json``,
 ``mappings/arkit_*.yaml``); ``puppet calibrate-face`` with ARKit-named examples (a perfect-sync
 GLB's morph targets) writes the face's own into its folder (``write_face_route``). A face's route
@@ -59,7 +59,7 @@ CHANNEL_OPTIONS = {  # how each route shapes a channel before the targets; the r
 CSV_HEADER = """\
 # yaml-language-server: $schema=schema.json
 #
-# Written by tools/build_arkit_mappings.py: edit that, not this file.
+# Written by tools/builders/build_arkit_mappings.py: edit that, not this file.
 #
 # A Live Link Face (Epic's iPhone app) / ARKit blendshape CSV imported as a take by
 # puppet.live.arkit.import_csv: every CSV row becomes one Sample from device `csv`, its channels named
@@ -115,7 +115,7 @@ CSV_ANGLE_TARGETS = """\
 OSC_HEADER = """\
 # yaml-language-server: $schema=schema.json
 #
-# Written by tools/build_arkit_mappings.py: edit that, not this file.
+# Written by tools/builders/build_arkit_mappings.py: edit that, not this file.
 #
 # A phone face tracker (ARKit blendshapes, e.g. through iFacialMocap or Waidayo) sending the VMC
 # protocol over OSC: every /VMC/Ext/Blend/Apply arrives as one Sample of blendshape weights 0..1
@@ -192,7 +192,7 @@ def write_routes(document: dict, folder: str | os.PathLike, *, face: str | None 
 def _for_face(header: str, face: str) -> str:
     """A shipped route's header made the header of ``face``'s own route."""
     return (header.replace("# yaml-language-server: $schema=schema.json\n#\n", "")
-            .replace("# Written by tools/build_arkit_mappings.py: edit that, not this file.",
+            .replace("# Written by tools/builders/build_arkit_mappings.py: edit that, not this file.",
                      f"# Written by puppet calibrate-face for {face}: calibrate again rather than edit.\n"
                      "# Blendshapes the face has no example of keep the default face's vectors.")
             .replace(f"on {DEFAULT_FACE} (puppet/data/arkit_faps.json,",

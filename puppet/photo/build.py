@@ -20,7 +20,7 @@ it: pixel scale, smaller is nearer) come in three layouts, as files any detector
 Each landmark is a point on the default face (``model_points``, ``MeshPoints``): its FDP's
 vertex; for iBUG points without one a point by a stated rule (``ibug_points``); for MediaPipe
 where MediaPipe itself finds the landmark on the default face (``data/mediapipe_map.json``,
-``tools/build_mediapipe_map.py``).
+``tools/builders/build_mediapipe_map.py``).
 
 The fit (``fit_photo``):
 
@@ -273,7 +273,7 @@ def _feature_vertex(face: Face, fdp: str) -> int:
 
 def mediapipe_points(face: Face) -> MeshPoints:
     """MediaPipe Face Mesh's 468 landmarks on the default face (``data/mediapipe_map.json``,
-    built by ``tools/build_mediapipe_map.py`` from MediaPipe's canonical face). Only the
+    built by ``tools/builders/build_mediapipe_map.py`` from MediaPipe's canonical face). Only the
     default face's topology has them: another face is refused."""
     table = _mediapipe_map()
     if int(table["vertex_count"]) != len(face.vertices) or table["face_hash"] != _topology_hash(face):

@@ -20,7 +20,7 @@ shape, the farther half at most): seen edge-on, MediaPipe puts the face-oval poi
 outline of the view, which is not the default face's place for them (on the default face itself
 some lift 40-70% of the face width inward).
 
-On two faces of other shapes (``tools/transfer_check.py --found``: the shape model, two standard
+On two faces of other shapes (``tools/checks/transfer_check.py --found``: the shape model, two standard
 deviations out) the face oval's points now lie within 12% of the face width of the given ones,
 and the transfer's residual from found landmarks fell from 0.405 / 0.524 to 0.380 / 0.421 (from
 given landmarks: 0.352 / 0.357). On MediaPipe's canonical face, the 14 points its table gives and

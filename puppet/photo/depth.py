@@ -39,14 +39,14 @@ Z_SMOOTHING = 1e-3  # the same for depth
 SMOOTHING = 300.0
 """The thin-plate spline's smoothing of x and y per squared landmark error (face units): a
 detector's landmarks (``LANDMARK_NOISE``) are followed loosely, exact ones closely. 100 to 1000
-do alike on held-out MakeHuman faces (``tools/shape_check.py``); the larger, the less a
+do alike on held-out MakeHuman faces (``tools/checks/shape_check.py``); the larger, the less a
 detector's scatter shows."""
 DEPTH_TRUST = 0.05
 """How far the landmarks' depth goes from the face's own toward a detector's. MediaPipe's
 depth is poor on faces it was not trained on: on renders of held-out MakeHuman faces it errs
 3.9% of the face width RMS against their true depth, whose differences from the default face's
-are about 1% (``tools/shape_check.py``), and on the rendered ICT face 4.15% against the default
-face's own 3.07% (``tools/photo_check.py``). Trusted 0.3, it turned the fitted head (a depth
+are about 1% (``tools/checks/shape_check.py``), and on the rendered ICT face 4.15% against the default
+face's own 3.07% (``tools/checks/photo_check.py``). Trusted 0.3, it turned the fitted head (a depth
 error is a turn of the head) and made the held-out faces worse than the generic one; 0.05 does
 a little better than none on them. ICT's face, further from the default, gains from it (its
 face area 0.90x the generic face's trusted fully, 1.00x at 0.05), but a photo cannot tell which

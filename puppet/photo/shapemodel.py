@@ -1,6 +1,6 @@
 """A morphable model of face shape: the default face plus a weighted sum of shape components that
 MakeHuman's own shape modifiers make (``data/shape_model.npz``, built from MakeHuman's CC0 targets
-by ``tools/build_shape_model.py``; ``data/SHAPE_MODEL.md`` says how).
+by ``tools/builders/build_shape_model.py``; ``data/SHAPE_MODEL.md`` says how).
 
 A frontal photo fixes where the landmarks are across the image, hardly how deep they are or what
 the face does above the brows and round the jaw. The model says which depths, foreheads, jaws and

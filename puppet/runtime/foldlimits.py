@@ -29,7 +29,7 @@ a file or a device gives are never changed, only what the face shows.
   by the runtime's sliver guard (``puppet.runtime.sliverguard``); open_jaw goes as far as the
   examples' fits go within the other limits (``within_limits``), short of the chin's fold (four
   quads beside the lip corners folded until they were split along the other diagonal,
-  ``tools/build_default_face.py``'s ``TURNED_QUADS``).
+  ``tools/builders/build_default_face.py``'s ``TURNED_QUADS``).
 
 Fits see both limits (``puppet.runtime.fapcalibration``: each fit keeps within the reach, and within
 the follow ranges as linear constraints, so the values it finds are what the face shows).

@@ -5,7 +5,7 @@ exactly value x IRISD: at 1024 IRISD it lies on the lower lid's middle point. Th
 margin takes a share of the turn that fades toward the still eye corners (``lid_shares``), and
 the calibrated FAP motions add the artists' own motions of those points, so on the default face
 a blink with the upper lids alone left 8.4% of the eyes' opening, the outer half 1.6 mm open and
-the white of the eye showing (``tools/eye_closure.py``). The artists' blinks close it all (0.1%
+the white of the eye showing (``tools/checks/eye_closure.py``). The artists' blinks close it all (0.1%
 left).
 
 So each upper lid has a closing shape, as a rigger sculpts one: where the two lids meet (the

@@ -38,7 +38,7 @@ Three ways to apply them:
   active control points inside their zones, and DFFD spreads that over the skin. The points move
   by the improved law (1): a control point that crossed its muscle's fixed end would turn the
   whole region it controls inside out, and there is no mesh between control points to hold it.
-  That alone does not keep the skin from folding at large contraction (tools/muscle_experiment.py:
+  That alone does not keep the skin from folding at large contraction (tools/checks/muscle_experiment.py:
   the zone squeezed toward the bone flips spread triangles on a grid at c = 5 and 10, and on the
   default face DFFD folds the rig's region borders next to the moving lip corner from c = 3);
   ``EdgeConstraints`` run on the spread displacement removes those folds. Without that guard no

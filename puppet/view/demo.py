@@ -1,7 +1,7 @@
 """The main job on the embedded default face: replay the shipped demo take to a video, with its voice.
 
-``demo_take.fap`` (made by ``tools/make_demo_take.py``) says a short sentence in visemes with a
-growing smile, blinks, glances and head motion; ``demo_speech.wav`` (``tools/make_demo_speech.py``)
+``demo_take.fap`` (made by ``tools/builders/make_demo_take.py``) says a short sentence in visemes with a
+growing smile, blinks, glances and head motion; ``demo_speech.wav`` (``tools/builders/make_demo_speech.py``)
 is that sentence spoken. The demo lays the mouth the voice makes over the take, as ``puppet
 lipsync --over`` does (the take folder ``demo_take/`` beside the video), renders it to MP4 with
 the sound, and also writes a still of the frame with the mouth open widest beside the neutral

@@ -33,7 +33,7 @@ the median distance of its lifts from the chosen vertex, in % of the face's widt
 MediaPipe's face-side points 234 and 454). A mesh where no view shows a face is refused in one
 line (``DetectionError``). On the default face, ICT-FaceKit and MediaPipe's canonical face, the
 points found lie within 2-2.5% of the face width of the given ones (median;
-``tools/landmark_accuracy.py``).
+``tools/checks/landmark_accuracy.py``).
 """
 
 from __future__ import annotations

@@ -19,7 +19,7 @@ is rendered into the window's framebuffer:
 * **the keys**.
 
 H hides it. Hidden, a frame only appends its fps and latency to the graphs' history (``tick``):
-no ImGui call, no device or channel read, so the overlay costs nothing (``tools/bench_overlay.py``
+no ImGui call, no device or channel read, so the overlay costs nothing (``tools/bench/bench_overlay.py``
 measures it). It draws on any moderngl-window window, headless (EGL) ones included, so tests and
 screenshots need no display.
 """

@@ -5,7 +5,7 @@ woken when the frame is flushed. On the two-core machines the project is measure
 the kernel, both threads often ended up sharing one core for whole runs (the waking thread's
 core is the scheduler's first choice for a thread it wakes), and a 640x480 live frame then
 rasterised at one core's speed: 2.1-2.3 ms instead of 1.2, in about half the processes started
-(``tools/latency_profile.py``). Given a core each, they rasterise in 1.2-1.3 ms in every run,
+(``tools/bench/latency_profile.py``). Given a core each, they rasterise in 1.2-1.3 ms in every run,
 and a Sample's latency in the live loop fell from 7.5-9.0 ms median to 4.4-5.2 (``puppet bench
 --only latency``, four runs each).
 

@@ -434,7 +434,7 @@ def choose_normals(ctx: moderngl.Context, gpu_normals: bool | None = None) -> bo
     vertex's ring of six triangles is a few hundred flops beside its lighting. On a software
     rasteriser, no: there the vertex shader runs on the CPU once per corner that misses
     llvmpipe's small vertex cache (1.5 times a vertex on the default face), so summing a ring
-    per invocation costs more than numpy's sums once per vertex (``tools/normals_draw.py``).
+    per invocation costs more than numpy's sums once per vertex (``tools/bench/normals_draw.py``).
     ``gpu_normals`` True asks for it anyway and fails clearly where the GL cannot.
     """
     if gpu_normals and not gpu_normals_supported(ctx):
