@@ -5,7 +5,7 @@ shipped ``arduino_sliders`` mapping, as ``puppet live --mapping arduino_sliders 
 "box=sim://joystick?protocol=ascii&rate=200"`` reads them, and the face is drawn headless beside
 the sliders' positions, one frame every 1/FPS s.
 
-    PYTHONPATH=. .venv/bin/python tools/readme_gif.py [--out docs/readme.gif] [--seconds 6] [--size 300]
+    PYTHONPATH=. .venv/bin/python tools/figures/readme_gif.py [--out docs/readme.gif] [--seconds 6] [--size 300]
 """
 
 from __future__ import annotations
