@@ -37,8 +37,7 @@ from puppet.view.renderer import Renderer, save_png
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository: tools.* as packages
 from tools.builders.build_shape_model import Wheel, default_macro, draw, modifiers  # noqa: E402
-from tools.checks.photo_check import (  # noqa: E402
-    EXACT_NOISE, MARGIN, SIZE, Ict, _table, face_area, measure, visible)
+from tools.checks.photo_check import EXACT_NOISE, MARGIN, SIZE, Ict, _table, face_area, measure, visible  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 FIRST_SEED = 2000  # the model's population is drawn with build_shape_model.SEED (15); the settings were chosen on 1000-1015
