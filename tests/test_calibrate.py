@@ -243,3 +243,14 @@ def test_a_bad_simulated_motion_is_refused(url, message):
 
     with pytest.raises(DeviceError, match=message):
         open_device(url, "box")
+
+
+def test_a_count_or_two_of_jitter_after_a_rest_too_short_to_show_noise_is_not_a_sweep():
+    """A 10-bit channel whose few rest readings were all alike (noise 0 seen) and that jitters by
+    three counts in the sweep was never moved: a device in counts is never steadier than a count
+    (a loaded machine's short rest phase once calibrated such a channel to 531..534)."""
+    rest = {"still": [532.0] * 4, "swept": [512.0] * 4}
+    sweep = {"still": [531.0, 533.0, 534.0, 532.0], "swept": [3.0, 512.0, 1020.0]}
+    _, updates, warnings = cal._analyse({"still": False, "swept": False}, rest, sweep)
+    assert list(updates) == ["swept"]
+    assert any(w.startswith("still: never moved more in the sweep") for w in warnings)

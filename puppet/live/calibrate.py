@@ -199,6 +199,8 @@ def _analyse(channels: dict[str, bool], rest: dict[str, list[float]], sweep: dic
             warnings.append(f"{name}: no samples during the sweep: left as it was")
             continue
         noise = float(np.percentile(r, HIGH_PCT) - np.percentile(r, LOW_PCT)) if r.size else 0.0
+        if counts:  # a device in whole counts is never known steadier than a count (a short rest may show none)
+            noise = max(noise, 1.0)
         floor = max(NOISE_FACTOR * noise, 1e-9 * max(1.0, abs(lo), abs(hi)))
         if hi - lo <= floor:
             if hi - lo > 1e-9 * max(1.0, abs(lo), abs(hi)):
