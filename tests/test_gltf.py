@@ -157,3 +157,17 @@ def test_the_khronos_validator_finds_no_errors(take, tmp_path):
         assert run.returncode == 0, run.stderr
         issues = json.loads(run.stdout)
         assert issues["numErrors"] == 0 and issues["numWarnings"] == 0, issues["messages"]
+
+
+def test_puppet_export_says_each_step_only_after_its_inputs_are_read(take, tmp_path, capsys):
+    """Issue 38: export's half minute on a long take is not silent: three steps on stderr, each as
+    it starts; a take that cannot be read is one line and no step."""
+    from puppet.cli import main
+
+    assert main(["export", str(take), "-o", str(tmp_path / "t.glb")]) == 0
+    captured = capsys.readouterr()
+    assert [line.split(":")[0] for line in captured.err.splitlines()] == [f"export {k}/3" for k in (1, 2, 3)]
+    assert "t.glb: 10 frames" in captured.out
+    assert main(["export", str(tmp_path / "none.fap"), "-o", str(tmp_path / "u.glb")]) != 0
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) == 1 and "none.fap" in lines[0], lines
