@@ -214,7 +214,7 @@ def fold_limited(face, rig: Rig, search: type[Bisection] = FoldSearch,
     Before the limits are searched, the skin is smoothed where the poses crease
     (``puppet.runtime.creasesmoothing``; the rig's ``smoothed``), so the limits hold for the face as
     it moves. ``search``: as for ``fold_limits``; ``step(what)`` hears each of ``FOLD_STEPS`` as it
-    starts (on ICT, about 10, 20 and 5 seconds)."""
+    starts (on ICT here: 6, 15 and 2 seconds)."""
     step = step or (lambda what: None)
     out = copy.copy(rig)
     none = np.zeros(0, dtype=np.int64)
