@@ -158,6 +158,22 @@ def test_the_mediapipe_face_rigs_from_the_project_s_own_table_without_the_brows(
     assert (tmp_path / "mp").is_dir()
 
 
+def test_a_flattened_face_is_refused_in_one_line_naming_the_empty_regions(default, tmp_path, capsys):
+    """A face pressed to a relief (a character drawn nearly flat) has no skin in front of its jaw
+    angles: its regions came out empty and the rig ended in a numpy traceback; now one line."""
+    skin = default.parts["skin"]
+    remap = np.full(len(default.vertices), -1)
+    remap[skin] = np.arange(len(skin))
+    triangles = remap[default.triangles]
+    flat = default.vertices[skin] * (1.0, 1.0, 0.05)
+    mesh = write_bare_obj(tmp_path / "flat.obj", flat, triangles[(triangles >= 0).all(axis=1)])
+    marks = {f: int(remap[v]) for f, v in default.feature_vertices.items() if remap[v] >= 0}
+    (tmp_path / "points.json").write_text(json.dumps(marks))
+    assert main(["rig", str(mesh), "--landmarks", str(tmp_path / "points.json"), "-o", str(tmp_path / "f")]) != 0
+    line = capsys.readouterr().err.strip().splitlines()[-1]
+    assert line.startswith("puppet rig: face 'flat': no skin for the forehead") and "flat face" in line, line
+
+
 def test_a_landmark_file_that_is_not_json_is_named(tmp_path):
     bad = tmp_path / "bad.json"
     bad.write_text("{2.1: 3")
