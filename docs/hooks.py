@@ -1,19 +1,23 @@
-"""MkDocs hooks: the parts of the guide that are made from the code at every build, so they
-never drift from it.
+"""MkDocs hooks and the generator of the guide's pages that are made from the code, so they never
+drift from it. ``python docs/hooks.py`` writes them into ``docs/guide/reference/`` (committed, so
+the links work in an unbuilt checkout too); ``tests/test_docs.py`` checks the committed pages are
+what this makes:
 
 * ``reference/mapping.md`` is written from ``mappings/schema.json`` (every key, its type, allowed
   values, default and description, section by section as the schema's ``$defs`` go);
 * ``reference/commands.md`` is the ``puppet`` command's own ``--help`` and each subcommand's,
   the subcommands read from the top-level help's choices (nothing is listed by hand);
+* ``reference/faps.md``, the FAP glossary: each FAP's name, what it moves, its unit and direction
+  (``puppet.fap.table``) and how far it goes on the default face (its rig's ``fap_reach``);
+* ``reference/feature-points.md``: the feature points ``puppet rig`` needs
+  (``puppet.face.landmarks.FDP_NEEDED``), each with what it is, beside their picture
+  (``tools/figures/feature_point_picture.py``);
 * on the device pages, a ``<!-- url-options: SCHEME -->`` line becomes the URL options that
   backend declares (``Device.OPTIONS``), when it declares them.
 
 The code is asked in a child Python with the checkout first on its path, so the pages show this
-checkout's code, not an installed snapshot.
-
-The reference pages are added with ``File.generated`` (``on_files``): nothing is written into
-the tracked tree. A ``--8<-- "samples/FILE"`` line puts that sample file inline. ``mkdocs
-serve`` also watches the schema, the CLI and the device backends.
+checkout's code, not an installed snapshot. A ``--8<-- "samples/FILE"`` line puts that sample
+file inline. ``mkdocs serve`` also watches the schema, the CLI and the device backends.
 """
 
 from __future__ import annotations
@@ -25,13 +29,23 @@ import subprocess
 import sys
 from pathlib import Path
 
-from mkdocs.structure.files import File, Files
-
 ROOT = Path(__file__).resolve().parent.parent
+GUIDE = ROOT / "docs" / "guide"
 SCHEMA = ROOT / "mappings" / "schema.json"
 CLI = ROOT / "puppet" / "cli.py"
 MAPPING_PAGE = "reference/mapping.md"
 COMMANDS_PAGE = "reference/commands.md"
+FAPS_PAGE = "reference/faps.md"
+FEATURE_POINTS_PAGE = "reference/feature-points.md"
+REGENERATE = "python docs/hooks.py"
+HELP_PYTHON = "with Python "  # the commands page says which: argparse lays out help a little differently by version
+UNITS = {  # the FAP units (ISO/IEC 14496-2 Annex C) in words; their feature points are puppet.fap.units'
+    "MNS0": "MNS, the mouth-nose separation / 1024", "MW0": "MW, the mouth width / 1024",
+    "ES0": "ES, the eye separation / 1024", "ENS0": "ENS, the eye-nose separation / 1024",
+    "IRISD0": "IRISD, the iris diameter / 1024", "AU": "AU, 1e-5 radians",
+}
+FDP_GROUPS = (("3.", "Eyes: corners and lid middles"), ("9.", "Nose"), ("2.1", "Chin"),
+              ("8.", "Lips' outer edge (the vermilion border)"), ("2.", "Lips' inner edge (where they meet)"))
 HELP_COLUMNS = "100"
 INCLUDE = re.compile(r'^--8<-- "([^"]+)"$', re.M)
 OPTIONS = re.compile(r"^<!-- url-options: ([a-z]+) -->$", re.M)
@@ -69,17 +83,53 @@ helps = {"": top}
 for command in found.group(1).split(","):
     helps[command] = help_of([command, "--help"])
 options = {scheme: options_of(scheme) for scheme in BACKENDS}
-print(json.dumps({"help": helps, "options": options}))
+
+from puppet.face.default import default_face, load_default_rig
+from puppet.face.landmarks import FDP_NEEDED, FDP_NEEDED_WHAT
+from puppet.fap.table import faps
+from puppet.fap.units import FAPU_DEFINITIONS
+
+reach = load_default_rig().fap_reach
+fapu = default_face().fapu
+
+def end(value):
+    return None if value in (float("inf"), float("-inf")) else round(float(value), 1)
+
+rows = [{"number": f.number, "name": f.name, "unit": f.unit, "direction": f.direction,
+         "bidirectional": f.bidirectional, "feature_points": list(f.feature_points), "description": f.description,
+         "reach": [end(x) for x in reach[f.number]] if f.number in reach else None} for f in faps()]
+units = {name: {"points": list(how[:2]), "size": fapu[name]} for name, how in FAPU_DEFINITIONS.items()}
+needed = {f: FDP_NEEDED_WHAT[f] for f in FDP_NEEDED}
+print(json.dumps({"help": helps, "options": options, "faps": rows, "units": units, "needed": needed}))
 """
 
 
-def on_files(files: Files, config) -> Files:
-    """Add the generated reference pages to the build (and keep what the code says for pages)."""
+def on_files(files, config):
+    """Ask the code once per build for what the device pages show (the reference pages are files
+    in the tree, written by ``generated_pages``)."""
     global _CODE
     _CODE = from_the_code()
-    files.append(File.generated(config, MAPPING_PAGE, content=mapping_reference(json.loads(SCHEMA.read_text("utf-8")))))
-    files.append(File.generated(config, COMMANDS_PAGE, content=command_reference(_CODE["help"])))
     return files
+
+
+def generated_pages(code: dict | None = None) -> dict[str, str]:
+    """{path under docs/guide: text} of every page made from the code (module docstring)."""
+    code = from_the_code() if code is None else code
+    return {MAPPING_PAGE: mapping_reference(json.loads(SCHEMA.read_text("utf-8"))),
+            COMMANDS_PAGE: command_reference(code["help"]),
+            FAPS_PAGE: fap_glossary(code["faps"], code["units"]),
+            FEATURE_POINTS_PAGE: feature_point_page(code["needed"])}
+
+
+def write_pages() -> list[Path]:
+    """Write the generated pages into docs/guide (``python docs/hooks.py``)."""
+    written = []
+    for name, text in generated_pages().items():
+        path = GUIDE / name
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(text, encoding="utf-8")
+        written.append(path)
+    return written
 
 
 def on_page_markdown(markdown: str, page, config, files) -> str:
@@ -135,8 +185,9 @@ def command_reference(helps: dict[str, str]) -> str:
     """The command reference page: the top-level help, then one section per subcommand."""
     commands = [c for c in helps if c]
     lines = ["# Command reference", "",
-             "Generated from the `puppet` command's own `--help` when this guide is built, so it always",
-             "matches the code. Every command also runs as `python -m puppet.cli COMMAND` from a checkout.",
+             f"Generated from the `puppet` command's own `--help` by `{REGENERATE}` ({HELP_PYTHON}"
+             f"{sys.version_info.major}.{sys.version_info.minor}, whose argparse wrote it; a test checks it",
+             "matches the code). Every command also runs as `python -m puppet.cli COMMAND` from a checkout.",
              "", " | ".join(f"[{c}](#puppet-{c})" for c in commands), "",
              "## puppet", "", "```text", helps[""].rstrip(), "```", ""]
     said = summaries(helps[""])
@@ -162,13 +213,93 @@ def summaries(top_help: str) -> dict[str, str]:
     return said
 
 
+# -- FAPs and feature points --------------------------------------------------------------------
+
+def fap_glossary(rows: list[dict], units: dict[str, dict]) -> str:
+    """The FAP glossary: each FAP's number, name, what it moves, unit, positive direction and reach
+    on the default face, from the code's FAP table and the default face's rig."""
+    lines = ["# FAP glossary", "",
+             f"Generated from the code's FAP table (`puppet.fap.table`) and the default face's rig by `{REGENERATE}`.",
+             "A FAP (MPEG-4 facial animation parameter) moves one feature point, or turns the head or an eye;",
+             "a mapping's `target` names it by name or number ([Mappings](../mappings.md)). Directions are the",
+             "face's own: *left* is the face's left (the viewer's right), *forward* toward the viewer.", "",
+             "Values are in the FAP's unit: a distance of the face's own divided by 1024, so one value moves",
+             "every face alike. On the default face, in its mesh units:", ""]
+    for name, unit in units.items():
+        a, b = unit["points"]
+        lines.append(f"- **{UNITS[name]}** (from feature point {a} to {b}): {unit['size']:.4g}")
+    lines += [f"- **{UNITS['AU']}**: the unit of the head's and eyes' turns", "",
+              "*Reach on the default face* is how far the FAP goes before a triangle of the default face would",
+              "fold; the face stops there at pose time (a file keeps its values). A FAP another face is rigged",
+              "for has that face's reach (`puppet rig` prints it). \"none\" is not limited.", "",
+              "| # | name | what it moves | unit | positive | reach on the default face |",
+              "|---|---|---|---|---|---|"]
+    for row in rows:
+        unit = UNITS[row["unit"]].split(",")[0] if row["unit"] else ""
+        sense = row["direction"] if row["direction"] != "na" else ""
+        if sense and not row["bidirectional"]:
+            sense += " (one way)"
+        points = f" (feature point {', '.join(row['feature_points'])})" if row["feature_points"] else ""
+        lines.append(f"| {row['number']} | `{row['name']}` | {_cell(_sentence(row['description']))}{points} | {unit} "
+                     f"| {sense} | {_reach(row['reach'], row['unit'])} |")
+    return "\n".join(lines) + "\n"
+
+
+def _reach(reach: list | None, unit: str | None) -> str:
+    if unit is None:
+        return ""
+    if reach is None:
+        return "none"
+    low, high = (("none" if end is None else f"{end:g}") for end in reach)
+    return f"{low} to {high}"
+
+
+def _in_group(fdp: str, prefix: str) -> bool:
+    """``prefix`` is a group ("8.") or one point ("2.1")."""
+    return fdp.startswith(prefix) if prefix.endswith(".") else fdp == prefix
+
+
+def feature_point_page(needed: dict[str, str]) -> str:
+    """The feature points ``puppet rig`` needs, grouped, each with what it is, and their picture."""
+    lines = ["# Feature points for puppet rig", "",
+             f"Generated from `puppet.face.landmarks.FDP_NEEDED` by `{REGENERATE}`.",
+             f"`puppet rig MESH --landmarks POINTS.json` needs these {len(needed)} MPEG-4 feature points, each the",
+             "index of a vertex of the mesh (`{\"2.1\": 152, \"3.7\": 263, ...}`). The lip and lid loops run through",
+             "them; every other feature point (brows, cheeks, jaw, ears, hairline, pupils) is placed from them as",
+             "it sits on the default face, so leave those out unless you know where they are. *Left* is the face's",
+             "own left: on a front view, the viewer's right. Give more points and they are used as given.", "",
+             "![The feature points rig needs, on the default face: the whole face, and the mouth magnified]"
+             "(../feature_points.png)", "",
+             "The picture is the default face (`python tools/figures/feature_point_picture.py` draws it). The inner lip",
+             "points of a closed mouth sit in pairs on the line where the lips meet (2.2 above 2.3, and so on).", ""]
+    done: set[str] = set()
+    for prefix, title in FDP_GROUPS:
+        group = sorted((f for f in needed if f not in done and _in_group(f, prefix)),
+                       key=lambda f: tuple(int(x) for x in f.split(".")))
+        if not group:
+            continue
+        done |= set(group)
+        lines += [f"## {title}", "", "| feature point | what it is |", "|---|---|"]
+        lines += [f"| {f} | {needed[f]} |" for f in group] + [""]
+    lines += ["## Other ways to give them", "",
+              "- **The 68 iBUG points**: a JSON list of 68 vertex indices in the iBUG order (dlib, face-alignment)",
+              "  gives them all. A file that holds that list under one key, as ICT-FaceKit's `vertex_indices.json`",
+              "  does (`idx_to_landmark_verts`), is read from that key.",
+              "- **Found**: without `--landmarks`, `puppet rig` finds them on renders of the mesh and writes them",
+              "  to `landmarks.json`; `puppet pick-landmarks MESH --start landmarks.json -o points.json` shows them",
+              "  on the mesh to move.",
+              "- A missing point is named, with what it is, in one line; two points on one place are named with",
+              "  what to move. See [Faces](../faces.md#landmarks-you-give)."]
+    return "\n".join(lines) + "\n"
+
+
 # -- the mapping schema ---------------------------------------------------------------------------
 
 def mapping_reference(schema: dict) -> str:
     """The mapping reference page: the top-level keys, then each ``$defs`` entry's keys."""
     defs = schema.get("$defs", {})
     lines = ["# Mapping file reference", "",
-             f"Generated from `mappings/schema.json` when this guide is built. {schema.get('description', '')}",
+             f"Generated from `mappings/schema.json` by `{REGENERATE}`. {schema.get('description', '')}",
              "", "Editors that read JSON Schema (VS Code with the YAML extension) check a mapping as you type",
              "when its first line is `# yaml-language-server: $schema=schema.json` (next to the schema)",
              "or names the schema's path. [Mappings](../mappings.md) explains how the parts work together.",
@@ -311,3 +442,8 @@ def _cell(text: str) -> str:
 def _sentence(text: str) -> str:
     text = text.strip()
     return text[:1].upper() + text[1:] + ("" if text.endswith(".") else ".")
+
+
+if __name__ == "__main__":
+    for page in write_pages():
+        print(page.relative_to(ROOT))

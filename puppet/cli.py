@@ -536,22 +536,23 @@ def _rig(args: argparse.Namespace) -> int:
     from puppet.face.folder import write_rigged_folder
     from puppet.face.load import load_face
     from puppet.face.rig import save_rig
-    from puppet.runtime.foldlimits import fold_limited
+    from puppet.runtime.foldlimits import FOLD_STEPS, fold_limited
 
     output, rig_file = _rig_output(args.output)
     start = time.perf_counter()
     found, marks = None, output.with_suffix(".landmarks.json") if rig_file else output / LANDMARKS_FILE
     if args.landmarks is None:
-        face, found = _found_landmarks(args.mesh, marks)
+        face, found = _found_landmarks(args.mesh, marks, 2 + len(FOLD_STEPS))
     else:
         face = load_face(args.mesh, landmarks=args.landmarks)  # the inputs checked before any step is said
-    steps = 2 + (found is not None)
-    _step("rig", steps - 1, steps, f"regions, control points and muscles on {len(face.vertices):,} vertices")
+    first = 1 + (found is not None)
+    steps = first + len(FOLD_STEPS)
+    _step("rig", first, steps, f"regions, control points and muscles on {len(face.vertices):,} vertices")
     rig = build_rig(face)
     seconds = time.perf_counter() - start
     start = time.perf_counter()
-    _step("rig", steps, steps, "fold limits: how far each FAP goes before a triangle folds (the longest step)")
-    rig = fold_limited(face, rig)
+    said = iter(range(first + 1, steps + 1))
+    rig = fold_limited(face, rig, step=lambda what: _step("rig", next(said), steps, what))
     limits = time.perf_counter() - start
     if rig_file:
         save_rig(rig, output)
@@ -571,10 +572,11 @@ def _rig(args: argparse.Namespace) -> int:
     return 0
 
 
-def _found_landmarks(mesh: str, out: Path):
+def _found_landmarks(mesh: str, out: Path, steps: int):
     """``puppet rig`` without ``--landmarks``: the mesh (checked before any step is said), its
     landmarks found on renders (``puppet.view.meshlandmarks``) and applied; the landmarks written
-    to ``out`` ({FDP id: vertex}, what ``--landmarks`` takes), for the user to correct."""
+    to ``out`` ({FDP id: vertex}, what ``--landmarks`` takes), for the user to correct; the first
+    of the command's ``steps``."""
     import json
 
     from puppet.face.meshfile import load_mesh
@@ -583,7 +585,7 @@ def _found_landmarks(mesh: str, out: Path):
 
     bare = load_mesh(mesh)
     detector_python(mesh)
-    _step("rig", 1, 3, "landmarks: the mesh rendered from 5 sides, MediaPipe's landmarks found and lifted onto it")
+    _step("rig", 1, steps, "landmarks: the mesh rendered from 5 sides, MediaPipe's landmarks found and lifted onto it")
     face, found = found_face(bare, mesh, step=lambda text: print(f"rig: {text}", file=sys.stderr, flush=True))
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(found.fdp, indent=1) + "\n", encoding="utf-8")

@@ -11,11 +11,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from puppet.bench.assets import shared_assets
+from puppet.cli import main
 from puppet.face.autorig import _loop_path_via, _spread_out, build_rig
-from puppet.face.landmarks import IBUG_FDP, LandmarkError, read_landmarks
+from puppet.face.landmarks import FDP_NEEDED, FDP_NEEDED_WHAT, IBUG_FDP, LandmarkError, read_landmarks
 from puppet.face.load import load_face
 from puppet.face.meshfile import write_bare_obj
 from puppet.face.rig import rig_to_dict
+from puppet.photo.build import MEDIAPIPE_FDP
 from puppet.runtime.runtime import Runtime
 from tools.figures.rig_faces import ict_inputs, mediapipe_inputs
 
@@ -114,6 +116,62 @@ def test_a_landmark_file_like_ict_facekits_gives_its_68_ibug_points_from_its_key
     path.write_text(json.dumps({"expressions": ["x"], "fitting": [1, 2]}))
     with pytest.raises(LandmarkError, match="unknown FDP id.*68 iBUG vertex indices, as a list or under one key"):
         read_landmarks(path, 500)
+
+
+def test_a_missing_needed_feature_point_is_named_with_what_it_is(default, tmp_path):
+    """Issue 38: a user's landmarks without the brows rig (those are placed); without a lip point
+    the one line names the file, the point and where it goes, and how many rig needs."""
+    mesh = write_bare_obj(tmp_path / "m.obj", default.vertices, default.triangles)
+    marks = {f: v for f, v in default.feature_vertices.items() if not f.startswith("4.") and f not in ("8.6", "3.2")}
+    (tmp_path / "points.json").write_text(json.dumps(marks))
+    with pytest.raises(LandmarkError) as err:
+        load_face(mesh, landmarks=tmp_path / "points.json")
+    text = str(err.value)
+    assert str(tmp_path / "points.json") in text and "2 needed feature points missing" in text, text
+    assert f"8.6 ({FDP_NEEDED_WHAT['8.6']})" in text and f"3.2 ({FDP_NEEDED_WHAT['3.2']})" in text, text
+    assert f"these {len(FDP_NEEDED)}" in text and "\n" not in text, text
+    assert set(FDP_NEEDED_WHAT) == set(FDP_NEEDED)
+
+
+def test_the_nose_tip_on_another_feature_point_names_both_and_what_to_do(default, tmp_path, capsys):
+    """Issue 38: the nose tip put on the nose bone's vertex was 'duplicate sites: 1 pairs, e.g.
+    indices 3 and 4'; now the feature points are named, and what to do with them."""
+    mesh = write_bare_obj(tmp_path / "m.obj", default.vertices, default.triangles)
+    marks = dict(default.feature_vertices) | {"9.3": int(default.feature_vertices["9.1"])}
+    (tmp_path / "points.json").write_text(json.dumps(marks))
+    assert main(["rig", str(mesh), "--landmarks", str(tmp_path / "points.json"), "-o", str(tmp_path / "me")]) != 0
+    line = capsys.readouterr().err.strip().splitlines()[-1]
+    assert "feature points 9.1 and 9.3 fall on the same place" in line and "pick-landmarks" in line, line
+
+
+def test_the_mediapipe_face_rigs_from_the_project_s_own_table_without_the_brows(tmp_path, capsys):
+    """Issue 38: MediaPipe's canonical mesh with landmarks written from ``MEDIAPIPE_FDP`` less the
+    brow points 4.x ended in ``LinAlgError: Singular matrix`` (two placed points on one vertex made
+    the feature warp's system singular); it rigs."""
+    mesh = shared_assets() / "mediapipe_face" / "mediapipe_canonical_face_model.obj"
+    if not mesh.is_file():
+        pytest.skip("the MediaPipe canonical face is not in ../shared")
+    marks = {fdp: index for index, fdp in MEDIAPIPE_FDP.items() if not fdp.startswith("4.")}
+    (tmp_path / "points.json").write_text(json.dumps(marks))
+    assert main(["rig", str(mesh), "--landmarks", str(tmp_path / "points.json"), "-o", str(tmp_path / "mp")]) == 0
+    assert "rigged" in capsys.readouterr().out
+    assert (tmp_path / "mp").is_dir()
+
+
+def test_a_flattened_face_is_refused_in_one_line_naming_the_empty_regions(default, tmp_path, capsys):
+    """A face pressed to a relief (a character drawn nearly flat) has no skin in front of its jaw
+    angles: its regions came out empty and the rig ended in a numpy traceback; now one line."""
+    skin = default.parts["skin"]
+    remap = np.full(len(default.vertices), -1)
+    remap[skin] = np.arange(len(skin))
+    triangles = remap[default.triangles]
+    flat = default.vertices[skin] * (1.0, 1.0, 0.05)
+    mesh = write_bare_obj(tmp_path / "flat.obj", flat, triangles[(triangles >= 0).all(axis=1)])
+    marks = {f: int(remap[v]) for f, v in default.feature_vertices.items() if remap[v] >= 0}
+    (tmp_path / "points.json").write_text(json.dumps(marks))
+    assert main(["rig", str(mesh), "--landmarks", str(tmp_path / "points.json"), "-o", str(tmp_path / "f")]) != 0
+    line = capsys.readouterr().err.strip().splitlines()[-1]
+    assert line.startswith("puppet rig: face 'flat': no skin for the forehead") and "flat face" in line, line
 
 
 def test_a_landmark_file_that_is_not_json_is_named(tmp_path):

@@ -75,7 +75,7 @@ def option_strings(parser: argparse.ArgumentParser) -> set[str]:
 def test_the_guide_builds_strictly(site):
     for page in ("getting-started", "devices/serial", "devices/hid", "devices/can", "devices/midi", "devices/osc",
                  "devices/simulated", "mappings", "takes", "faces", "arkit", "troubleshooting", "reference/mapping",
-                 "reference/commands"):
+                 "reference/commands", "reference/faps", "reference/feature-points"):
         assert (site / page / "index.html").is_file(), page
     assert (site / "live_cockpit.png").read_bytes() == (GUIDE / "live_cockpit.png").read_bytes()  # getting started shows it
     for sample in ("livelink_sample.csv", "send_vmc.py", "slider_box.ino"):
@@ -226,16 +226,74 @@ def test_the_cansend_lines_move_what_the_can_page_says():
         assert reading[name] == pytest.approx(value)
 
 
-def test_every_python_name_the_schema_cites_exists():
-    """The mapping reference (made from mappings/schema.json) names Python objects, e.g. where the
-    muscle names live; each must import."""
+def test_every_python_name_the_schema_and_the_guide_cite_exists():
+    """The mapping reference (made from mappings/schema.json) and the guide's pages name Python
+    objects, e.g. where the muscle names live (``puppet.face.muscles.MUSCLE_NAMES``, once cited as
+    ``puppet.muscles.MUSCLE_NAMES``); each must import."""
     import importlib
 
-    text = (ROOT / "mappings" / "schema.json").read_text("utf-8")
-    cited = set(re.findall(r"\b((?:puppet|devices)(?:\.[a-z_]+)+)\.([A-Z][A-Z_]+)\b", text))
-    assert cited
-    for module, name in cited:
-        assert hasattr(importlib.import_module(module), name), f"schema.json cites {module}.{name}"
+    sources = [ROOT / "mappings" / "schema.json", *sorted(GUIDE.rglob("*.md"))]
+    name = re.compile(r"\b((?:puppet|devices)(?:\.[a-z_]+)+)\.([A-Z][A-Z_]+)\b")
+    cited = {(m, n, path.name) for path in sources for m, n in name.findall(path.read_text("utf-8"))}
+    assert any(source == "schema.json" for *_, source in cited)
+    for module, name, source in cited:
+        assert hasattr(importlib.import_module(module), name), f"{source} cites {module}.{name}"
+
+
+def _hooks():
+    """docs/hooks.py as a module: the generator of the guide's pages made from the code."""
+    spec = importlib.util.spec_from_file_location("guide_hooks", ROOT / "docs" / "hooks.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_the_pages_made_from_the_code_are_committed_as_it_makes_them():
+    """reference/*.md are in the tree (the guide's links work unbuilt) and are what the code makes
+    today: after changing the CLI, the schema, the FAP table or the default rig, regenerate them."""
+    hooks = _hooks()
+    for name, text in hooks.generated_pages().items():
+        path = GUIDE / name
+        assert path.is_file(), f"docs/guide/{name} is missing: run `python docs/hooks.py` and commit it"
+        made_by = re.search(rf"{hooks.HELP_PYTHON}(\d+\.\d+)", path.read_text("utf-8"))
+        if made_by and made_by.group(1) != f"{sys.version_info.major}.{sys.version_info.minor}":
+            continue  # another Python's argparse words the help otherwise; the site tests check its contents
+        assert path.read_text("utf-8") == text, \
+            f"docs/guide/{name} is not what the code makes: run `python docs/hooks.py` and commit it"
+
+
+def test_the_fap_glossary_gives_every_fap_its_unit_and_the_default_face_s_reach():
+    from puppet.face.default import load_default_rig
+    from puppet.fap.table import faps
+
+    text = (GUIDE / "reference" / "faps.md").read_text("utf-8")
+    row = re.compile(r"^\| (\d+) \| `\w+` \| (.*) \|$", re.M)
+    rows = {int(m.group(1)): m.group(2).split(" | ") for m in row.finditer(text)}
+    assert sorted(rows) == list(range(1, 69))
+    reach = load_default_rig().fap_reach
+    for fap in faps():
+        what, unit, positive, shown = rows[fap.number]
+        assert fap.description.rstrip(".") in what and unit == (fap.unit or "").removesuffix("0")
+        if fap.unit is None:
+            continue
+        assert positive.startswith(fap.direction), (fap.name, positive)
+        if fap.number not in reach:
+            assert shown == "none", (fap.name, shown)
+        else:
+            ends = [float("-inf") if e == "none" and i == 0 else float("inf") if e == "none" else float(e)
+                    for i, e in enumerate(shown.split(" to "))]
+            assert ends == pytest.approx(list(reach[fap.number]), abs=0.051), (fap.name, shown)
+
+
+def test_the_feature_point_page_lists_what_rig_needs_with_its_picture():
+    from puppet.face.landmarks import FDP_NEEDED
+
+    text = (GUIDE / "reference" / "feature-points.md").read_text("utf-8")
+    listed = re.findall(r"^\| (\d+\.\d+) \| \w", text, re.M)
+    assert sorted(listed) == sorted(FDP_NEEDED) and len(listed) == len(set(listed))
+    assert f"these {len(FDP_NEEDED)} MPEG-4 feature points" in text
+    assert "(../feature_points.png)" in text and (GUIDE / "feature_points.png").is_file()
+    assert "reference/feature-points.md" in (GUIDE / "faces.md").read_text("utf-8")
 
 
 def test_the_version_is_the_same_in_pyproject_the_cli_and_the_changelog(capsys):

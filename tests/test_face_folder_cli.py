@@ -41,8 +41,8 @@ def rigged(tmp_path_factory):
 def test_puppet_rig_says_each_step_as_it_starts(rigged):
     """The minute a big mesh takes is not silent: each step is said on stderr as it begins."""
     steps = (rigged / "rig_stderr.txt").read_text().splitlines()
-    assert [line.split(":")[0] for line in steps] == ["rig 1/2", "rig 2/2"]
-    assert "vertices" in steps[0] and "fold limits" in steps[1]
+    assert [line.split(":")[0] for line in steps] == [f"rig {k}/4" for k in range(1, 5)]
+    assert "vertices" in steps[0] and "crease" in steps[1] and "fold limits" in steps[2] and "guard" in steps[3]
 
 
 def test_the_folder_holds_mesh_feature_points_and_rig_and_loads_with_its_own_rig(rigged):

@@ -166,3 +166,17 @@ def test_the_vertex_error_is_said_in_millimetres_on_the_default_face_and_in_the_
     assert error_words(0.0028, 2.86, DEFAULT_UNIT_MM) == "largest vertex error 0.28 mm (0.098% of the face's 286 mm size)"
     assert error_words(0.0028, 2.86) == ("largest vertex error 0.0028 mesh units (the face file's own unit; "
                                          "0.098% of the face's 2.86-unit size)")
+
+
+def test_puppet_export_says_each_step_only_after_its_inputs_are_read(take, tmp_path, capsys):
+    """Issue 38: export's half minute on a long take is not silent: three steps on stderr, each as
+    it starts; a take that cannot be read is one line and no step."""
+    from puppet.cli import main
+
+    assert main(["export", str(take), "-o", str(tmp_path / "t.glb")]) == 0
+    captured = capsys.readouterr()
+    assert [line.split(":")[0] for line in captured.err.splitlines()] == [f"export {k}/3" for k in (1, 2, 3)]
+    assert "t.glb: 10 frames" in captured.out
+    assert main(["export", str(tmp_path / "none.fap"), "-o", str(tmp_path / "u.glb")]) != 0
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) == 1 and "none.fap" in lines[0], lines

@@ -86,7 +86,7 @@ def test_a_face_turned_in_its_file_is_found_the_same(found, turn, tmp_path):
 
 
 def refusals(err: str) -> list[str]:
-    """A command's refusal lines (its progress lines, "rig 1/3: ...", come before them)."""
+    """A command's refusal lines (its progress lines, "rig 1/5: ...", come before them)."""
     return [line for line in err.splitlines() if line.startswith("puppet ")]
 
 
@@ -115,7 +115,9 @@ def test_without_the_photo_environment_rig_says_how_to_get_it_in_one_line(defaul
 def test_rig_without_landmarks_makes_a_face_folder_that_loads_and_poses(default_obj, tmp_path, capsys):
     folder = tmp_path / "me"
     assert cli.main(["rig", str(default_obj), "-o", str(folder)]) == 0
-    out = capsys.readouterr().out
+    out, err = capsys.readouterr()
+    assert [line.split(":")[0] for line in err.splitlines() if line.startswith("rig ")
+            and line[4].isdigit()] == [f"rig {k}/5" for k in range(1, 6)]
     assert "landmarks: found 42 feature points in 5 of 5 views" in out and "pick-landmarks" in out
     marks = read_landmarks(folder / "landmarks.json", len(default_face().vertices))
     face = load_face(folder)

@@ -132,6 +132,11 @@ def build_rig(face, *, grid: bool = True, calibrated: bool = True) -> Rig:
     return rig
 
 
+def _depth(fp: dict[str, np.ndarray]) -> float:
+    """How far the nose tip stands in front of the jaw angles, in spans of the outer eye corners."""
+    return float((fp["9.3"][2] - (fp["2.13"][2] + fp["2.14"][2]) / 2) / (fp["3.7"][0] - fp["3.12"][0]))
+
+
 def _default_follow() -> dict[tuple[int, int], tuple[float, float]]:
     """The shipped default rig's follow ranges of the inner and outer lip FAPs
     (``puppet.runtime.foldlimits``), in FAPU: the inner and outer lip points lie a few millimetres apart
@@ -214,6 +219,7 @@ class _Builder:
         bag = self._mouth_bag(skin)
         self.bag = skin[bag]
         label[bag] = np.where(self._bag_upper(self.bag), "upper_mouth", "lower_mouth")
+        self._check_regions(label)
         self.region_of[skin] = label
         for part, region in (("eye_l", "eyeball_l"), ("eye_r", "eyeball_r"), ("teeth_upper", "upper_teeth"),
                              ("teeth_lower", "lower_teeth"), ("tongue", "tongue")):
@@ -226,6 +232,19 @@ class _Builder:
             a = self.face.parts["attached"]
             gap, nearest = cKDTree(v[skin]).query(v[a])
             self.region_of[a] = np.where(self._far_pieces(a, gap), "rest", label[nearest])
+
+    def _check_regions(self, label: np.ndarray) -> None:
+        """A RigError naming the DFFD regions that got no skin: a face's regions are the skin in
+        front of its jaw angles (2.13, 2.14), so a face flattened to a relief or a plane has none,
+        and its building would end in a traceback."""
+        empty = [r for r in DFFD_REGIONS if not np.any(label == r)]
+        if empty:
+            raise RigError(f"face {self.face.name!r}: no skin for the {', '.join(empty)} region"
+                           f"{'s' if len(empty) > 1 else ''}: a face's regions are the skin in front of its jaw "
+                           f"angles (feature points 2.13, 2.14), and its nose tip stands {_depth(self.fp):.2f} "
+                           f"outer-eye-corner spans in front of them (the default face's: "
+                           f"{_depth(default_face().feature_points):.2f}); a flat face cannot be rigged: give it "
+                           "depth, or give 2.13 and 2.14 at the jaw's back corners")
 
     def _far_pieces(self, members: np.ndarray, gap: np.ndarray) -> np.ndarray:
         """Per vertex of ``members``, whether its connected piece reaches farther than

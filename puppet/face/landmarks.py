@@ -87,6 +87,26 @@ FDP_CONTOURS = {
 # The default face's oval passes these (in front of 2.1, which sits under the chin).
 FACE_OVAL = ["2.11", "2.13", "11.3", "11.1", "11.2", "2.14", "2.12"]
 FDP_NEEDED = sorted({f for loop in FDP_CONTOURS.values() for f in loop} | {"2.1", "9.3", "9.15"})
+# What each needed point is (MPEG-4 Annex C; "left" is the face's own left, on a photo's right).
+FDP_NEEDED_WHAT = {
+    "2.1": "bottom of the chin", "9.3": "nose tip", "9.15": "base of the nose, above the upper lip",
+    "2.2": "inner lip line, top, middle", "2.3": "inner lip line, bottom, middle",
+    "2.4": "inner lip line, left corner", "2.5": "inner lip line, right corner",
+    "2.6": "inner lip line, top, halfway to the left corner", "2.7": "inner lip line, top, halfway to the right corner",
+    "2.8": "inner lip line, bottom, halfway to the left corner",
+    "2.9": "inner lip line, bottom, halfway to the right corner",
+    "8.1": "upper lip's outer edge, middle", "8.2": "lower lip's outer edge, middle",
+    "8.3": "left mouth corner (outer)", "8.4": "right mouth corner (outer)",
+    "8.5": "upper lip's outer edge, between the left peak and corner",
+    "8.6": "upper lip's outer edge, between the right peak and corner",
+    "8.7": "lower lip's outer edge, halfway to the left corner",
+    "8.8": "lower lip's outer edge, halfway to the right corner",
+    "8.9": "upper lip's right peak (Cupid's bow)", "8.10": "upper lip's left peak (Cupid's bow)",
+    "3.1": "left upper lid, middle of its edge", "3.2": "right upper lid, middle of its edge",
+    "3.3": "left lower lid, middle of its edge", "3.4": "right lower lid, middle of its edge",
+    "3.7": "left eye, outer corner", "3.8": "right eye, inner corner",
+    "3.11": "left eye, inner corner", "3.12": "right eye, outer corner",
+}
 KEPT_PARTS = {"eye_l", "eye_r", "teeth_upper", "teeth_lower", "tongue", "attached"}  # a file's named pieces
 PUPILS = ("3.5", "3.6")  # coordinates when the face has no eyeball to put them on
 EYES = {"eye_l": ("3.7", "3.11", "3.5"), "eye_r": ("3.12", "3.8", "3.6")}
@@ -192,20 +212,32 @@ def _halfway(skin: Skin, waypoints: list[int]) -> int:
     return int(path[np.argmin(np.abs(run - run[-1] / 2))])
 
 
+def _check_needed(landmarks: dict[str, int], name: str) -> None:
+    """A LandmarkError naming each needed feature point (``FDP_NEEDED``) missing from ``landmarks``
+    and what it is: the others are placed from these, and the lip and lid loops run through them."""
+    missing = [f for f in FDP_NEEDED if f not in landmarks]
+    if missing:
+        listed = "; ".join(f"{f} ({FDP_NEEDED_WHAT[f]})" for f in missing)
+        raise LandmarkError(f"{name}: {_plural(len(missing), 'needed feature point')} missing: {listed}; "
+                            f"rig needs these {len(FDP_NEEDED)} (the lip and lid loops, chin, nose tip and base)")
+
+
+def _plural(n: int, noun: str) -> str:
+    return f"{n} {noun}{'' if n == 1 else 's'}"
+
+
 # -- the face -------------------------------------------------------------------------------------
 
 def apply_landmarks(face, landmarks) -> object:
     """A copy of ``face`` in the face frame with parts, contours, pivots and all feature points
     (module docstring), ready for ``autorig.build_rig``."""
-    landmarks = read_landmarks(landmarks, len(face.vertices))
+    source, landmarks = landmarks, read_landmarks(landmarks, len(face.vertices))
     seams = _seams(face.vertices, _pieces(face))
     skin = _skin_graph(face.vertices, face.triangles, _landmark_component(face, landmarks, seams), seams)
     if isinstance(landmarks, list):
         given, waypoints = ibug_to_fdp(landmarks, skin)
     else:
-        missing = [f for f in FDP_NEEDED if f not in landmarks]
-        if missing:
-            raise LandmarkError(f"landmarks: FDP(s) {missing} are needed (the lip and lid loops, chin, nose)")
+        _check_needed(landmarks, str(source) if isinstance(source, (str, os.PathLike)) else "landmarks")
         given = dict(landmarks)
         waypoints = {name: [given[f] for f in loop] for name, loop in FDP_CONTOURS.items()}
     reference = default_face()

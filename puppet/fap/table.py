@@ -51,6 +51,7 @@ class Fap:
     quant_step: int
     low: float | None  # Greta editor's slider range (not a limit), None where the table gives none
     high: float | None
+    description: str = ""  # what it moves, as the table says
 
     @property
     def axis(self) -> np.ndarray | None:
@@ -79,6 +80,7 @@ def faps() -> tuple[Fap, ...]:
             quant_step=int(code["quant_step_ref_encoder"]),
             low=float(code["greta_editor_min"]) if code["greta_editor_min"] else None,
             high=float(code["greta_editor_max"]) if code["greta_editor_max"] else None,
+            description=row["description"],
         ))
     if [f.number for f in out] != list(range(1, N_FAPS + 1)):
         raise RuntimeError("fap_table.csv must list FAPs 1..68 in order")

@@ -56,6 +56,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+from collections.abc import Callable
 
 import numpy as np
 
@@ -194,7 +195,14 @@ def fold_safe(runtime) -> Rig:
     return rig
 
 
-def fold_limited(face, rig: Rig, search: type[Bisection] = FoldSearch) -> Rig:
+FOLD_STEPS = ("smoothing the skin where the expressions and visemes crease",
+              "fold limits: how far each FAP goes before a triangle folds (the longest step)",
+              "the triangles the expressions and visemes still fold, to guard")
+"""The three parts of ``fold_limited``, in order, as ``step`` hears them (``puppet rig``'s progress)."""
+
+
+def fold_limited(face, rig: Rig, search: type[Bisection] = FoldSearch,
+                 step: Callable[[str], None] | None = None) -> Rig:
     """A copy of a new face's ``rig`` with its ``fap_follow`` and ``fap_reach`` found on ``face``
     (``fold_limits``): what ``puppet rig`` and ``puppet face-from-photo`` give a face, whose
     motions are the default face's carried over (their lid margins faded already). The upper lids'
@@ -205,15 +213,20 @@ def fold_limited(face, rig: Rig, search: type[Bisection] = FoldSearch) -> Rig:
     fold together) are the rig's ``guarded``, which the runtime's fold guard keeps from folding.
     Before the limits are searched, the skin is smoothed where the poses crease
     (``puppet.runtime.creasesmoothing``; the rig's ``smoothed``), so the limits hold for the face as
-    it moves. ``search``: as for ``fold_limits``."""
+    it moves. ``search``: as for ``fold_limits``; ``step(what)`` hears each of ``FOLD_STEPS`` as it
+    starts (on ICT here: 6, 15 and 2 seconds)."""
+    step = step or (lambda what: None)
     out = copy.copy(rig)
     none = np.zeros(0, dtype=np.int64)
     out.fap_follow, out.fap_reach, out.guarded, out.smoothed = {}, {}, none, none
     reference = Runtime(default_face(), load_default_rig(), guard=False)
+    step(FOLD_STEPS[0])
     runtime = crease_smoothed(Runtime(face, out, guard=False), reference)
     out.smoothed = runtime.rig.smoothed
+    step(FOLD_STEPS[1])
     out.fap_follow, reach = fold_limits(runtime, search)
     out.fap_reach = {n: (low, np.inf) if n in GUARDED else (low, high) for n, (low, high) in reach.items()}
+    step(FOLD_STEPS[2])
     out.guarded = folded_vertices(runtime.with_limits(out.fap_follow, out.fap_reach))
     return out
 
