@@ -26,13 +26,14 @@ screenshots need no display.
 
 from __future__ import annotations
 
-import time
 from collections import deque
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+
+from puppet.view.imguilayer import ImguiLayer
 
 FAILURE_RGBA = (1.0, 0.3, 0.3, 1.0)
 """The colour of a notice that says something failed (a calibration that left channels as they were)."""
@@ -62,27 +63,14 @@ class DeviceLine:
         return 0.0 if self.level_db is None else min(1.0, max(0.0, (self.level_db + 60.0) / 60.0))
 
 
-class Cockpit:
+class Cockpit(ImguiLayer):
     """The overlay on one window (module docstring); ``draw`` once a frame, after the face."""
 
     def __init__(self, window: Any) -> None:
-        from imgui_bundle import imgui
-        from moderngl_window.integrations.imgui_bundle import ModernglWindowRenderer
-
-        self.imgui = imgui
-        self.context = imgui.create_context()
-        imgui.get_io().set_ini_filename("")  # no imgui.ini written beside the user's takes
-        self.renderer = ModernglWindowRenderer(window)
-        self.window = window
-        self.visible = True
+        super().__init__(window)
         self.monitor = False
         self.fps: deque[float] = deque(maxlen=HISTORY)
         self.latency: deque[float] = deque(maxlen=HISTORY)
-        self._last = time.perf_counter()
-
-    def toggle(self) -> None:
-        """H: show or hide the whole overlay."""
-        self.visible = not self.visible
 
     def tick(self, fps: float, latency_ms: float | None) -> None:
         """Every frame, shown or hidden: the graphs' history (so they are whole when shown again)."""
@@ -100,13 +88,7 @@ class Cockpit:
         notice says a failure (drawn red)."""
         if not self.visible:
             return
-        imgui = self.imgui
-        imgui.set_current_context(self.context)
-        now = time.perf_counter()
-        io = imgui.get_io()
-        io.delta_time = max(now - self._last, 1e-4)
-        io.display_size = self.window.size
-        self._last = now
+        imgui = self.begin()
         imgui.new_frame()
         self._status(fps, latency_ms, list(devices), recording, notice, layer, failed)
         self._triggers(list(triggers))
@@ -114,10 +96,6 @@ class Cockpit:
             self._monitor(list(channels))
         imgui.render()
         self.renderer.render(imgui.get_draw_data())
-
-    def release(self) -> None:
-        self.renderer.shutdown()
-        self.imgui.destroy_context(self.context)
 
     # -- panels --------------------------------------------------------------------------------
 

@@ -8,8 +8,7 @@ Dear ImGui over the face as the live window's cockpit is (``puppet.view.overlay`
 
 from __future__ import annotations
 
-import time
-from typing import Any
+from puppet.view.imguilayer import ImguiLayer
 
 
 def clock_text(seconds: float) -> str:
@@ -26,36 +25,14 @@ def play_status(frame: int, total: int | None, fps: float, paused: bool) -> str:
     return "   ".join(parts)
 
 
-class PlayBar:
+class PlayBar(ImguiLayer):
     """The status line on one window; ``draw`` after the face, before the buffer swap."""
-
-    def __init__(self, window: Any) -> None:
-        from imgui_bundle import imgui
-        from moderngl_window.integrations.imgui_bundle import ModernglWindowRenderer
-
-        self.imgui = imgui
-        self.context = imgui.create_context()
-        imgui.get_io().set_ini_filename("")  # no imgui.ini written beside the user's takes
-        self.renderer = ModernglWindowRenderer(window)
-        self.window = window
-        self.visible = True
-        self._last = time.perf_counter()
-
-    def toggle(self) -> None:
-        """H: show or hide the line."""
-        self.visible = not self.visible
 
     def draw(self, text: str) -> None:
         """The line over the current framebuffer (nothing while hidden)."""
         if not self.visible:
             return
-        imgui = self.imgui
-        imgui.set_current_context(self.context)
-        now = time.perf_counter()
-        io = imgui.get_io()
-        io.delta_time = max(now - self._last, 1e-4)
-        io.display_size = self.window.size
-        self._last = now
+        imgui = self.begin()
         for _ in range(2 if imgui.get_frame_count() == 0 else 1):  # ImGui measures a new window unseen
             imgui.new_frame()
             imgui.set_next_window_pos((8, self.window.size[1] - 8), imgui.Cond_.always, (0.0, 1.0))
@@ -67,7 +44,3 @@ class PlayBar:
             imgui.end()
             imgui.render()
         self.renderer.render(imgui.get_draw_data())
-
-    def release(self) -> None:
-        self.renderer.shutdown()
-        self.imgui.destroy_context(self.context)
