@@ -70,7 +70,7 @@ import statistics
 import threading
 import time
 import warnings
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -287,18 +287,8 @@ class LiveSession:
         """One Sample or event: into the take (its log and its clock) while recording. A write
         that fails (disk full, the folder gone) ends the take, marked incomplete, and the live
         face goes on: ``record_error`` says what happened."""
-        if self._clock is not None:
-            try:
-                if isinstance(entry, Sample):
-                    self._recorder.sample(entry)
-                else:
-                    self._recorder.event(entry)
-                self._clock.apply(entry)
-                return
-            except OSError as exc:
-                self._end_take(str(exc.strerror or exc))
-            except Exception as exc:  # noqa: BLE001 -- any failed write ends the take, not the face
-                self._end_take(f"{type(exc).__name__}: {exc}")
+        if self._into_take(lambda: self._take_entry(entry)):
+            return
         if isinstance(entry, Sample):
             self.mapping.feed(entry)
         elif entry.kind == "reset":
@@ -314,17 +304,35 @@ class LiveSession:
         each channel's newest reading per frame of the take (``TakeClock.apply_newest``), or
         per loop frame when not recording (``Mapping.feed_newest``). A failed write ends the
         take, as in ``_apply``."""
-        if self._clock is not None:
-            try:
-                self._recorder.event(LogEvent(samples[0].t_ns, "newest", {"count": len(samples)}))
-                self._recorder.samples(samples)
-                self._clock.apply_newest(samples)
-                return
-            except OSError as exc:
-                self._end_take(str(exc.strerror or exc))
-            except Exception as exc:  # noqa: BLE001 -- any failed write ends the take, not the face
-                self._end_take(f"{type(exc).__name__}: {exc}")
-        self.mapping.feed_newest(samples)
+        if not self._into_take(lambda: self._take_newest(samples)):
+            self.mapping.feed_newest(samples)
+
+    def _into_take(self, write: Callable[[], None]) -> bool:
+        """Run ``write`` (into the take's log and clock, which feeds the mapping) while recording:
+        True when it did. A write that fails ends the take, marked incomplete, and gives False:
+        the caller feeds the mapping itself, and the live face goes on."""
+        if self._clock is None:
+            return False
+        try:
+            write()
+            return True
+        except OSError as exc:
+            self._end_take(str(exc.strerror or exc))
+        except Exception as exc:  # noqa: BLE001 -- any failed write ends the take, not the face
+            self._end_take(f"{type(exc).__name__}: {exc}")
+        return False
+
+    def _take_entry(self, entry: Sample | LogEvent) -> None:
+        if isinstance(entry, Sample):
+            self._recorder.sample(entry)
+        else:
+            self._recorder.event(entry)
+        self._clock.apply(entry)
+
+    def _take_newest(self, samples: list[Sample]) -> None:
+        self._recorder.event(LogEvent(samples[0].t_ns, "newest", {"count": len(samples)}))
+        self._recorder.samples(samples)
+        self._clock.apply_newest(samples)
 
     def _end_take(self, why: str) -> None:
         """End the take now, marked incomplete with ``why`` (``record_error``)."""
