@@ -27,7 +27,7 @@ import numpy as np
 
 from puppet.bench.browser import HeadlessChromium, find_browser
 from puppet.bench.pipeline import live_box
-from puppet.live.session import measure_latency
+from puppet.live.session import measure_latency, ms_stats
 from puppet.runtime.runtime import Runtime
 from puppet.show.server import ShowServer
 from puppet.show.stage import LiveStage
@@ -39,14 +39,6 @@ from puppet.view.window import HeldTable
 
 FEED_SIZE = (720, 720)
 FLOOD = ['{"type": "status"}', '{"type": "fly"}', "not json", '{"type": "set", "channels": {"smile": 0.5}}']
-
-
-def _median_p99(values: list[float]) -> dict:
-    if not values:
-        return {"median": float("nan"), "p99": float("nan"), "n": 0}
-    ordered = sorted(values)
-    return {"median": statistics.median(ordered), "p99": ordered[min(len(ordered) - 1, int(0.99 * len(ordered)))],
-            "n": len(ordered)}
 
 
 def show(runtime: Runtime, seconds: float = 10.0) -> dict:
@@ -85,7 +77,7 @@ def feed(runtime: Runtime, seconds: float = 10.0) -> dict:
             time.sleep(max(0.0, start + k / 30.0 - time.monotonic()))
         feed_bytes = server.counts["feed_bytes"] - sent
         delays = list(server.delays_ms)
-    return {"frames": k, "seconds": elapsed, "delay_ms": _median_p99(delays), "drawn": len(delays),
+    return {"frames": k, "seconds": elapsed, "delay_ms": ms_stats([round(d * 1e6) for d in delays]), "drawn": len(delays),
             "feed_kb_s": feed_bytes / elapsed / 1000, "encode_ms": encode_ms, **pictures,
             "vertices": len(face.vertices), "size": f"{FEED_SIZE[0]}x{FEED_SIZE[1]}"}
 

@@ -437,7 +437,7 @@ def close_each(things: Iterable) -> None:
 
 # -- latency ----------------------------------------------------------------------------------
 
-def _ms_stats(values_ns: list[int]) -> dict:
+def ms_stats(values_ns: list[int]) -> dict:
     """Median and 99th percentile, in milliseconds (NaN when nothing was measured)."""
     if not values_ns:
         return {"median": float("nan"), "p99": float("nan")}
@@ -491,8 +491,8 @@ def measure_latency(session: LiveSession, renderer, seconds: float = 3.0, output
             mesh.extend(ready - t for t in f.sample_ns)
             work.append(ready - f.t_ns)
     elapsed = (time.monotonic_ns() - start) / 1e9
-    return {"sample_to_drawn_ms": _ms_stats(drawn), "sample_to_mesh_ms": _ms_stats(mesh),
-            "frame_work_ms": _ms_stats(work), "draw_ms": _ms_stats(draw), "fps": frames / elapsed if elapsed else 0.0,
+    return {"sample_to_drawn_ms": ms_stats(drawn), "sample_to_mesh_ms": ms_stats(mesh),
+            "frame_work_ms": ms_stats(work), "draw_ms": ms_stats(draw), "fps": frames / elapsed if elapsed else 0.0,
             "frames": frames, "samples": len(drawn), "samples_before": before,
             "gl_renderer": str(renderer.ctx.info.get("GL_RENDERER", "")),
             "normals": "draw" if renderer.gpu_normals else "cpu",
