@@ -9,7 +9,16 @@ area: *teeth* where the teeth are the surface seen (the two renders differ) and 
 without antialiasing (``EXACT``): each pixel shows the surface at its centre, so a lip pixel
 beside a tooth is not counted as one (FXAA blends neighbours, and on a closed mouth's slit of
 one or two pixels it turned lip edges into "teeth"). A closed mouth has an almost empty area and
-shows neither. ``python -m puppet.view.mouthcheck`` prints the figures for the default face.
+shows neither.
+
+The teeth a viewer sees first are the upper central incisors, in the middle of the opening; side
+teeth toward the corners alone read as a gap-toothed mouth. So the area is also split into its
+middle third (by the columns between its leftmost and rightmost pixel) and the sides, and the upper
+teeth are told from the lower ones by a third render without the upper teeth: ``MouthPixels``
+gives the teeth fraction of each, and of the upper teeth in the middle third. ``mouth_pixels``
+poses the face by FAP ``open_jaw`` or by any ``Runtime.deform_faps`` pose (an expression, a
+viseme); ``posed_mouth_pixels`` classifies given vertices, such as the face plus an artist's
+shape. ``python -m puppet.view.mouthcheck`` prints the figures for the default face.
 """
 
 from __future__ import annotations
@@ -35,11 +44,15 @@ EXACT = {"samples": 0, "antialias": "none"}
 
 @dataclass(frozen=True)
 class MouthPixels:
-    """Pixel counts inside the projected inner lip line, and the fractions of that area."""
+    """Pixel counts inside the projected inner lip line, and the fractions of that area: all of it,
+    its middle third (``middle``: the columns of the middle third of its width) and the sides."""
 
     area: int
     dark: int
     teeth: int
+    middle: int = 0
+    middle_teeth: int = 0
+    middle_upper_teeth: int = 0
 
     @property
     def dark_fraction(self) -> float:
@@ -49,32 +62,80 @@ class MouthPixels:
     def teeth_fraction(self) -> float:
         return self.teeth / self.area if self.area else 0.0
 
+    @property
+    def middle_teeth_fraction(self) -> float:
+        """Teeth (upper and lower) over the middle third's area."""
+        return self.middle_teeth / self.middle if self.middle else 0.0
 
-def mouth_pixels(face, runtime, open_jaw: float = 400.0, *, view: str = "front",
+    @property
+    def middle_upper_teeth_fraction(self) -> float:
+        """Upper teeth over the middle third's area: the central incisors, seen or not."""
+        return self.middle_upper_teeth / self.middle if self.middle else 0.0
+
+    @property
+    def side_teeth_fraction(self) -> float:
+        """Teeth over the area outside the middle third."""
+        sides = self.area - self.middle
+        return (self.teeth - self.middle_teeth) / sides if sides else 0.0
+
+
+def mouth_pixels(face, runtime, open_jaw: float = 400.0, *, pose: dict | None = None, view: str = "front",
                  size: int = 640) -> MouthPixels:
     """Classify the pixels inside the inner lip line of ``face`` posed by ``runtime`` with
-    FAP open_jaw = ``open_jaw`` (MNS units), rendered at ``size`` x ``size`` from ``view``
-    (framed on the rest face, as ``puppet.view.renderer.render_face`` does)."""
-    fap = {"open_jaw": open_jaw}
-    vertices = runtime.deform_faps(fap)
-    normals = runtime.normals(vertices, runtime.fap_controls(fap)[1])
-    teeth = np.zeros(len(face.vertices), dtype=bool)
-    for part in TEETH_PARTS:
-        teeth[face.parts.get(part, [])] = True
-    without = face.triangles[~teeth[face.triangles].all(axis=1)]
+    FAP open_jaw = ``open_jaw`` (MNS units), or with ``pose`` (keyword arguments of
+    ``Runtime.deform_faps``, such as ``{"expression": (4, 63, 0, 0)}``) when given, rendered at
+    ``size`` x ``size`` from ``view`` (framed on the rest face, as ``puppet.view.renderer.render_face``
+    does)."""
+    pose = {"fap": {"open_jaw": open_jaw}} if pose is None else pose
+    vertices = runtime.deform_faps(**pose)
+    rigid = runtime.fap_controls(**{k: v for k, v in pose.items() if k in ("fap", "viseme", "expression")})[1]
+    return posed_mouth_pixels(face, vertices, runtime.normals(vertices, rigid), view=view, size=size)
+
+
+def posed_mouth_pixels(face, vertices: np.ndarray, normals: np.ndarray, *, view: str = "front",
+                       size: int = 640) -> MouthPixels:
+    """``mouth_pixels`` of ``face`` with these posed vertices and normals (module docstring)."""
     with Renderer.for_face(face, width=size, height=size, detail=False, **EXACT) as r:
         r.aim(face.vertices, view=view)
         image = r.render(vertices, normals)
         polygon = r.project(vertices[face.contours["mouth_opening"]])
-    with Renderer(without, len(face.vertices), face.colors, width=size, height=size, **EXACT) as r:
-        r.aim(face.vertices, view=view)
-        bare = r.render(vertices, normals)
+    bare = _render_without(face, TEETH_PARTS, vertices, normals, view, size)
+    no_upper = _render_without(face, ("teeth_upper",), vertices, normals, view, size)
     inside = polygon_mask(polygon, size, size)
-    luma = luminance(image)
-    seen_teeth = np.abs(image.astype(int) - bare.astype(int)).max(axis=2) > 8
-    is_teeth = inside & seen_teeth & (luma >= TOOTH_LUMA)
-    is_dark = inside & ~(seen_teeth & (luma >= TOOTH_LUMA)) & (luma < DARK_LUMA)
-    return MouthPixels(int(inside.sum()), int(is_dark.sum()), int(is_teeth.sum()))
+    bright = luminance(image) >= TOOTH_LUMA
+    is_teeth = inside & _differs(image, bare) & bright
+    is_upper = is_teeth & _differs(image, no_upper)
+    is_dark = inside & ~is_teeth & (luminance(image) < DARK_LUMA)
+    middle = inside & middle_third(inside)
+    return MouthPixels(int(inside.sum()), int(is_dark.sum()), int(is_teeth.sum()), int(middle.sum()),
+                       int((is_teeth & middle).sum()), int((is_upper & middle).sum()))
+
+
+def _render_without(face, parts: tuple[str, ...], vertices: np.ndarray, normals: np.ndarray, view: str,
+                    size: int) -> np.ndarray:
+    """The posed face rendered (``EXACT``) without the triangles all of whose vertices are in ``parts``."""
+    drop = np.zeros(len(face.vertices), dtype=bool)
+    for part in parts:
+        drop[face.parts.get(part, [])] = True
+    kept = face.triangles[~drop[face.triangles].all(axis=1)]
+    with Renderer(kept, len(face.vertices), face.colors, width=size, height=size, **EXACT) as r:
+        r.aim(face.vertices, view=view)
+        return r.render(vertices, normals)
+
+
+def _differs(image: np.ndarray, other: np.ndarray) -> np.ndarray:
+    """Pixels where two renders of the same pose differ: a part left out of ``other`` is seen there."""
+    return np.abs(image.astype(int) - other.astype(int)).max(axis=2) > 8
+
+
+def middle_third(mask: np.ndarray) -> np.ndarray:
+    """(H, W) bool: the columns of the middle third of the width ``mask`` spans (all False if empty)."""
+    columns = np.flatnonzero(mask.any(axis=0))
+    out = np.zeros_like(mask, dtype=bool)
+    if len(columns):
+        first, width = columns[0], columns[-1] + 1 - columns[0]
+        out[:, int(round(first + width / 3)):int(round(first + 2 * width / 3))] = True
+    return out
 
 
 def polygon_mask(points: np.ndarray, width: int, height: int) -> np.ndarray:
@@ -90,15 +151,18 @@ def luminance(image: np.ndarray) -> np.ndarray:
 
 
 def main() -> None:
-    """Print the mouth figures of the default face at open_jaw 0 and 400."""
+    """Print the mouth figures of the default face at open_jaw 0 and 400 and in the six expressions."""
     import puppet
 
     face = puppet.load_face()
     runtime = puppet.Runtime(face)
-    for open_jaw in (0.0, 400.0):
-        m = mouth_pixels(face, runtime, open_jaw)
-        print(f"open_jaw {open_jaw:5.0f}: area {m.area:5d} px, dark {m.dark_fraction:6.1%}, "
-              f"teeth {m.teeth_fraction:6.1%}")
+    poses = {f"open_jaw {v:.0f}": {"fap": {"open_jaw": v}} for v in (0.0, 400.0)}
+    poses |= {f"expression {k}": {"expression": (k, 63, 0, 0)} for k in range(1, 7)}
+    for name, pose in poses.items():
+        m = mouth_pixels(face, runtime, pose=pose)
+        print(f"{name:14s}: area {m.area:5d} px, dark {m.dark_fraction:6.1%}, teeth {m.teeth_fraction:6.1%} "
+              f"(middle third {m.middle_teeth_fraction:6.1%}, upper {m.middle_upper_teeth_fraction:6.1%}; "
+              f"sides {m.side_teeth_fraction:6.1%})")
 
 
 if __name__ == "__main__":
