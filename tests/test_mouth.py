@@ -8,7 +8,7 @@ import pytest
 
 import puppet
 from puppet.face.autorig import _loop_path_via, build_rig
-from puppet.view.mouthcheck import mouth_pixels
+from puppet.view.mouthcheck import MouthPixels, middle_third, mouth_pixels
 
 JAW_OPENINGS = np.arange(0.0, 1081.0, 120.0)
 
@@ -32,6 +32,17 @@ def test_open_mouth_is_mostly_dark_with_teeth_showing(open_mouth):
     assert open_mouth.area > 1000
     assert open_mouth.dark_fraction >= 0.25
     assert open_mouth.teeth_fraction >= 0.08
+
+
+def test_middle_third_splits_the_width_the_mask_spans():
+    """Issue 36: the check counts the teeth in the middle third of the opening, where the upper
+    central incisors show, apart from the side teeth it counted with them."""
+    mask = np.zeros((4, 12), dtype=bool)
+    mask[1:3, 3:9] = True  # columns 3..8: the middle third is 5..6
+    assert np.flatnonzero(middle_third(mask).any(axis=0)).tolist() == [5, 6]
+    assert not middle_third(np.zeros((4, 12), dtype=bool)).any()
+    m = MouthPixels(area=100, dark=10, teeth=30, middle=40, middle_teeth=20, middle_upper_teeth=8)
+    assert (m.middle_teeth_fraction, m.middle_upper_teeth_fraction, m.side_teeth_fraction) == (0.5, 0.2, 10 / 60)
 
 
 def test_closed_mouth_shows_neither_cavity_nor_teeth(face, runtime, open_mouth):

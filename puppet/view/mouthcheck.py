@@ -156,7 +156,7 @@ def main() -> None:
 
     face = puppet.load_face()
     runtime = puppet.Runtime(face)
-    poses = {f"open_jaw {v:.0f}": {"fap": {"open_jaw": v}} for v in (0.0, 400.0)}
+    poses: dict[str, dict] = {f"open_jaw {v:.0f}": {"fap": {"open_jaw": v}} for v in (0.0, 400.0)}
     poses |= {f"expression {k}": {"expression": (k, 63, 0, 0)} for k in range(1, 7)}
     for name, pose in poses.items():
         m = mouth_pixels(face, runtime, pose=pose)
