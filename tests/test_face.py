@@ -175,7 +175,9 @@ def test_feature_points_are_plausible(face):
     y = {k: p[1] for k, p in fp.items()}
     assert y["11.4"] > y["11.1"] > y["4.3"] > y["3.13"] > y["3.1"] > y["3.5"] > y["3.3"] > y["3.9"]
     assert y["3.9"] > y["9.3"] > y["9.15"] > y["8.1"] > y["2.2"] >= y["2.3"] > y["8.2"] > y["2.10"] > y["2.1"]
-    assert y["9.8"] > y["9.10"] > y["9.11"] > y["9.9"]  # teeth top to bottom, apart at rest
+    assert y["9.8"] > y["9.11"] > y["9.10"] > y["9.9"]  # an overbite: the upper incisors overlap the lower
+    assert fp["9.10"][2] > fp["9.11"][2]  # in front of them
+    assert 0.02 <= y["2.3"] - y["9.10"] <= 0.035  # 2-3.5 mm of upper incisor show once the lips part
     assert fp["4.1"][0] < fp["4.3"][0] < fp["4.5"][0]  # the brow runs outward
     assert fp["4.5"][0] < fp["10.9"][0]  # and ends in front of the ear
     assert fp["3.11"][0] < fp["3.5"][0] < fp["3.7"][0]

@@ -45,6 +45,15 @@ def test_middle_third_splits_the_width_the_mask_spans():
     assert (m.middle_teeth_fraction, m.middle_upper_teeth_fraction, m.side_teeth_fraction) == (0.5, 0.2, 10 / 60)
 
 
+@pytest.mark.parametrize("expression", [4, 6])
+def test_parted_lips_show_the_upper_front_teeth(face, runtime, egl, expression):
+    """Issue 36: fear (4) and surprise (6) show the upper central incisors in the middle of the
+    opening, as the artist's shapes do. Their edges sat 0.5 mm below the lips' meeting line, behind
+    the upper lip's inner wall, and the middle of every open mouth was dark with side teeth only."""
+    m = mouth_pixels(face, runtime, pose={"expression": (expression, 63, 0, 0)})
+    assert m.middle_upper_teeth_fraction >= 0.05
+
+
 def test_closed_mouth_shows_neither_cavity_nor_teeth(face, runtime, open_mouth):
     """At rest the lips meet (the face builder closes base.obj's slit behind them): what lies
     between them is their own dark crease, not the cavity, and no tooth (the slit showed the

@@ -18,16 +18,21 @@ teeth are told from the lower ones by a third render without the upper teeth: ``
 gives the teeth fraction of each, and of the upper teeth in the middle third. ``mouth_pixels``
 poses the face by FAP ``open_jaw`` or by any ``Runtime.deform_faps`` pose (an expression, a
 viseme); ``posed_mouth_pixels`` classifies given vertices, such as the face plus an artist's
-shape. ``python -m puppet.view.mouthcheck`` prints the figures for the default face.
+shape. ``python -m puppet.view.mouthcheck [--artist FOLDER]`` prints the figures for the default face
+(beside the artist's, given the artist's ARKit shapes).
 """
 
 from __future__ import annotations
 
+import argparse
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from PIL import Image, ImageDraw
 
+from puppet.face.examples import load_examples
+from puppet.fap.facs import EXPRESSIONS, artist_shape
 from puppet.view.renderer import Renderer
 
 DARK_LUMA = 0.22
@@ -37,6 +42,9 @@ TOOTH_LUMA = 0.35
 """sRGB luminance (0-1) a visible tooth pixel needs to count as a tooth seen (not lost in shadow)."""
 
 TEETH_PARTS = ("teeth_upper", "teeth_lower")
+
+OPEN_JAW = 400.0
+"""The open_jaw value (MNS) ``main`` reports: a mouth open for speech, about 7 mm at the lips."""
 
 EXACT = {"samples": 0, "antialias": "none"}
 """Renderer options: one sample per pixel, no post pass (module docstring)."""
@@ -150,19 +158,42 @@ def luminance(image: np.ndarray) -> np.ndarray:
     return (np.asarray(image, float) @ np.array([0.2126, 0.7152, 0.0722])) / 255.0
 
 
-def main() -> None:
-    """Print the mouth figures of the default face at open_jaw 0 and 400 and in the six expressions."""
+def main(argv: list[str] | None = None) -> None:
+    """Print the mouth figures of the default face at open_jaw 0 and 400 and in the six expressions,
+    with ``--artist FOLDER`` each beside the artist's same shape (``artist_shapes``)."""
     import puppet
 
+    parser = argparse.ArgumentParser(description=main.__doc__)
+    parser.add_argument("--artist", type=Path, help="the artist's ARKit shapes (.target files) of the default face")
+    args = parser.parse_args(argv)
     face = puppet.load_face()
     runtime = puppet.Runtime(face)
-    poses: dict[str, dict] = {f"open_jaw {v:.0f}": {"fap": {"open_jaw": v}} for v in (0.0, 400.0)}
+    poses: dict[str, dict] = {f"open_jaw {v:.0f}": {"fap": {"open_jaw": v}} for v in (0.0, OPEN_JAW)}
     poses |= {f"expression {k}": {"expression": (k, 63, 0, 0)} for k in range(1, 7)}
+    artist = artist_shapes(face, runtime, load_examples(face, args.artist)) if args.artist else {}
     for name, pose in poses.items():
-        m = mouth_pixels(face, runtime, pose=pose)
-        print(f"{name:14s}: area {m.area:5d} px, dark {m.dark_fraction:6.1%}, teeth {m.teeth_fraction:6.1%} "
-              f"(middle third {m.middle_teeth_fraction:6.1%}, upper {m.middle_upper_teeth_fraction:6.1%}; "
-              f"sides {m.side_teeth_fraction:6.1%})")
+        print(_figures(name, mouth_pixels(face, runtime, pose=pose)))
+        if name in artist:
+            posed = face.vertices + artist[name]
+            print(_figures("  artist", posed_mouth_pixels(face, posed, runtime.normals(posed))))
+
+
+def artist_shapes(face, runtime, examples: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The artist's displacements for ``main``'s poses: each expression's FACS sum
+    (``puppet.fap.facs``), and for open_jaw ``OPEN_JAW`` the artist's jawOpen at the strength that
+    drops the lower lip's middle (2.3) as far. The artist's shapes move the skin only: their teeth
+    stay at rest, so the lower teeth show more there than on a face whose jaw turns."""
+    out = {f"expression {k}": artist_shape(examples, units) for k, (_, units) in EXPRESSIONS.items()}
+    lip = face.feature_vertices["2.3"]
+    drop = runtime.deform_faps(fap={"open_jaw": OPEN_JAW})[lip, 1] - face.vertices[lip, 1]
+    out[f"open_jaw {OPEN_JAW:.0f}"] = examples["jawOpen"] * drop / examples["jawOpen"][lip, 1]
+    return out
+
+
+def _figures(name: str, m: MouthPixels) -> str:
+    return (f"{name:14s}: area {m.area:5d} px, dark {m.dark_fraction:6.1%}, teeth {m.teeth_fraction:6.1%} "
+            f"(middle third {m.middle_teeth_fraction:6.1%}, upper {m.middle_upper_teeth_fraction:6.1%}; "
+            f"sides {m.side_teeth_fraction:6.1%})")
 
 
 if __name__ == "__main__":

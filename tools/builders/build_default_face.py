@@ -30,8 +30,9 @@ What it does, in order (each step is a function below):
    incisors to second molars, average adult sizes scaled by the mouth width, and a scalloped gum
    band) along a smooth curve fitted to each helper's incisal row; the arch is set back where
    teeth come within a clearance of the mouth bag, and the gum's deep rows are drawn back where
-   the bag is shallow. At rest the incisal edges are level with the lips' meeting line (the
-   lower ones just behind the upper ones), so the teeth show as soon as the lips part.
+   the bag is shallow. At rest the upper incisal edges lie on a smile arc 2.7 mm below the lips'
+   meeting line at the mid-line (behind the lower lip), the lower ones level with it just behind
+   them, so the upper front teeth show as soon as the lips part.
    Tongue: the helper tongue is as wide as the whole arch and its tip reaches through the lower
    incisors once the teeth have a real thickness, so it is reshaped (same vertices and faces,
    shortened toward its root and narrowed above the floor of the mouth) until no tooth vertex is
@@ -143,12 +144,17 @@ TOOTH_SEGMENTS = 12
 SUPERELLIPSE = 2.6
 MOUTH_WIDTH_MM = 50.0
 LOWER_INSET = 0.028  # dm: the lower arch's labial line behind the upper one (overjet)
-# Rest position: lips closed; the upper incisal edges a little below the lips' meeting line
-# (behind the lower lip), so they show as soon as the lips part, and the lower incisal edges
-# level with the lower lip's inner edge, just behind the upper incisors (a slight overbite), so
-# they show as the jaw opens. Both relative to the helpers' incisal rows (lift: up, drop: down).
+# Rest position: lips closed; the upper incisal edges below the lips' meeting line (behind the
+# lower lip), on a smile arc: the central incisors lowest, the arch rising to the helpers' row
+# plus UPPER_REST_LIFT by the canines; the lower incisal edges level with the lower lip's inner
+# edge, just behind the upper incisors (an overbite). Relative to the helpers' incisal rows
+# (lift: up, drop: down). With the central incisors 0.5 mm below the meeting line (no arc), the
+# upper lip's inner wall hid them in every open mouth: a relaxed face shows 2-3.5 mm of them
+# below its parted upper lip, so they now sit 2.7 mm below the line (``INCISOR_SHOW`` more).
 UPPER_REST_LIFT = -0.004  # dm
 LOWER_REST_DROP = -0.001  # dm
+INCISOR_SHOW = 0.025  # dm: how much lower the central incisors sit than the arch's back
+SMILE_ARC_END = 0.2  # dm of arch length from the mid-line (about the canines): the arc's end
 GUM_COLUMNS_PER_TOOTH = 6
 # gum profile levels (same f as LEVELS): margin at the tooth centres, extra at the papillae,
 # the labial/lingual faces' deepest row and the ridge over the roots
@@ -444,6 +450,12 @@ class Arch:
         other.inset = other.inset + amount
         return other
 
+
+
+def upper_lift(s: float) -> float:
+    """The upper teeth's rest lift at arch length ``s`` from the mid-line: the smile arc (above
+    ``INCISOR_SHOW``), lowest at the mid-line and easing up to ``UPPER_REST_LIFT`` by ``SMILE_ARC_END``."""
+    return UPPER_REST_LIFT - INCISOR_SHOW * (1.0 - float(smoothstep(0.0, SMILE_ARC_END, s)))
 
 @dataclass
 class Jaw:
@@ -985,7 +997,7 @@ def build(source: Path) -> tuple[dict[str, np.ndarray], dict, str]:
     skin_dist = SkinDistance(P, skin_tri_base, np.array([-0.6, 6.2, 0.4]), np.array([0.6, 7.1, 1.9]))
     scale = (cand_xyz["8.3"][0] - cand_xyz["8.4"][0]) * 100.0 / MOUTH_WIDTH_MM
     upper_arch, upper, upper_fit = fit_jaw(
-        Arch(P[UPPER_ARCH_ROW]), lambda a: make_jaw(a, UPPER_TEETH, scale, True, lambda s: UPPER_REST_LIFT),
+        Arch(P[UPPER_ARCH_ROW]), lambda a: make_jaw(a, UPPER_TEETH, scale, True, upper_lift),
         skin_dist, "the upper teeth")
     lower_arch0 = Arch(P[LOWER_ARCH_ROW])
     lower_arch0.inset = np.interp(lower_arch0.s, upper_arch.s, upper_arch.inset) + LOWER_INSET
@@ -1345,8 +1357,9 @@ def json_document(src, V, T, parts, fp_doc, contours, cand, eye_centres, radius,
                   "note": "tooth sizes are average adult sizes (mm) times the scale (mouth width 8.3-8.4 "
                           "over 50 mm); arches along the helper teeth's incisal rows, set back where "
                           "needed to keep a clearance inside the mouth bag; lower arch behind the upper "
-                          f"by {LOWER_INSET} dm; at rest the incisal edges are at the lips' meeting line (upper row raised {UPPER_REST_LIFT} dm, "
-                          f"lower lowered {LOWER_REST_DROP} dm from the helpers'), behind the closed lips"},
+                          f"by {LOWER_INSET} dm; at rest, behind the closed lips, the upper row is raised {UPPER_REST_LIFT} dm "
+                          f"from the helper's and its incisors {INCISOR_SHOW} dm more on a smile arc ending "
+                          f"{SMILE_ARC_END} dm from the mid-line; the lower row is lowered {LOWER_REST_DROP} dm"},
         "tongue": {"fit": tongue_fit, "base_vertices": [TONGUE_FIRST, TONGUE_FIRST + int(len(parts["tongue"])) - 1],
                    "note": "vertex i of the tongue part is base vertex 13380 + i, moved: the helper tongue is "
                            "wider than the space between generated teeth of natural size (379 teeth vertices "
