@@ -342,7 +342,10 @@ class _Builder:
         """Which mouth-bag vertices go with the upper lip: those nearer, along the bag's edges,
         to the upper half of the lips' meeting line than to its lower half. Behind closed lips
         the bag starts as a flat tube at the lips' height, so height alone does not split it:
-        its lower rim would hang from the upper lip and curtain the opened mouth."""
+        its lower rim would hang from the upper lip and curtain the opened mouth. Where the
+        lips are one sheet of skin (``_closed_mouth``), the whole bag goes with the upper lip."""
+        if self._closed_mouth(bag):
+            return np.ones(len(bag), dtype=bool)
         halves = self._lip_halves()
         inside = np.zeros(len(self.v), dtype=bool)
         inside[bag] = inside[np.concatenate(halves)] = True
@@ -352,6 +355,16 @@ class _Builder:
         graph = sp.coo_matrix((w, (e[:, 0], e[:, 1])), shape=(len(self.v),) * 2).tocsr()
         d_up, d_lo = (dijkstra(graph, directed=False, min_only=True, indices=half[1:-1]) for half in halves)
         return d_up[bag] <= d_lo[bag]
+
+    def _closed_mouth(self, bag: np.ndarray) -> bool:
+        """Whether the lips are one sheet of skin (a scan with a closed mouth, no cavity behind
+        them): no ``bag`` vertex lies farther than ``BAG_FREE_DEPTH`` from the lips' meeting line.
+        Such a bag is no more than the row where the lips join, left between the meeting line's
+        halves where the landmarks put them a row above and below it; split by distance to the
+        halves, its vertices went alternately with the upper and the lower lip, and the parted
+        lips' edge zigzagged. A mouth with a cavity reaches several times that deep."""
+        opening = self.v[np.asarray(self.face.contours["mouth_opening"])]
+        return bool(np.all(cKDTree(opening).query(self.v[bag])[0] <= self._scale(BAG_FREE_DEPTH)))
 
     def _regions_with_points(self) -> list[Region]:
         self.members: dict[str, list[str]] = {}
