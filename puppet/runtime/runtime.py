@@ -221,26 +221,33 @@ class Runtime:
         return order
 
     def _folded(self) -> sp.csr_matrix:
-        """B = sum over regions of (its coefficients) @ (its rows of M), as one CSR matrix
-        (the precomputed mode's ``B``; a real-time runtime folds it only for muscles)."""
-        n = len(self.rest)
-        blocks = []
-        for region in self._regions:
-            coef = self.deformers[region.name].coefficients[: len(region.vertices)]
-            spread = sp.csr_matrix(self._spread[self._region_cps[region.name]])  # sparse: the same sums in the
-            folded = sp.csr_matrix(coef @ spread)  # same order as a dense product, without a dense block (0.7 s on ICT)
-            folded.data[np.abs(folded.data) < 1e-12] = 0.0
-            folded.eliminate_zeros()
-            place = sp.csr_matrix((np.ones(len(region.vertices)), (region.vertices, np.arange(len(region.vertices)))),
-                                  shape=(n, len(region.vertices)))
-            blocks.append(place @ folded)
-        B = sum(blocks[1:], blocks[0]) if blocks else sp.csr_matrix((n, len(self._inputs)))
+        """B: the regions' product (``_regions_product``) smoothed where the rig says and pruned, as
+        one CSR matrix (the precomputed mode's ``B``; a real-time runtime folds it only for muscles)."""
+        B = self._regions_product
         if len(self.rig.smoothed):
             B = self._smoothing @ B
         B = _pruned(sp.csr_matrix(B), self.prune)
         B = sp.csr_matrix(B, dtype=self.dtype)
         B.sort_indices()
         return B
+
+    @functools.cached_property
+    def _regions_product(self) -> sp.csr_matrix:
+        """The sum over regions of (its coefficients) @ (its rows of M), unsmoothed and unpruned
+        (float64): what B is made from. Made once and kept by ``with_smoothing``'s copies, whose
+        smoothing does not change it (``puppet rig`` makes B with and without smoothing)."""
+        n = len(self.rest)
+        spread = sp.csr_matrix(self._spread)  # rows sliced from one sparse M: the same entries as a block's own
+        blocks = []
+        for region in self._regions:
+            coef = self.deformers[region.name].coefficients[: len(region.vertices)]
+            folded = sp.csr_matrix(coef @ spread[self._region_cps[region.name]])  # sparse: the same sums in the
+            folded.data[np.abs(folded.data) < 1e-12] = 0.0  # same order as a dense product (0.7 s on ICT)
+            folded.eliminate_zeros()
+            place = sp.csr_matrix((np.ones(len(region.vertices)), (region.vertices, np.arange(len(region.vertices)))),
+                                  shape=(n, len(region.vertices)))
+            blocks.append(place @ folded)
+        return sum(blocks[1:], blocks[0]) if blocks else sp.csr_matrix((n, len(self._inputs)))
 
     @functools.cached_property
     def _smoothing(self) -> sp.csr_matrix:
@@ -714,9 +721,11 @@ class Runtime:
             warnings.warn(f"real-time rebase skipped: {exc}", stacklevel=3)
 
 
-_MADE_ON_USE = frozenset(name for name, value in vars(Runtime).items() if isinstance(value, functools.cached_property))
+_MADE_ON_USE = frozenset(name for name, value in vars(Runtime).items()
+                         if isinstance(value, functools.cached_property)) - {"_regions_product"}
 """What a runtime makes on first use (its ``functools.cached_property`` names): a copy on another
-rig (``with_smoothing``) makes it again."""
+rig (``with_smoothing``) makes it again, except the regions' product, which smoothing leaves as
+it is."""
 
 
 def _pruned(B: sp.csr_matrix, prune: float) -> sp.csr_matrix:
