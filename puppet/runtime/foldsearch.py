@@ -94,7 +94,7 @@ class FoldSearch(Bisection):
     """``Bisection``'s values from a model of the motion checked on the face (module docstring)."""
 
     def __init__(self, runtime: Runtime) -> None:
-        super().__init__(runtime)
+        super().__init__(runtime.for_few_inputs())  # a search deforms one FAP at a dozen values
         self.triangles = np.asarray(runtime.face.triangles, dtype=np.int64)
         self._corners = [np.ascontiguousarray(self.triangles[:, k]) for k in range(3)]
         rest = np.asarray(runtime.rest, dtype=float)

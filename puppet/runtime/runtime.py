@@ -128,6 +128,7 @@ class Runtime:
         self._init_normals()
         self.muscle_names: tuple[str, ...] = tuple(m.name for m in self.rig.muscles)
         self._muscle_models: dict[str, MuscleModel] = {}
+        self.few_inputs = False  # ``for_few_inputs``
         self._slivers = None  # the probes that find the sliver guard's triangles deform without it
         if guard:  # without: a runtime for checks that do without it (``puppet.runtime.creasesmoothing``)
             self._slivers = sliver_guard(self)
@@ -324,9 +325,7 @@ class Runtime:
             if share is not None:  # one product spreads both shares; the guard corrects the muscles' alone
                 d += share
             np.copyto(out, self.rest)
-            B = self._by_input  # column by column: 30% faster than by rows, and the same sums in the same order
-            _sparsetools.csc_matvecs(B.shape[0], B.shape[1], 3, B.indptr, B.indices, B.data,
-                                     d.astype(self.dtype, copy=False).ravel(), out.ravel())
+            self._spread_inputs(d.astype(self.dtype, copy=False), out)
         else:
             self._deform_realtime(d, out)
             if len(self.rig.smoothed):
@@ -347,6 +346,34 @@ class Runtime:
         if "head" in rigid:
             self._turn_head(rigid["head"], out)
         return out
+
+    def _spread_inputs(self, x: np.ndarray, out: np.ndarray) -> None:
+        """``out += B @ x`` for the inputs' displacements ``x`` (K, 3), column by column (30% faster
+        than by rows, and the same sums in the same order); ``for_few_inputs``, over the columns of
+        the inputs that move alone."""
+        B = self._by_input
+        if not self.few_inputs:
+            _sparsetools.csc_matvecs(B.shape[0], B.shape[1], 3, B.indptr, B.indices, B.data, x.ravel(), out.ravel())
+            return
+        moving = (x[:, 0] != 0) | (x[:, 1] != 0) | (x[:, 2] != 0)
+        inputs, indptr, indices, data = self._last_columns.get("B", moving.tobytes(), lambda: _columns(B, moving))
+        _sparsetools.csc_matvecs(B.shape[0], len(inputs), 3, indptr, indices, data, x[inputs].ravel(), out.ravel())
+
+    @functools.cached_property
+    def _last_columns(self) -> LastMade:
+        """B's columns for the last set of inputs that moved (``for_few_inputs``)."""
+        return LastMade()
+
+    def for_few_inputs(self) -> Runtime:
+        """This runtime for a caller that deforms the face many times with a few of its inputs
+        moving, the same ones for a while (``puppet.runtime.foldsearch``: one FAP at a dozen
+        values, moving 1,100-1,700 of ICT's 3,540 inputs): the product runs over B's columns for
+        the inputs that move, gathered again only when they change (0.3-0.5 ms instead of 0.9 on
+        ICT smoothed). The same sums in the same order, less the terms that add zero; a live face,
+        whose inputs change from frame to frame, keeps the whole product."""
+        other = copy.copy(self)
+        other.few_inputs = True
+        return other
 
     def deform_with_normals(self, displacements: np.ndarray, rigid: Mapping[str, np.ndarray] | None = None,
                             *, out: np.ndarray | None = None, normals_out: np.ndarray | None = None,
@@ -756,6 +783,17 @@ def _pruned(B: sp.csr_matrix, prune: float) -> sp.csr_matrix:
     B.data[drop] = 0.0
     B.eliminate_zeros()
     return B
+
+
+def _columns(B: sp.csc_matrix, inputs: np.ndarray) -> tuple[np.ndarray, ...]:
+    """(the inputs, then indptr, indices and data of ``B``'s columns for them) for a bool mask
+    ``inputs`` over B's columns: a CSC matrix of those columns, in their order."""
+    inputs = np.flatnonzero(inputs)
+    starts, counts = B.indptr[inputs], np.diff(B.indptr)[inputs]
+    indptr = np.zeros(len(inputs) + 1, dtype=B.indptr.dtype)
+    np.cumsum(counts, out=indptr[1:])
+    taken = np.repeat(starts - indptr[:-1], counts) + np.arange(indptr[-1], dtype=B.indptr.dtype)
+    return inputs, indptr, B.indices[taken], B.data[taken]
 
 
 def _translate(points: np.ndarray, t: np.ndarray) -> None:
