@@ -103,6 +103,8 @@ class FoldSearch(Bisection):
         size = np.linalg.norm(b - a, axis=1) + np.linalg.norm(c - a, axis=1)
         self._area = np.linalg.norm(self.rest_normals, axis=1)
         self._clear = ((np.sqrt(size * size + 4 * CLEAR * self._area) - size) / 4) ** 2
+        self._near = NEAR * self._area ** 2
+        self._rest_normals_t = np.ascontiguousarray(self.rest_normals.T)  # (3, T): ``_dots`` by rows
         self._found: dict[tuple, float | None] = {}
 
     def with_follow(self, fap_follow: dict) -> FoldSearch:
@@ -161,12 +163,21 @@ class FoldSearch(Bisection):
         tested, the ``likely`` ones first: where one of them folds, that is the answer (and they
         the near ones)."""
         if likely is not None and len(likely):
-            dots = _dots(face[self.triangles[likely]].astype(float), self.rest_normals[likely])
+            dots = self._dots(face, likely)
             if (dots < 0).any():
-                return True, likely[dots < NEAR * self._area[likely] ** 2]
+                return True, likely[dots < self._near[likely]]
         touched = self.touched(moved)
-        dots = _dots(face[self.triangles[touched]].astype(float), self.rest_normals[touched])
-        return bool((dots < 0).any()), touched[dots < NEAR * self._area[touched] ** 2]
+        dots = self._dots(face, touched)
+        return bool((dots < 0).any()), touched[dots < self._near[touched]]
+
+    def _dots(self, face: np.ndarray, among: np.ndarray) -> np.ndarray:
+        """Each triangle of ``among``'s normal on ``face`` dotted with its rest normal, as
+        ``musclesolver.folded_triangles`` takes them: the corners gathered a coordinate at a time
+        into contiguous rows (2-3x faster than gathering them triangle by triangle)."""
+        p0, p1, p2 = (np.take(face.T, corner[among], axis=1).astype(float) for corner in self._corners)
+        (bx, by, bz), (cx, cy, cz) = p1 - p0, p2 - p0
+        nx, ny, nz = np.take(self._rest_normals_t, among, axis=1)
+        return (by * cz - bz * cy) * nx + (bz * cx - bx * cz) * ny + (bx * cy - by * cx) * nz
 
     def touched(self, moved: np.ndarray) -> np.ndarray:
         """The triangles that might fold with their corners moved at most sqrt(``moved``) (per
@@ -275,14 +286,6 @@ def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
         np.multiply(a, b, out=out[:, k])
         out[:, k] -= c * d
     return out
-
-
-def _dots(corners: np.ndarray, rest_normals: np.ndarray) -> np.ndarray:
-    """Each triangle's normal (corners (T, 3, 3)) dotted with its rest normal, as
-    ``musclesolver.folded_triangles`` takes them."""
-    (bx, by, bz), (cx, cy, cz) = (corners[:, 1] - corners[:, 0]).T, (corners[:, 2] - corners[:, 0]).T
-    nx, ny, nz = rest_normals.T
-    return (by * cz - bz * cy) * nx + (bz * cx - bx * cz) * ny + (bx * cy - by * cx) * nz
 
 
 def _normals(positions: np.ndarray, triangles: np.ndarray) -> np.ndarray:
