@@ -34,14 +34,20 @@ sets up a new runtime: on the ICT head (26,719 vertices) 3,500 deformations and 
   ``FoldSearch.ahead`` searches them all at once in processes forked from this one
   (``puppet.runtime.forked``: they inherit the runtime; nothing is sent but the ends and the
   values), one per core.
+* **Only what moves.** A FAP moves the same inputs at every value tried (1,100-1,700 of ICT's
+  3,540), so the search's runtime spreads only theirs (``Runtime.for_few_inputs``: B's columns
+  for them gathered once, the same sums less the zero terms); a face tried is tested with its
+  corners gathered a coordinate at a time, and the model's cross products are written out.
 
-On the ICT head the search takes 916 deformations and one runtime: 4-6 s here on one core, 3-4
-s on this machine's two (``puppet bench --only rig`` times it beside the plain search in one
-run: 41.8 -> 3.1 s, and 54.5 -> 3.9 s in a slower hour); the limits are the plain search's to
-the digit, on ICT and on the default face (``tests/test_foldsearch.py``). Trusting the model's answer at bad
-where the face at good lay on its line to 1e-5 would save a deformation a limit, but moved one
-limit of the default face by 0.3 MNS (a fold is a near-cancellation: the model's error counts
-against the triangle's size, not the motion's), so every bracket is checked. The check holds
+On the ICT head the search takes 916 deformations and one runtime: 1.5 s of CPU in one process
+(2.6 s before it spread only what moves: ``fold_limits`` on ICT's smoothed rig, median of three
+runs in turns, this 2-core machine busy), 3-4 s of wall on two cores before it (``puppet bench
+--only rig`` times it beside the plain search in one run: 41.8 -> 3.1 s, and 54.5 -> 3.9 s in a
+slower hour); the limits are the plain search's to the digit, on ICT and on the default face
+(``tests/test_foldsearch.py``). Trusting the model's answer at bad where the face at good lay on
+its line to 1e-5 would save a deformation a limit, but moved one limit of the default face by
+0.3 MNS (a fold is a near-cancellation: the model's error counts against the triangle's size,
+not the motion's), so every bracket is checked. The check holds
 where the face, once folded, stays folded further on; it does not quite everywhere (FAP 59
 alone folds at -358.5 MNS on the default face, not at -358.6): trying the rounded value in
 good's stead moved that limit by 0.3 MNS, so good itself is tried, as the plain search did.
