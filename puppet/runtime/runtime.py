@@ -373,6 +373,7 @@ class Runtime:
         whose inputs change from frame to frame, keeps the whole product."""
         other = copy.copy(self)
         other.few_inputs = True
+        other.faps = self.faps  # one FAP engine for both, made once (it reads the runtime's geometry alone)
         return other
 
     def deform_with_normals(self, displacements: np.ndarray, rigid: Mapping[str, np.ndarray] | None = None,
