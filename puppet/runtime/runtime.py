@@ -368,10 +368,10 @@ class Runtime:
         """This runtime for a caller that deforms the face many times with a few of its inputs
         moving, the same ones for a while (``puppet.runtime.foldsearch``: one FAP at a dozen
         values, moving 1,100-1,700 of ICT's 3,540 inputs; the sliver guard's probes, a lid and its
-        brows): the product runs over B's columns for
-        the inputs that move, gathered again only when they change (0.3-0.5 ms instead of 0.9 on
-        ICT smoothed). The same sums in the same order, less the terms that add zero; a live face,
-        whose inputs change from frame to frame, keeps the whole product."""
+        brows): the product runs over B's columns for the inputs that move, gathered again only
+        when they change (0.3-0.5 ms instead of 0.9 on ICT smoothed). The same sums in the same
+        order, less the terms that add zero; a live face, whose inputs change from frame to frame,
+        keeps the whole product."""
         other = copy.copy(self)
         other.few_inputs = True
         other.faps = self.faps  # one FAP engine for both, made once (it reads the runtime's geometry alone)
