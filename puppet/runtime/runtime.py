@@ -222,9 +222,10 @@ class Runtime:
         return order
 
     def _folded(self) -> sp.csr_matrix:
-        """B: the regions' product (``_regions_product``) smoothed where the rig says and pruned, as
-        one CSR matrix (the precomputed mode's ``B``; a real-time runtime folds it only for muscles)."""
-        B = self._regions_product
+        """B: the regions' product smoothed where the rig says and pruned, as one CSR matrix (the
+        precomputed mode's ``B``, from ``_regions_product``; a real-time runtime folds it only for
+        muscles, from its regions' coefficients as they are, rebased or not)."""
+        B = self._regions_product if self.mode == "precomputed" else self._product_of_regions()
         if len(self.rig.smoothed):
             B = self._smoothing @ B
         B = _pruned(sp.csr_matrix(B), self.prune)
@@ -234,9 +235,14 @@ class Runtime:
 
     @functools.cached_property
     def _regions_product(self) -> sp.csr_matrix:
+        """``_product_of_regions`` of a precomputed runtime, whose coefficients never change: made
+        once and kept by ``with_smoothing``'s copies, whose smoothing does not change it (``puppet
+        rig`` makes B without smoothing, then with it)."""
+        return self._product_of_regions()
+
+    def _product_of_regions(self) -> sp.csr_matrix:
         """The sum over regions of (its coefficients) @ (its rows of M), unsmoothed and unpruned
-        (float64): what B is made from. Made once and kept by ``with_smoothing``'s copies, whose
-        smoothing does not change it (``puppet rig`` makes B with and without smoothing)."""
+        (float64): what B is made from."""
         n = len(self.rest)
         spread = sp.csr_matrix(self._spread)  # rows sliced from one sparse M: the same entries as a block's own
         blocks = []
