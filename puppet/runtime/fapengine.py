@@ -184,11 +184,11 @@ class FapEngine:
     def _calibrated_matrix(self) -> np.ndarray:
         """(K * 3, 68): the rig's calibrated FAP motions, in mesh units per unit of each FAP."""
         T = np.zeros((len(self._index), 3, N_FAPS))
-        for number, motions in self.rig.fap_motions.items():
-            unit = self.fapu[fap(number).unit]
-            for name, motion in motions.items():
-                if name in self._index:
-                    T[self._index[name], :, number - 1] += motion * unit
+        for number, motions in self.rig.fap_motions.items():  # a FAP's points at once: a point once per FAP
+            names = [name for name in motions if name in self._index]
+            if names:
+                rows = np.array([self._index[name] for name in names], dtype=np.int64)
+                T[rows, :, number - 1] += np.array([motions[name] for name in names]) * self.fapu[fap(number).unit]
         return T.reshape(-1, N_FAPS)
 
     def effects(self) -> dict[int, str]:

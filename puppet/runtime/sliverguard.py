@@ -225,14 +225,15 @@ def sliver_guard(runtime) -> SliverGuard:
     """The guard for a runtime's face and rig, from the runtime's own deformation of each of
     ``PROBED`` at its range end (made before the runtime has a guard) and the rig's ``guarded``
     triangles, with its corrective shapes. Movable: the DFFD skin vertices that are not feature
-    points."""
+    points. The probes move a lid and its brows alone, so they deform ``Runtime.for_few_inputs``."""
     high = clamp_ranges()[1]
-    probes = [_lid_pose(runtime, number, high[number - 1])[0] for number in PROBED]
+    lids = runtime.for_few_inputs()
+    probes = [_lid_pose(lids, number, high[number - 1])[0] for number in PROBED]
     movable = runtime.dffd_vertices.copy()
     movable[list(runtime.face.feature_vertices.values())] = False
     guard = SliverGuard(runtime.face.vertices, runtime.face.triangles, movable, probes, runtime.rig.guarded)
     if guard.constraints is not None:
-        shapes = [_corrective(runtime, guard, number, high[number - 1]) for number in PROBED
+        shapes = [_corrective(lids, guard, number, high[number - 1]) for number in PROBED
                   if LID_FAPS[number][0] in runtime.rig.rigid_parts]
         guard.shapes = [shape for shape in shapes if shape is not None]
     return guard

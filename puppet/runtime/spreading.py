@@ -59,16 +59,18 @@ def spread_matrix(rig: Rig, passive_rows: dict[str, dict[str, float]]) -> np.nda
     index = rig.point_index()
     active = {name: i for i, name in enumerate(rig.input_points)}
     depends = _dependencies(rig, passive_rows)
-    rows: dict[str, np.ndarray] = {}
+    M = np.zeros((len(rig.control_points), len(active)))  # each row filled in place (a 27k-vertex
+    rows: dict[str, np.ndarray] = {}  # face's M is 3,750 x 3,540: a copy of it costs a tenth of a second)
     pending = [p.name for p in rig.control_points]
     while pending:
         ready = [n for n in pending if all(d in rows for d in depends.get(n, {}))]
         if not ready:
             raise RigError(f"control points depend on each other in a cycle: {sorted(pending)[:6]}")
         for name in ready:
-            rows[name] = _row(rig.control_points[index[name]].role, name, active, depends, rows)
+            rows[name] = M[index[name]]
+            _fill(rows[name], rig.control_points[index[name]].role, name, active, depends, rows)
         pending = [n for n in pending if n not in rows]
-    return np.array([rows[p.name] for p in rig.control_points]).reshape(len(rig.control_points), len(active))
+    return M
 
 
 def _dependencies(rig: Rig, passive_rows: dict[str, dict[str, float]]) -> dict[str, dict[str, float]]:
@@ -81,11 +83,11 @@ def _dependencies(rig: Rig, passive_rows: dict[str, dict[str, float]]) -> dict[s
     return depends
 
 
-def _row(role: str, name: str, active: dict[str, int], depends: dict, rows: dict) -> np.ndarray:
-    row = np.zeros(len(active))
+def _fill(row: np.ndarray, role: str, name: str, active: dict[str, int], depends: dict, rows: dict) -> None:
+    """Point ``name``'s row of M, written into ``row`` (zeros): 1 at its own input, or its sources'
+    rows weighted (``rows``: those made so far)."""
     if name in active:
         row[active[name]] = 1.0
     elif role in ("passive", "interpolated"):
         for source, weight in depends[name].items():
             row += weight * rows[source]
-    return row
