@@ -187,6 +187,9 @@ def test_a_face_of_another_shape_rigs_from_its_found_landmarks(tmp_path, capsys,
     assert len(loop) <= 1.2 * len(face.contours["mouth_opening"]) and not set(loop) & set(border)
     fv, up = rigged.feature_vertices, rigged.vertices[:, 1]
     assert all(up[fv[a]] > up[fv[b]] for a, b in (("2.2", "2.3"), ("2.6", "2.8"), ("2.7", "2.9")))
+    shaped, eyes = np.asarray(face.vertices, float) + model.offsets(weights), 1024 * face.fapu["ES0"]
+    for mid in ("2.2", "2.3"):  # on the lips' edges: lifted onto a tooth between them, 2.2 took the wall behind
+        assert abs(shaped[fv[mid], 2] - shaped[face.feature_vertices[mid], 2]) < 0.03 * eyes
 
 
 @needs_detector

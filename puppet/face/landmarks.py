@@ -246,7 +246,7 @@ def apply_landmarks(face, landmarks) -> object:
     skin = _skin_graph(vertices, face.triangles, skin.mask, seams)
     parts = _parts(vertices, face.triangles, skin.mask, {f: vertices[i] for f, i in given.items()}, face.parts,
                    seams)
-    contours = {name: _geodesic_path(skin, ways, closed=True) for name, ways in waypoints.items()}
+    contours = _lip_contours(skin, waypoints)
     feature_points, feature_vertices = _feature_points(vertices, parts, skin, given, reference)
     contours["face_oval"] = _geodesic_path(skin, [feature_vertices[f] for f in FACE_OVAL], closed=True)
     neck = _neck_cut(vertices, face.triangles, skin.mask, seams, feature_points["2.1"][1])
@@ -344,16 +344,31 @@ def _skin_graph(vertices: np.ndarray, triangles: np.ndarray, on_skin: np.ndarray
     return Skin(graph, np.asarray(vertices, float), on_skin)
 
 
-def _geodesic_path(skin: Skin, waypoints: list[int], closed: bool) -> np.ndarray:
+def _lip_contours(skin: Skin, waypoints: dict[str, list[int]]) -> dict[str, np.ndarray]:
+    """The contours through their waypoints (``_geodesic_path``), each keeping off those made
+    before it (the lips' inner line first, then the outer one round it): on a face whose found
+    outer mouth corners lay a vertex or two from the inner ones, the outer line's shortest way
+    ran through the inner corner, and the lips' two edges shared vertices."""
+    made: dict[str, np.ndarray] = {}
+    for name, ways in waypoints.items():
+        kept_off = np.zeros(skin.graph.shape[0], dtype=bool)
+        for contour in made.values():
+            kept_off[contour] = True
+        made[name] = _geodesic_path(skin, ways, closed=True, kept_off=kept_off)
+    return made
+
+
+def _geodesic_path(skin: Skin, waypoints: list[int], closed: bool, kept_off: np.ndarray | None = None) -> np.ndarray:
     """Vertices along shortest skin paths from waypoint to waypoint (back to the first if closed).
     Each leg keeps off the vertices the legs before it took, so a loop never touches itself: two
     waypoints near one corner (found landmarks a vertex or two apart) sent two shortest legs
     through one vertex, which became both an upper and a lower lid point, two control points on
-    one place (``duplicate sites``). A leg with no way round them takes the plain shortest path."""
+    one place (``duplicate sites``); and off ``kept_off`` (another contour's vertices). A leg with
+    no way round them takes the plain shortest path."""
     stops = list(waypoints) + ([waypoints[0]] if closed else [])
     path: list[int] = [stops[0]]
     for a, b in zip(stops[:-1], stops[1:]):
-        taken = np.zeros(skin.graph.shape[0], dtype=bool)
+        taken = np.zeros(skin.graph.shape[0], dtype=bool) if kept_off is None else kept_off.copy()
         taken[path] = True
         taken[[a, b]] = False
         path += _leg(skin, a, b, taken) or _leg(skin, a, b, np.zeros_like(taken))

@@ -245,10 +245,13 @@ def _combine(face: Face, normals: np.ndarray, lifts: np.ndarray, facing: np.ndar
     rows = _lip_rows(vertices, normals, skin, rotation)
     chosen = np.full(N_MESH, -1)
     spread = np.full(N_MESH, np.nan)
+    on_skin = _on_skin(vertices, skin, lifts)
     for i in range(N_MESH):
         seen = found & np.isfinite(lifts[:, i]).all(axis=1)
         if not seen.any():
             continue
+        if (seen & on_skin[:, i]).any():
+            seen &= on_skin[:, i]
         use = seen & (facing[:, i] >= MIN_FACING)
         if not use.any():
             use = seen & (facing[:, i] == facing[seen, i].max())
@@ -257,8 +260,11 @@ def _combine(face: Face, normals: np.ndarray, lifts: np.ndarray, facing: np.ndar
         cost = np.linalg.norm(vertices[near][:, None] - lifts[use, i][None], axis=2).sum(axis=1)
         chosen[i] = near[np.argmin(cost)]
     _apart(chosen, vertices, rows, lifts, found, rotation[1])
+    _outside(chosen, vertices, rows[None], lifts, found, rotation[0])
     for i in np.flatnonzero(chosen >= 0):  # over the views the choice used
         seen = found & np.isfinite(lifts[:, i]).all(axis=1)
+        if (seen & on_skin[:, i]).any():
+            seen &= on_skin[:, i]
         use = seen & (facing[:, i] >= MIN_FACING)
         use = use if use.any() else seen & (facing[:, i] == facing[seen, i].max())
         spread[i] = np.median(np.linalg.norm(lifts[use, i] - vertices[chosen[i]], axis=1))
@@ -274,6 +280,20 @@ def _combine(face: Face, normals: np.ndarray, lifts: np.ndarray, facing: np.ndar
     fdp |= carried_points(vertices, skin, chosen, list(fdp.values()))
     return FoundLandmarks(fdp=fdp, vertices=chosen, spread=agree, views_found=int(found.sum()),
                           views=views, rotation=rotation, face_width=width)
+
+
+def _on_skin(vertices: np.ndarray, skin: np.ndarray, lifts: np.ndarray) -> np.ndarray:
+    """(views, landmarks) bool: whether each lift lies on the skin, its nearest vertex of the whole
+    mesh a skin vertex. Between parted lips a lip landmark can lift onto a tooth behind them, and
+    snapped to the skin from there it took the lip's inner wall for the lip's edge (the inner lip
+    loop then ran over the lips): a landmark is taken from the views that lift it onto the skin,
+    where any does."""
+    finite = np.isfinite(lifts).all(axis=2)
+    is_skin = np.zeros(len(vertices), dtype=bool)
+    is_skin[skin] = True
+    out = np.zeros(finite.shape, dtype=bool)
+    out[finite] = is_skin[cKDTree(vertices).query(lifts[finite])[1]]
+    return out
 
 
 LIP_ROWS = {"2.2": "upper", "2.6": "upper", "2.7": "upper", "2.3": "lower", "2.8": "lower", "2.9": "lower"}
@@ -331,6 +351,36 @@ def _apart(chosen: np.ndarray, vertices: np.ndarray, rows: dict[str | None, tupl
         if np.isfinite(total).any():
             a, b = np.unravel_index(np.argmin(total), total.shape)
             chosen[i], chosen[j] = near[0][a], near[1][b]
+
+
+OUTER_INNER = (("8.3", "2.4"), ("8.4", "2.5"))
+"""(outer, inner) lip corners: the outer corner lies beyond the inner one, away from the mid-line."""
+
+
+def _outside(chosen: np.ndarray, vertices: np.ndarray, skin: tuple[np.ndarray, cKDTree], lifts: np.ndarray,
+             found: np.ndarray, across: np.ndarray) -> None:
+    """An outer lip corner lies beyond its inner corner, away from the mid-line (in place). On a
+    face whose lips stand a little apart, MediaPipe can put the outer corner a few millimetres in
+    from the inner one (3.5 mm on a shape-model face); the outer line (the vermilion border) then
+    ran round the inner corner, and the lips' two contours shared vertices. Such a corner takes
+    the skin vertex nearest its lifts that lies beyond the inner corner (``across``: the face
+    frame's +x in the file)."""
+    index = {fid: i for i, fid in MEDIAPIPE_FDP.items()}
+    among, tree = skin
+    inner = [chosen[index[fdp]] for _, fdp in OUTER_INNER]
+    if min(inner) < 0:
+        return
+    middle = float(np.mean(vertices[inner] @ across))
+    for outer, inner_fdp in OUTER_INNER:
+        i, j = index[outer], index[inner_fdp]
+        side = np.sign(vertices[chosen[j]] @ across - middle)
+        if chosen[i] < 0 or side * (vertices[chosen[i]] @ across - vertices[chosen[j]] @ across) > 0:
+            continue
+        target = np.nanmean(lifts[found, i], axis=0)
+        near = among[tree.query(target, k=min(len(among), 24))[1]]
+        beyond = near[side * (vertices[near] @ across - vertices[chosen[j]] @ across) > 0]
+        if len(beyond):
+            chosen[i] = beyond[0]
 
 
 def skin_vertices(vertices: np.ndarray, triangles: np.ndarray, lifts: np.ndarray) -> np.ndarray:
