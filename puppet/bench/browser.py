@@ -30,6 +30,7 @@ from puppet.show.process import end_process
 
 BROWSERS = ("chromium", "chromium-browser", "google-chrome")
 START_TIMEOUT = 60.0
+PROFILE_GRACE = 5.0  # seconds the profile folder's removal is tried again (``HeadlessChromium._remove_profile``)
 
 
 class BrowserError(PuppetError, RuntimeError):
@@ -130,7 +131,23 @@ class HeadlessChromium:
     def close(self) -> None:
         self._closing.close()
         end_process(self._process, 10)
-        self._profile.cleanup()
+        self._remove_profile()
+
+    def _remove_profile(self) -> None:
+        """Remove the browser's profile folder. Chromium's helper processes can still write into it
+        for a moment after the browser has ended, and a removal that met a new file failed ("Directory
+        not empty"): it is tried again for up to ``PROFILE_GRACE`` seconds, then what is left stays in
+        the system's temporary folder."""
+        deadline = time.monotonic() + PROFILE_GRACE
+        while True:
+            try:
+                self._profile.cleanup()
+                return
+            except OSError:
+                if time.monotonic() > deadline:
+                    shutil.rmtree(self._profile.name, ignore_errors=True)
+                    return
+                time.sleep(0.1)
 
     def __enter__(self) -> HeadlessChromium:
         return self
