@@ -247,14 +247,9 @@ def _combine(face: Face, normals: np.ndarray, lifts: np.ndarray, facing: np.ndar
     spread = np.full(N_MESH, np.nan)
     on_skin = _on_skin(vertices, skin, lifts)
     for i in range(N_MESH):
-        seen = found & np.isfinite(lifts[:, i]).all(axis=1)
-        if not seen.any():
-            continue
-        if (seen & on_skin[:, i]).any():
-            seen &= on_skin[:, i]
-        use = seen & (facing[:, i] >= MIN_FACING)
+        use = _views_used(found & np.isfinite(lifts[:, i]).all(axis=1), on_skin[:, i], facing[:, i])
         if not use.any():
-            use = seen & (facing[:, i] == facing[seen, i].max())
+            continue
         among, tree = _row(rows, MEDIAPIPE_FDP.get(i))
         near = among[tree.query(lifts[use, i])[1]]
         cost = np.linalg.norm(vertices[near][:, None] - lifts[use, i][None], axis=2).sum(axis=1)
@@ -262,11 +257,7 @@ def _combine(face: Face, normals: np.ndarray, lifts: np.ndarray, facing: np.ndar
     _apart(chosen, vertices, rows, lifts, found, rotation[1])
     _outside(chosen, vertices, rows[None], lifts, found, rotation[0])
     for i in np.flatnonzero(chosen >= 0):  # over the views the choice used
-        seen = found & np.isfinite(lifts[:, i]).all(axis=1)
-        if (seen & on_skin[:, i]).any():
-            seen &= on_skin[:, i]
-        use = seen & (facing[:, i] >= MIN_FACING)
-        use = use if use.any() else seen & (facing[:, i] == facing[seen, i].max())
+        use = _views_used(found & np.isfinite(lifts[:, i]).all(axis=1), on_skin[:, i], facing[:, i])
         spread[i] = np.median(np.linalg.norm(lifts[use, i] - vertices[chosen[i]], axis=1))
     missing = sorted({MEDIAPIPE_FDP[i] for i in MEDIAPIPE_FDP if chosen[i] < 0} & set(FDP_NEEDED))
     if missing:
@@ -280,6 +271,18 @@ def _combine(face: Face, normals: np.ndarray, lifts: np.ndarray, facing: np.ndar
     fdp |= carried_points(vertices, skin, chosen, list(fdp.values()))
     return FoundLandmarks(fdp=fdp, vertices=chosen, spread=agree, views_found=int(found.sum()),
                           views=views, rotation=rotation, face_width=width)
+
+
+def _views_used(seen: np.ndarray, on_skin: np.ndarray, facing: np.ndarray) -> np.ndarray:
+    """The views a landmark is taken from (module docstring, 3), of those that ``seen`` it: the ones
+    that lift it onto the skin where any does (``_on_skin``), and of those the ones that see its
+    surface within ``MIN_FACING`` of head-on, else the most frontal. All False where none saw it."""
+    if (seen & on_skin).any():
+        seen = seen & on_skin
+    if not seen.any():
+        return seen
+    use = seen & (facing >= MIN_FACING)
+    return use if use.any() else seen & (facing == facing[seen].max())
 
 
 def _on_skin(vertices: np.ndarray, skin: np.ndarray, lifts: np.ndarray) -> np.ndarray:

@@ -21,7 +21,7 @@ from PIL import Image, ImageDraw
 import puppet
 from puppet.bench.assets import shared_assets
 from puppet.face.examples import load_examples
-from puppet.view.mouthcheck import OPEN_JAW, artist_shapes, mouth_pixels, posed_mouth_pixels
+from puppet.view.mouthcheck import OPEN_JAW, artist_shapes, posed_mouth_pixels
 from puppet.view.renderer import Renderer
 
 POSES = {f"open_jaw {OPEN_JAW:.0f}": {"fap": {"open_jaw": OPEN_JAW}}, "expression 4": {"expression": (4, 63, 0, 0)},
@@ -59,7 +59,7 @@ def main() -> None:
         label = NAMES.get(name, name)
         vertices = runtime.deform_faps(**pose)
         normals = runtime.normals(vertices, runtime.fap_controls(**pose)[1])
-        shown = mouth_pixels(face, runtime, pose=pose).middle_upper_teeth_fraction
+        shown = posed_mouth_pixels(face, vertices, normals).middle_upper_teeth_fraction
         rows[0].append(tile(close_up(face, vertices, normals), f"{label}: rig, upper teeth in the middle {shown:.0%}"))
         posed = face.vertices + artist[name]
         normals = runtime.normals(posed)
