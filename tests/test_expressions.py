@@ -14,15 +14,15 @@ from puppet.fap.highlevel import high_level_faps
 from puppet.fap.table import clamp_ranges
 from puppet.runtime.fapcalibration import relative_residual
 from puppet.runtime.musclesolver import folded_triangles
-from tools.builders.build_high_level_faps import MARKER, unfolded, write
+from tools.builders.build_high_level_faps import CORNERS_RAISED, MARKER, unfolded, write
 
 EXAMPLES = shared_assets() / "makehuman" / "faceunits_arkit"
 
-RESIDUAL_AT_MOST = {("expressions", 1): 0.64, ("expressions", 2): 0.50, ("expressions", 3): 0.34,
+RESIDUAL_AT_MOST = {("expressions", 1): 0.58, ("expressions", 2): 0.50, ("expressions", 3): 0.34,
                     ("expressions", 4): 0.30, ("expressions", 5): 0.60, ("expressions", 6): 0.35,
                     ("visemes", 13): 0.41, ("visemes", 14): 0.36}
 """|V(f) - V0 - D| / |D| against the summed artist shape, as tools/builders/build_high_level_faps.py
-measures it (0.613, 0.473, 0.313, 0.274, 0.572, 0.315, 0.376, 0.332) plus about 0.03. The hand-made
+measures it (0.547, 0.473, 0.313, 0.274, 0.573, 0.315, 0.376, 0.332) plus about 0.03. The hand-made
 tables before them left 0.75, 0.83, 1.16, 0.66, 1.05, 0.50, 0.56, 0.66."""
 
 FACS_BUILT = [("expressions", n) for n in EXPRESSIONS] + [("visemes", n) for n in VISEMES]
@@ -64,15 +64,27 @@ def test_a_recipe_is_the_sum_of_its_units_shapes():
 
 
 def test_joy_raises_both_lip_corners_and_the_lower_lids(runtime, face):
-    """The artist lifts the corners 746 MNS; the hand-made joy 200, this one 327 (the corners'
-    fold-free reach holds them there). The cheek raiser (AU6) shows as the lower lids pushed up
+    """The artist lifts the corners 746 MNS; the hand-made joy 200, this one 672 (past the Greta
+    editor's 600 MNS: ``test_joy_lifts_the_lip_corners_...``). The cheek raiser (AU6) shows as the lower lids pushed up
     and the cheeks puffed, not by lift_cheek, whose motion creases the cheek
     (``test_joy_creases_no_cheek``)."""
     joy = _pose(runtime, "expressions", 1)
     for corner in ("8.3", "8.4"):
-        assert _moved(face, joy, corner, 1, "MNS0") >= 280
+        assert _moved(face, joy, corner, 1, "MNS0") >= 600
     for lid in ("3.3", "3.4"):  # the bottom eyelids
         assert _moved(face, joy, lid, 1, "IRISD0") > 0
+
+
+def test_joy_lifts_the_lip_corners_nine_tenths_of_the_artist_s_smile_with_no_fold(runtime, face, examples):
+    """The artist's joy lifts the outer corners 13.2 mm. Capped at the Greta editor's 600 MNS and
+    eased where the corner slivers fold, joy lifted them 9.3 mm (70%); fitted past the editor's
+    end, with the fold guard holding the hidden slivers inside the corners, 11.9 mm."""
+    joy = _pose(runtime, "expressions", 1)
+    artist = face.vertices + artist_shape(examples, EXPRESSIONS[1][1])
+    for corner in ("8.3", "8.4"):
+        vertex = face.feature_vertices[corner]
+        assert joy[vertex, 1] - face.vertices[vertex, 1] >= 0.9 * (artist[vertex, 1] - face.vertices[vertex, 1])
+    assert not folded_triangles(face.vertices, joy, np.asarray(face.triangles)).any()
 
 
 def test_joy_creases_no_cheek(runtime, face):
@@ -168,12 +180,14 @@ def test_o_is_round_and_u_pushes_the_lips_forward(runtime, face):
 
 @pytest.mark.parametrize("kind, number", FACS_BUILT)
 def test_the_face_shows_each_shape_whole_within_the_fap_ranges(runtime, kind, number):
-    """No value passes its FAP's range, or the reach at which the face caps it: what the table
-    says is what the face shows, to the whole FAPU it is written in (the hand-made anger was
-    capped by 42 FAPU, U by 10)."""
+    """No value passes its FAP's range (the lip corners, fitted past the editor's end, excepted:
+    ``CORNERS_RAISED``), or the reach at which the face caps it: what the table says is what the
+    face shows, to the whole FAPU it is written in (the hand-made anger was capped by 42 FAPU, U
+    by 10)."""
     values = high_level_faps()[kind][number]
     low, high = clamp_ranges()
-    assert np.all((low <= values) & (values <= high))
+    past = np.isin(np.arange(1, 69), CORNERS_RAISED)
+    assert np.all((low <= values) & (values <= high) | past)
     np.testing.assert_allclose(runtime.faps.shown(values), values, atol=0.5)
 
 

@@ -109,6 +109,7 @@ def test_the_fold_free_reach_of_a_fap_folds_nothing_and_its_range_end_does(runti
     low, high = clamp_ranges()
     rig = copy.copy(runtime.rig)
     rig.fap_follow = {}  # each corner FAP alone, its partner left where it is
+    rig.guarded = np.zeros(0, dtype=np.int64)  # the face as it folds, not as the guard holds it
     runtime = puppet.Runtime(face, rig, dtype=np.float64)
     reach = fold_free_reach(runtime, numbers=(6, 53))
     triangles = np.asarray(face.triangles)

@@ -22,9 +22,10 @@ SAMPLE = ([3], [4], [6], [12], [19], [31], [35], [53], [59], [12, 59], [6, 53])
 
 @pytest.fixture(scope="module")
 def unlimited(face):
-    """The default face's runtime (float32, as ``puppet rig`` searches) on its rig without limits."""
+    """The default face's runtime (float32, as ``puppet rig`` searches) on its rig without limits,
+    nor the fold guard's watch over what the shipped poses fold (``fold_limits`` drops both)."""
     rig = copy.copy(puppet.Runtime(face).rig)
-    rig.fap_follow, rig.fap_reach = {}, {}
+    rig.fap_follow, rig.fap_reach, rig.guarded = {}, {}, np.zeros(0, dtype=np.int64)
     return puppet.Runtime(face, rig)
 
 

@@ -171,13 +171,14 @@ def test_rig_file_round_trip(runtime, tmp_path):
 @pytest.mark.parametrize("field", ["guarded", "smoothed"])
 def test_a_rig_s_vertex_lists_round_trip_and_are_checked(runtime, tmp_path, field):
     """The vertices a rig's fold guard watches, and those it smooths, are saved as runs and read
-    back; the shipped rig has none and writes no key; an index past the face is refused by name."""
+    back; a rig with none writes no key; an index past the face is refused by name."""
     import copy
 
     from puppet.face.rig import RigError, rig_to_dict
 
-    assert field not in rig_to_dict(runtime.rig)
     rig = copy.copy(runtime.rig)
+    setattr(rig, field, np.zeros(0, dtype=np.int64))
+    assert field not in rig_to_dict(rig)
     setattr(rig, field, np.array([5, 6, 7, 40, 41]))
     save_rig(rig, tmp_path / "listed.rig")
     assert getattr(load_rig(tmp_path / "listed.rig"), field).tolist() == [5, 6, 7, 40, 41]
@@ -258,6 +259,7 @@ def test_the_shipped_rig_is_what_autorig_builds_today(face):
     built = json.loads(json.dumps(rig_to_dict(build_rig(face, calibrated=False))))
     for calibrated in ("fap_motions", "fap_reach", "fap_follow"):  # calibration and fold limits add them
         del shipped[calibrated], built[calibrated]
+    del shipped["guarded"]  # and the triangles the shipped poses fold, which the fold guard holds
     assert shipped == built, "run tools/builders/build_default_rig.py"
 
 

@@ -110,9 +110,12 @@ def fap(key: int | str) -> Fap:
 @functools.lru_cache(maxsize=1)
 def clamp_ranges() -> tuple[np.ndarray, np.ndarray]:
     """(low, high) arrays over the 68 FAPs, -inf/+inf where the table gives no range: the Greta
-    editor's sliders (a file may go past them; the face's own limits are ``FapEngine.shown``)."""
+    editor's sliders (a file may go past them; the face's own limits are ``FapEngine.shown``).
+    Read-only: every caller shares the cached pair."""
     low = np.array([-np.inf if f.low is None else f.low for f in faps()])
     high = np.array([np.inf if f.high is None else f.high for f in faps()])
+    low.setflags(write=False)
+    high.setflags(write=False)
     return low, high
 
 

@@ -179,19 +179,22 @@ def solve(runtime: Runtime, examples: Mapping[str, np.ndarray], *, held_out: tup
 
 
 def fit_faps(runtime: Runtime, displacement: np.ndarray, *, refine: int = 2, where: str = "skin",
-             held: tuple[int, ...] = ()) -> np.ndarray:
+             held: tuple[int, ...] = (), past_editor: tuple[int, ...] = ()) -> np.ndarray:
     """The 68 FAP values (within their ranges) whose pose best reproduces ``displacement`` (N, 3):
     bounded least squares linearised at neutral, then up to ``refine`` Gauss-Newton steps on the
     real rig, stopping at one that would fit worse (a blink's fit had stepped to opened lids);
     over the whole skin (``where="skin"``: motion where the shape has none costs too) or only
     the vertices it moves (``"moved"``, the measure of the rig's issue 11 baseline). The FAPs
-    numbered in ``held`` stay at 0 (an expression's eyeballs, or the lips it leaves to the visemes)."""
+    numbered in ``held`` stay at 0 (an expression's eyeballs, or the lips it leaves to the visemes).
+    The FAPs numbered in ``past_editor`` are bounded by the face's own limits alone, not also by
+    the Greta editor's slider range (``clamp_ranges``), which a file may pass: the artist's smile
+    lifts the lip corners 746 MNS, and the editor's slider stops at 600."""
     skin = _skin(runtime.face, runtime.rig)
     if where == "moved":
         skin = skin[np.linalg.norm(displacement[skin], axis=1) > 0]
     elif where != "skin":
         raise ValueError(f"where {where!r}: expected 'skin' or 'moved'")
-    model = _LinearModel(runtime, skin, held=held)
+    model = _LinearModel(runtime, skin, held=held, past_editor=past_editor)
     target = model.rows(displacement)
     values = np.zeros(N_FAPS)
     rest = model.runtime.deform_faps(values)
@@ -211,14 +214,15 @@ def fold_free_reach(runtime: Runtime, *, steps: int = 12, numbers=None, reach=No
     """Per FAP, the values (low, high) it can take alone without folding a triangle: each end of
     its range (``clamp_ranges``; twice it, as files go beyond) is kept when nothing folds there,
     else the fold-free value found by bisection toward 0. FAPs that fold nowhere are left out;
-    ``numbers`` restricts the search to those FAPs. The runtime's own reach does not apply (the
-    rig's response is searched); ``reach`` searches one end (``common_reach``) on a runtime
-    without one (``puppet.runtime.foldsearch``), else each trial deforms the whole face."""
-    if runtime.rig.fap_reach:
+    ``numbers`` restricts the search to those FAPs. The runtime's own reach does not apply, nor
+    the fold guard's watch over its ``guarded`` triangles (the rig's response is searched);
+    ``reach`` searches one end (``common_reach``) on a runtime without them
+    (``puppet.runtime.foldsearch``), else each trial deforms the whole face."""
+    if runtime.rig.fap_reach or len(runtime.rig.guarded):
         if reach is not None:
-            raise ValueError("fold_free_reach: a given reach search needs a runtime without fap_reach")
+            raise ValueError("fold_free_reach: a given reach search needs a runtime without fap_reach or guarded")
         free = copy.copy(runtime.rig)
-        free.fap_reach = {}
+        free.fap_reach, free.guarded = {}, np.zeros(0, dtype=np.int64)
         runtime = Runtime(runtime.face, free, dtype=runtime.dtype)
     out = {}
     for f in faps():
@@ -371,7 +375,7 @@ class _LinearModel:
     ``held`` are left out."""
 
     def __init__(self, runtime: Runtime, skin: np.ndarray, coarse: Runtime | None = None,
-                 held: tuple[int, ...] = ()) -> None:
+                 held: tuple[int, ...] = (), past_editor: tuple[int, ...] = ()) -> None:
         self.runtime = _unlimited(runtime)  # the rig's response; its limits are the fits' bounds
         self.skin = skin
         self.columns = np.array([f.number - 1 for f in faps()
@@ -385,7 +389,9 @@ class _LinearModel:
             self.prior_E = [E[:, live] for E in self.prior_E]
         self.columns, self.J0, self.fapu = self.columns[live], self.J0[:, live], self.fapu[live]
         self.fitted = tuple(int(c) + 1 for c in self.columns)
-        lo, hi = clamp_ranges()
+        lo, hi = (end.copy() for end in clamp_ranges())
+        past = [n - 1 for n in past_editor]
+        lo[past], hi[past] = -np.inf, np.inf
         limits = runtime.faps
         reach = np.stack([np.maximum(limits.reach[0], limits.skin_reach[0]),
                           np.minimum(limits.reach[1], limits.skin_reach[1])])[:, self.columns]

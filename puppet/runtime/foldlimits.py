@@ -132,9 +132,11 @@ def fold_limits(runtime, search: type[Bisection] = FoldSearch
     only on a side where the pair together goes further than the nearer of its two FAPs does
     alone within the rest range (``_narrowed``: the lip corner); elsewhere it stays as at rest.
     The rig's own limits do not apply (a runtime whose rig has a reach is set up again without
-    it). ``search`` finds each reach (``puppet.runtime.foldsearch``: ``Bisection`` is the plain
-    search, the reference; ``FoldSearch`` gives its values with a few trials each)."""
-    free = search(_with(runtime, fap_follow={}, fap_reach={}) if runtime.rig.fap_reach else runtime)
+    it, and without its ``guarded``: a reach is where the face folds, not where the guard stops
+    holding it). ``search`` finds each reach (``puppet.runtime.foldsearch``: ``Bisection`` is the
+    plain search, the reference; ``FoldSearch`` gives its values with a few trials each)."""
+    limited = runtime.rig.fap_reach or len(runtime.rig.guarded)
+    free = search(_with(runtime, fap_follow={}, fap_reach={}, guarded=np.zeros(0, dtype=np.int64)) if limited else runtime)
     ranges = _symmetric(follow_ranges(free), _mirror_pair)
     at_rest = {pair: (low, high, -np.inf, np.inf) for pair, (low, high, _, _) in ranges.items()}
     alone = _reach(free.with_follow(at_rest))
@@ -251,7 +253,7 @@ def within_limits(face, calibration: Calibration, examples) -> Calibration:
     jawOpen fit opens the jaw 930 MNS unlimited, 916 within the lids' and lips' limits), and
     the reach keeps only that, short of where the FAP alone folds unless the sliver guard holds
     it (open_jaw folds the chin from 913 MNS and stops there). What the expressions and visemes
-    still fold within the limits is the rig's ``guarded`` (none on the default face)."""
+    still fold within the limits is the rig's ``guarded`` (on the default face: joy's corner slivers)."""
     safe = fold_safe(Runtime(face, calibration.rig))
     fold_free = dict(safe.fap_reach)
     safe.fap_reach = {n: r for n, r in fold_free.items() if n not in NEEDED}

@@ -48,7 +48,13 @@ The same constraints watch the rig's ``guarded`` triangles (``puppet.face.rig``)
 by transfer, FAPs that each fold nothing within their limits fold a few triangles together in the
 expressions and visemes (the ICT head: 85 over the 21 poses, at the lip corners, the cheeks and
 the eye corners), and ``foldlimits`` lists them there. Watched, they fold in none (per-frame
-cost on ICT through the 21 poses ramped: 1.1 -> 1.35 ms median).
+cost on ICT through the 21 poses ramped: 1.1 -> 1.35 ms median). On the default face they are
+the hidden slivers inside the lip corners that joy turns over, its corners raised 90% of the
+artist's smile (0.23 -> 0.39 ms median per frame through the same poses,
+``tools/bench/bench_expressions.py``: the mouth's watched triangles are checked whenever it
+moves). A fix that would show more triangles turned over than it found, counted on every
+triangle it can move, is not shown: where a pose presses the lips hard against a watched corner
+the springs cannot hold it, and their fallback drew the skin toward rest by millimetres.
 """
 
 from __future__ import annotations
@@ -182,6 +188,10 @@ class SliverGuard:
         reached = grown(corners, neighbours(tri, len(rest)), RINGS)
         watched = tri[reached[tri].any(axis=1)]
         self.vertices, local = np.unique(watched, return_inverse=True)
+        around = tri[np.isin(tri, self.vertices).any(axis=1)]  # every triangle a fix can turn over
+        self._near, near_local = np.unique(around, return_inverse=True)
+        self._around, self._rest_near = near_local.reshape(-1, 3), rest[self._near]
+        self._inside = np.searchsorted(self._near, self.vertices)  # the watched vertices among the near ones
         self.constraints = None
         self._last = LastMade()
         if len(self.vertices):
@@ -197,11 +207,13 @@ class SliverGuard:
         blink) reuses the last frame's."""
         if self.constraints is None:
             return False
-        positions = out[self.vertices].astype(float)
+        near = out[self._near].astype(float)
+        positions = near[self._inside]
         shaped = self._shape(positions, rigid, displacements)
-        fixed = self._last.get("fixed", positions.tobytes(), lambda: self._fixed(positions.copy()))
+        near[self._inside] = positions
+        fixed = self._last.get("fixed", near.tobytes(), lambda: self._fixed(near.copy()))
         if len(fixed) or shaped:
-            out[self.vertices] = fixed if len(fixed) else positions
+            out[self.vertices] = (fixed if len(fixed) else near)[self._inside]
         return bool(len(fixed))
 
     def _shape(self, positions: np.ndarray, rigid: dict[str, np.ndarray],
@@ -216,9 +228,22 @@ class SliverGuard:
                 shaped = True
         return shaped
 
-    def _fixed(self, positions: np.ndarray) -> np.ndarray:
-        """``positions`` of the watched vertices fixed, or none (0, 3) when nothing was about to fold."""
-        return positions if self.constraints.guard(positions) else np.zeros((0, 3))
+    def _fixed(self, near: np.ndarray) -> np.ndarray:
+        """``near`` (the positions of the watched vertices and the ring around them) fixed, or none
+        (0, 3) when nothing was about to fold or the fix would show more folded triangles than it
+        found: where a pose squeezes watched triangles that the springs cannot hold (the lips
+        pursed against a lip corner whose smile slivers are watched), their fallback draws the
+        skin toward rest by millimetres and turns the triangles around over instead."""
+        found = near.copy()
+        positions = near[self._inside]
+        if not self.constraints.guard(positions):
+            return np.zeros((0, 3))
+        near[self._inside] = positions
+        return near if self._folds(near) <= self._folds(found) else np.zeros((0, 3))
+
+    def _folds(self, near: np.ndarray) -> int:
+        """How many of the triangles around the watched vertices ``near`` turns over."""
+        return int(folded_triangles(self._rest_near, near, self._around).sum())
 
 
 def sliver_guard(runtime) -> SliverGuard:

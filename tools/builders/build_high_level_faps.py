@@ -5,10 +5,14 @@ Each recipe is a weighted sum of the artist's ARKit shapes of the default face
 (``../shared/assets/makehuman/faceunits_arkit``). Its FAPs are fitted to that summed shape on the
 shipped rig (``fit_faps`` over the whole skin, within the face's limits; the eyeballs held still,
 and the lips' mid-line where the jaw does not drop, and in joy the upper lip beside the corners:
-``MIDLIP``, ``UPPER_LIP_SIDES``), made left/right symmetric, rounded to whole FAPU, and then eased where the sum folds the skin:
-while a triangle is turned over, the FAP pair (a FAP and its mirror) whose easing to 90% unfolds
-most is eased (the artist's joy itself folds a few triangles where cheek and smile meet). What is
-written is what the face shows (``FapEngine.shown``: an eased lip FAP's twin follows it).
+``MIDLIP``, ``UPPER_LIP_SIDES``; the lip corners' raise past the Greta editor's slider end,
+``CORNERS_RAISED``), made left/right symmetric, rounded to whole FAPU, and then eased where the
+sum folds (unless it raises the corners past the editor's end and folds only what the fold guard
+holds, ``held_by_guard``: joy): while a triangle is turned over, the FAP pair (a FAP and its
+mirror) whose easing to 90% unfolds most is eased (the artist's joy itself folds a few triangles
+where cheek and smile meet). What is
+written is what the face shows (``FapEngine.shown``: an eased lip FAP's twin follows it). Run
+``tools/builders/build_default_rig.py`` after it: the rig's guard watches what these shapes fold.
 
 Fitting the sum beat summing the shapes' own fits (``arkit_faps.json``, eyeballs zeroed): before
 easing, the fit left less of the sum unexplained in 7 of the 8 shapes (median 0.37 against 0.40;
@@ -25,6 +29,7 @@ against the summed artist shape, before (the table as it was) and after.
 from __future__ import annotations
 
 import argparse
+import copy
 from pathlib import Path
 
 import numpy as np
@@ -32,11 +37,13 @@ import yaml
 
 import puppet
 from puppet.bench.assets import shared_assets
+from puppet.face.autorig import rig_for_face
 from puppet.face.examples import load_examples
 from puppet.fap.facs import EXPRESSIONS, VISEMES, artist_shape, describe
 from puppet.fap.highlevel import high_level_faps
-from puppet.fap.table import N_FAPS, fap
+from puppet.fap.table import N_FAPS, clamp_ranges, fap
 from puppet.runtime.fapcalibration import fit_faps, mirror_fap, relative_residual
+from puppet.runtime.musclesolver import folded_triangles
 from puppet.runtime.runtime import Runtime
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -49,9 +56,9 @@ MIDLIP = (4, 5, 51, 52)
 (FACS unit 26): it leaves the lips' opening to the visemes, so that p/b/m still closes them while
 smiling (the artist's smile lifts the lower lip 170 MNS past the upper one at the mid-line)."""
 UPPER_LIP_SIDES = (8, 9, 55, 56)
-"""The upper lip's points midway to the corners (2.6, 2.7, 8.5, 8.6), held at 0 in joy: the face
-lifts the corners only to their fold-free reach (327 of the artist's 746 MNS), and the fit then
-lifts the upper lip beside them further (395 to 449 MNS), which turns the smile into a pout
+"""The upper lip's points midway to the corners (2.6, 2.7, 8.5, 8.6), held at 0 in joy: where the
+face lifted the corners only to their fold-free reach (327 of the artist's 746 MNS), the fit lifted
+the upper lip beside them further (395 to 449 MNS), which turned the smile into a pout
 (residual 0.55 that way, 0.61 this way; docs/realism_facs.png shows the smile)."""
 LIFT_CHEEKS = (41, 42)
 """lift_l_cheek and lift_r_cheek, held at 0 in joy: at the 167 ENS the fit gives them, their
@@ -66,6 +73,12 @@ SMALLEST = 5
 """FAPU: smaller values are left out of the table."""
 EASE = 0.9
 """The share of its value a FAP pair keeps at each easing step (``unfolded``)."""
+CORNERS_RAISED = (12, 13, 59, 60)
+"""raise_l/r_cornerlip and their outer twins, fitted past the Greta editor's 600 MNS slider end,
+within the face's own reach (``fit_faps``' ``past_editor``): the artist's smile lifts the corners
+746 MNS, and capped at 600 joy's lifted them 9.3 mm of the artist's 13.2."""
+GUARD_MOVE = 0.015
+"""dm: the most the fold guard may move a vertex to hold a pose's folds (``held_by_guard``)."""
 
 
 def symmetric(values: np.ndarray) -> np.ndarray:
@@ -90,9 +103,40 @@ def folds(runtime: Runtime, values: np.ndarray) -> tuple[int, float]:
     return int((cos < 0).sum()), float(np.maximum(-cos, 0).sum())
 
 
+def held_by_guard(runtime: Runtime, values: np.ndarray) -> bool:
+    """Whether the face shows the pose without a fold: nothing folds, or the fold guard
+    (``puppet.runtime.sliverguard``) watching the triangles it folds holds them all, moving no
+    vertex more than ``GUARD_MOVE``. The shipped rig watches what the shipped poses fold (its
+    ``guarded``, listed by ``tools/builders/build_default_rig.py`` from this table; ``runtime``
+    watches none, ``fitting_runtime``): joy's lip
+    corners raised as far as the artist's smile fold a few hidden slivers inside the corners,
+    which the guard holds by moving them at most a millimetre."""
+    triangles = np.asarray(runtime.face.triangles)
+    plain = runtime.deform_faps(values)
+    turned = folded_triangles(runtime.rest, plain, triangles)
+    if not turned.any():
+        return True
+    rig = copy.copy(runtime.rig)
+    rig.guarded = np.unique(triangles[turned])
+    shown = Runtime(runtime.face, rig, dtype=runtime.dtype).deform_faps(values)
+    return not folded_triangles(runtime.rest, shown, triangles).any() and \
+        float(np.linalg.norm(shown - plain, axis=1).max()) <= GUARD_MOVE
+
+
+def past_editor(values: np.ndarray) -> bool:
+    """Whether ``values`` take a lip corner past the Greta editor's slider end (``clamp_ranges``):
+    within it, the face's own fold-free reach holds every pose without the guard's help."""
+    low, high = clamp_ranges()
+    index = [n - 1 for n in CORNERS_RAISED]
+    return bool(np.any(values[index] > high[index]) or np.any(values[index] < low[index]))
+
+
 def unfolded(runtime: Runtime, values: np.ndarray) -> np.ndarray:
-    """``values`` with FAP pairs eased to ``EASE`` of their value, one pair at a time, the pair
-    that unfolds most first, until nothing folds."""
+    """``values`` as they are where they raise the lip corners past the editor's end and the face
+    shows them without a fold (``held_by_guard``), else with FAP pairs eased to ``EASE`` of their
+    value, one pair at a time, the pair that unfolds most first, until nothing folds."""
+    if past_editor(values) and held_by_guard(runtime, values):
+        return values
     values = values.copy()
     while folds(runtime, values)[0]:
         pairs = {tuple(sorted({n, fap(mirror_fap(fap(n + 1).name)).number - 1})) for n in np.flatnonzero(values)}
@@ -109,11 +153,21 @@ def build(runtime: Runtime, examples: dict[str, np.ndarray]) -> dict[str, dict[i
     """{"expressions" / "visemes": {number: 68 FAP values}} for every recipe of ``puppet.fap.facs``."""
     def values(kind: str, number: int, units: dict[int, float]) -> np.ndarray:
         held = EYEBALLS + (MIDLIP if kind == "expressions" and 26 not in units else ()) + HELD.get((kind, number), ())
-        eased = unfolded(runtime, symmetric(fit_faps(runtime, artist_shape(examples, units), held=held)))
+        fitted = fit_faps(runtime, artist_shape(examples, units), held=held, past_editor=CORNERS_RAISED)
+        eased = unfolded(runtime, symmetric(fitted))
         return np.round(runtime.faps.shown(eased))  # the lip pairs as they follow each other on the face
 
     return {kind: {number: values(kind, number, units) for number, (_, units) in recipes.items()}
             for kind, recipes in (("expressions", EXPRESSIONS), ("visemes", VISEMES))}
+
+
+def fitting_runtime(face) -> Runtime:
+    """The face's rig without its ``guarded`` list: the shapes are fitted, and what they fold is
+    found, on the rig as its motions and limits make it, not as the guard bent it for the table
+    before (the rig then lists what this table folds, so the table is the same when rebuilt)."""
+    rig = copy.copy(rig_for_face(face))
+    rig.guarded = np.zeros(0, dtype=np.int64)
+    return Runtime(face, rig, dtype=np.float64)
 
 
 def entry(number: int, name: str, units: dict[int, float], values: np.ndarray, residual: float) -> str:
@@ -143,7 +197,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--check", action="store_true", help="print the residuals; write nothing")
     args = parser.parse_args(argv)
     face = puppet.load_face()
-    runtime = Runtime(face, dtype=np.float64)
+    runtime = fitting_runtime(face)
     examples = load_examples(face, shared_assets() / "makehuman" / "faceunits_arkit")
     built = build(runtime, examples)
     before = high_level_faps()
@@ -154,7 +208,8 @@ def main(argv: list[str] | None = None) -> int:
             D = artist_shape(examples, units)
             residuals[(kind, number)] = relative_residual(runtime, built[kind][number], D)
             print(f"  {kind[:-1]} {number:>2} {name:<9} {relative_residual(runtime, before[kind][number], D):.3f} -> "
-                  f"{residuals[(kind, number)]:.3f}   ({folds(runtime, built[kind][number])[0]} folds)")
+                  f"{residuals[(kind, number)]:.3f}   ({folds(runtime, built[kind][number])[0]} folds, "
+                  f"{'held by the guard' if folds(runtime, built[kind][number])[0] else 'none shown'})")
     if not args.check:
         write(TABLE, built, residuals)
         print(f"{TABLE}: expressions 1-6 and visemes {', '.join(map(str, VISEMES))} written")

@@ -4,6 +4,9 @@ each view's row of the other checkout above this one's, folded triangles marked 
 
 * ``--corner mouth`` (``docs/mouth_corner.png``): the left mouth corner as the jaw opens (0, 400,
   900 MNS), three-quarter (rows 1-2) and front (rows 3-4);
+* ``--corner smile`` (``docs/smile_corner.png``): the same corner in joy at a third, two thirds
+  and all of its intensity (the corners raised past the Greta editor's 600 MNS, the fold guard
+  holding the slivers inside them), three-quarter (rows 1-2) and front (rows 3-4);
 * ``--corner eye`` (``docs/eye_corners.png``): the right eye, both its corners, as its orbicularis
   oculi squints it (0, 0.5, 1) and with every muscle at 0.5, front (rows 1-2) and three-quarter
   (rows 3-4);
@@ -44,6 +47,9 @@ CORNERS = {
     "mouth": {"out": "mouth_corner.png", "centre": ("8.3",), "shift": (0.0, -0.15, 0.0),
               "views": ((0.6, 0.0, 1.2), (0.0, 0.0, 1.5)),  # camera offsets, dm: three-quarter, front
               "poses": [{"fap": {"open_jaw": opening}} for opening in (0.0, 400.0, 900.0)]},
+    "smile": {"out": "smile_corner.png", "centre": ("8.3",), "shift": (0.0, 0.0, 0.0),
+              "views": ((0.6, 0.0, 1.2), (0.0, 0.0, 1.5)),
+              "poses": [{"expression": (1, intensity, 0, 0)} for intensity in (21, 42, 63)]},
     "eye": {"out": "eye_corners.png", "centre": ("3.8", "3.12"), "shift": (0.0, 0.0, 0.0),
             "views": ((0.0, 0.0, 0.9), (-0.5, 0.0, 0.75)),  # front, three-quarter from the right
             "poses": [{"muscles": {"orbicularis_oculi_r": c}} for c in (0.0, 0.5, 1.0)]
