@@ -18,11 +18,11 @@ from tools.builders.build_high_level_faps import CORNERS_RAISED, MARKER, unfolde
 
 EXAMPLES = shared_assets() / "makehuman" / "faceunits_arkit"
 
-RESIDUAL_AT_MOST = {("expressions", 1): 0.58, ("expressions", 2): 0.50, ("expressions", 3): 0.34,
+RESIDUAL_AT_MOST = {("expressions", 1): 0.56, ("expressions", 2): 0.50, ("expressions", 3): 0.34,
                     ("expressions", 4): 0.30, ("expressions", 5): 0.60, ("expressions", 6): 0.35,
                     ("visemes", 13): 0.41, ("visemes", 14): 0.36}
 """|V(f) - V0 - D| / |D| against the summed artist shape, as tools/builders/build_high_level_faps.py
-measures it (0.547, 0.473, 0.313, 0.274, 0.573, 0.315, 0.376, 0.332) plus about 0.03. The hand-made
+measures it (0.524, 0.473, 0.313, 0.274, 0.573, 0.315, 0.376, 0.332) plus about 0.03. The hand-made
 tables before them left 0.75, 0.83, 1.16, 0.66, 1.05, 0.50, 0.56, 0.66."""
 
 FACS_BUILT = [("expressions", n) for n in EXPRESSIONS] + [("visemes", n) for n in VISEMES]
@@ -85,6 +85,25 @@ def test_joy_lifts_the_lip_corners_nine_tenths_of_the_artist_s_smile_with_no_fol
         vertex = face.feature_vertices[corner]
         assert joy[vertex, 1] - face.vertices[vertex, 1] >= 0.9 * (artist[vertex, 1] - face.vertices[vertex, 1])
     assert not folded_triangles(face.vertices, joy, np.asarray(face.triangles)).any()
+
+
+def test_joy_s_lower_lip_keeps_under_the_upper_one_beside_the_corners(runtime, face):
+    """Between 3 and 20 mm from the mid-line the lips' inner edges (the mouth opening) overlap by
+    at most 3 mm (2.5 now): the artist's smile presses them 1.3 mm into each other. With the upper
+    lip beside the corners held still while the lower lip rose with the corners, it rode 7 mm over
+    it, a step in the lips' line close up."""
+    joy = _pose(runtime, "expressions", 1)
+    loop = np.asarray(face.contours["mouth_opening"])
+    rest = face.vertices[loop]
+    upper = rest[:, 1] >= np.median(rest[:, 1])
+    across = np.linspace(0.03, 0.2, 18)  # the default face is in decimetres
+    heights = []
+    for lip in (upper, ~upper):
+        side = loop[lip & (rest[:, 0] > 0.01)]
+        side = side[np.argsort(joy[side, 0])]
+        heights.append(np.interp(across, joy[side, 0], joy[side, 1]))
+    overlap = heights[1] - heights[0]
+    assert overlap.max() < 0.03
 
 
 def test_joy_creases_no_cheek(runtime, face):

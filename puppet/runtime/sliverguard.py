@@ -50,7 +50,7 @@ expressions and visemes (the ICT head: 85 over the 21 poses, at the lip corners,
 the eye corners), and ``foldlimits`` lists them there. Watched, they fold in none (per-frame
 cost on ICT through the 21 poses ramped: 1.1 -> 1.35 ms median). On the default face they are
 the hidden slivers inside the lip corners that joy turns over, its corners raised 90% of the
-artist's smile (0.23 -> 0.39 ms median per frame through the same poses,
+artist's smile (0.24 -> 0.39-0.43 ms median per frame through the same poses,
 ``tools/bench/bench_expressions.py``: the mouth's watched triangles are checked whenever it
 moves). A fix that would show more triangles turned over than it found, counted on every
 triangle it can move, is not shown: where a pose presses the lips hard against a watched corner

@@ -4,9 +4,9 @@ puppet/data/high_level_faps.yaml from their FACS recipes (puppet/fap/facs.py).
 Each recipe is a weighted sum of the artist's ARKit shapes of the default face
 (``../shared/assets/makehuman/faceunits_arkit``). Its FAPs are fitted to that summed shape on the
 shipped rig (``fit_faps`` over the whole skin, within the face's limits; the eyeballs held still,
-and the lips' mid-line where the jaw does not drop, and in joy the upper lip beside the corners:
-``MIDLIP``, ``UPPER_LIP_SIDES``; the lip corners' raise past the Greta editor's slider end,
-``CORNERS_RAISED``), made left/right symmetric, rounded to whole FAPU, and then eased where the
+and the lips' mid-line where the jaw does not drop: ``MIDLIP``; in joy the lip corners first,
+then the rest around them: ``CORNERS_FIRST``; the lip corners' raise past the Greta editor's
+slider end, ``CORNERS_RAISED``), made left/right symmetric, rounded to whole FAPU, and then eased where the
 sum folds (unless it raises the corners past the editor's end and folds only what the fold guard
 holds, ``held_by_guard``: joy): while a triangle is turned over, the FAP pair (a FAP and its
 mirror) whose easing to 90% unfolds most is eased (the artist's joy itself folds a few triangles
@@ -56,17 +56,22 @@ MIDLIP = (4, 5, 51, 52)
 (FACS unit 26): it leaves the lips' opening to the visemes, so that p/b/m still closes them while
 smiling (the artist's smile lifts the lower lip 170 MNS past the upper one at the mid-line)."""
 UPPER_LIP_SIDES = (8, 9, 55, 56)
-"""The upper lip's points midway to the corners (2.6, 2.7, 8.5, 8.6), held at 0 in joy: where the
-face lifted the corners only to their fold-free reach (327 of the artist's 746 MNS), the fit lifted
-the upper lip beside them further (395 to 449 MNS), which turned the smile into a pout
-(residual 0.55 that way, 0.61 this way; docs/realism_facs.png shows the smile)."""
+"""The upper lip's points midway to the corners (2.6, 2.7, 8.5, 8.6), held at 0 while joy's lip
+corners are fitted (``CORNERS_FIRST``): fitted together, the upper lip beside the corners rises
+instead of them, which turns the smile into a pout (docs/realism_facs.png shows the smile)."""
 LIFT_CHEEKS = (41, 42)
 """lift_l_cheek and lift_r_cheek, held at 0 in joy: at the 167 ENS the fit gives them, their
 calibrated motion bends the skin under each eye 56 degrees along a line, a bright crease (the
 artist's smile: 8); without them the cheek raiser shows as the lower lids pushed up and the
 cheeks puffed (residual 0.61 with them, 0.66 without)."""
-HELD = {("expressions", 1): UPPER_LIP_SIDES + LIFT_CHEEKS}
+HELD = {("expressions", 1): LIFT_CHEEKS}
 """FAPs held at 0 in one shape, besides the eyeballs and the mid-line lips."""
+CORNERS_FIRST = {("expressions", 1): UPPER_LIP_SIDES}
+"""Shapes whose lip corners are fitted first, with these FAPs held too, and the rest of the shape
+fitted again around the corners with them free (``around_corners``): joy's corners lift 11.9 mm
+(the artist's 13.2), and the upper lip beside them rises with them. Held at 0 throughout, the
+lower lip rose 7 mm past the upper lip's inner edge beside the corners (the artist's: 1.3 mm);
+fitted with the corners, the corners lifted 11.1 mm."""
 ACROSS = (15, 64)
 """shift_jaw and bend_nose: a symmetric shape has none (their mirror is their negative)."""
 SMALLEST = 5
@@ -149,11 +154,25 @@ def unfolded(runtime: Runtime, values: np.ndarray) -> np.ndarray:
     return values
 
 
+def around_corners(runtime: Runtime, shape: np.ndarray, first: np.ndarray, held: tuple[int, ...]) -> np.ndarray:
+    """``first``'s lip corners (``CORNERS_RAISED``), with every other FAP fitted again (``held``
+    kept at 0) to what those corners leave of ``shape``."""
+    corners = np.zeros(N_FAPS)
+    index = [n - 1 for n in CORNERS_RAISED]
+    corners[index] = first[index]
+    left = shape - (runtime.deform_faps(corners) - runtime.deform_faps(np.zeros(N_FAPS)))
+    return corners + fit_faps(runtime, left, held=held + CORNERS_RAISED)
+
+
 def build(runtime: Runtime, examples: dict[str, np.ndarray]) -> dict[str, dict[int, np.ndarray]]:
     """{"expressions" / "visemes": {number: 68 FAP values}} for every recipe of ``puppet.fap.facs``."""
     def values(kind: str, number: int, units: dict[int, float]) -> np.ndarray:
         held = EYEBALLS + (MIDLIP if kind == "expressions" and 26 not in units else ()) + HELD.get((kind, number), ())
-        fitted = fit_faps(runtime, artist_shape(examples, units), held=held, past_editor=CORNERS_RAISED)
+        shape = artist_shape(examples, units)
+        first = CORNERS_FIRST.get((kind, number))
+        fitted = fit_faps(runtime, shape, held=held + (first or ()), past_editor=CORNERS_RAISED)
+        if first:
+            fitted = around_corners(runtime, shape, symmetric(fitted), held)
         eased = unfolded(runtime, symmetric(fitted))
         return np.round(runtime.faps.shown(eased))  # the lip pairs as they follow each other on the face
 
