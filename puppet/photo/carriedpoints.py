@@ -1,7 +1,8 @@
-"""Feature points MediaPipe has no landmark for, carried over from the default face by the warp its
-468 landmarks make.
+"""Feature points MediaPipe has no landmark for (or one the default face puts elsewhere), carried
+over from the default face by the warp its 468 landmarks make.
 
-MediaPipe's landmarks (``build.MEDIAPIPE_FDP``) give 42 feature points; a rig needs the others
+MediaPipe's landmarks (``build.MEDIAPIPE_FDP``) give 42 feature points, 39 of them taken as they
+are (the chin and the lid creases are the default face's own: ``OWN_PLACE``); a rig needs the others
 too: the jaw line (chin sides 2.11 / 2.12, jaw angles 2.13 / 2.14, on the face oval), cheeks,
 ears, hairline. Placed one by one from the frame of three nearest given points
 (``puppet.face.landmarks``), these are extrapolated far (the jaw angle lies 9-10% of the face
@@ -25,6 +26,16 @@ deviations out) the face oval's points now lie within 12% of the face width of t
 and the transfer's residual from found landmarks fell from 0.405 / 0.524 to 0.380 / 0.421 (from
 given landmarks: 0.352 / 0.357). On MediaPipe's canonical face, the 14 points its table gives and
 MediaPipe does not find lie 6.8% of the face width from them (median; placed: 10.2%).
+
+The chin and the lid creases carried too (``OWN_PLACE``), the found 2.1 lies 6.6-8.2% of the
+face width from the given one on those two faces (22-26% from MediaPipe's 152), and the residual
+from found landmarks is 0.382 / 0.394 (0.382 / 0.441 with them taken from MediaPipe, after the
+default face's incisors moved; the default face's own: 0.298; every 4th ARKit shape, ``--every 4``).
+Over all 51 shapes: 0.400 / 0.413 (0.400 / 0.441 taken from MediaPipe; given: 0.351 / 0.357; the
+default face's own: 0.299). On ICT-FaceKit, whose given chin
+is iBUG's (the chin's front, as MediaPipe's 152), the found 2.1 now lies 12.4% of the face width
+under it: its rig from given landmarks is the same, from found ones it creases more (6150
+creased edges over the 21 poses against 5495, no folds).
 """
 
 from __future__ import annotations
@@ -44,6 +55,14 @@ FACE_SIDES = (234, 454)  # MediaPipe's face-side points: their distance is the f
 OUTLIER = 0.08  # face widths off the similarity: a landmark on the view's outline, left out of the warp
 SMOOTHING = 10.0  # the thin-plate spline's smoothing, default face units (its face width: 1.45)
 ROUNDS = 3  # similarity fits, each without the outliers of the one before
+OWN_PLACE = {"2.1", "3.13", "3.14"}
+"""Feature points MediaPipe has a landmark for that the default face puts elsewhere, carried like
+the rest: its chin 2.1 lies under the chin, MediaPipe's 152 on the chin's front (13% of the face
+width apart on the default face itself); its upper-lid creases 3.13 / 3.14 lie in the fold, a
+dip seen in depth, not in a picture (MediaPipe's 257 / 27 lie 1.7% off them). Taken from
+MediaPipe, the shape-model faces' found 2.1 lay 22-26% of the face width from the given one,
+and one face's transfer residual was 0.441 (0.415 with the chin alone carried, 0.394 with the
+creases too; module docstring)."""
 BEHIND = {"11.4", "11.6"}
 """The top and back of the skull: hidden from the front view ``pick-landmarks`` shows, and no
 landmark near them to carry them by (``apply_landmarks`` places them, as before)."""
@@ -56,10 +75,16 @@ def mediapipe_reference() -> np.ndarray:
     return mediapipe_points(reference).on(reference.vertices)
 
 
+def found_fdps() -> dict[int, str]:
+    """MediaPipe landmark -> the FDP taken from it (``MEDIAPIPE_FDP`` less ``OWN_PLACE``)."""
+    return {i: fdp for i, fdp in MEDIAPIPE_FDP.items() if fdp not in OWN_PLACE}
+
+
 def carried_fdps() -> list[str]:
-    """The feature points carried: the default face's vertex feature points MediaPipe does not
-    give, less teeth, tongue (no skin under them), pupils (on the eyeball) and ``BEHIND``."""
-    given = set(MEDIAPIPE_FDP.values()) | SKIPPED | set(PUPILS) | BEHIND
+    """The feature points carried: the default face's vertex feature points not taken from
+    MediaPipe (``found_fdps``), less teeth, tongue (no skin under them), pupils (on the eyeball)
+    and ``BEHIND``."""
+    given = set(found_fdps().values()) | SKIPPED | set(PUPILS) | BEHIND
     return sorted(set(default_face().feature_vertices) - given)
 
 

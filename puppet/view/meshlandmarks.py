@@ -23,10 +23,11 @@ points ``puppet rig`` needs.
    the views that see its surface within ``MIN_FACING`` of head-on (the most frontal one when none
    does): of their vertices, the one nearest all their lifts (a medoid: it stays on the surface).
 4. **Feature points.** MediaPipe landmark -> FDP as ``face-from-photo`` reads them
-   (``puppet.photo.build.MEDIAPIPE_FDP``: eye corners and lids, brows, nose, lips, chin), and
-   the default face's other feature points (jaw line, cheeks, ears, hairline) carried over by the
-   warp all the landmarks make (``puppet.photo.carriedpoints``): the {FDP id: vertex} landmark
-   dict ``puppet.face.landmarks.apply_landmarks`` takes.
+   (``puppet.photo.build.MEDIAPIPE_FDP``: eye corners and lids, brows, nose, lips), and the
+   default face's other feature points (chin, lid creases, jaw line, cheeks, ears, hairline)
+   carried over by the warp all the landmarks make (``puppet.photo.carriedpoints``; the chin and
+   the lid creases because the default face puts them elsewhere than MediaPipe: ``OWN_PLACE``):
+   the {FDP id: vertex} landmark dict ``puppet.face.landmarks.apply_landmarks`` takes.
 
 How sure: the views the face was found in, and the agreement between views, per feature point
 the median distance of its lifts from the chosen vertex, in % of the face's width (between
@@ -53,7 +54,7 @@ from puppet.face.landmarks import FDP_NEEDED, apply_landmarks
 from puppet.face.meshparts import components
 from puppet.face.model import Face
 from puppet.photo.build import MEDIAPIPE_FDP
-from puppet.photo.carriedpoints import FACE_SIDES, carried_points, mediapipe_reference
+from puppet.photo.carriedpoints import FACE_SIDES, carried_points, found_fdps, mediapipe_reference
 from puppet.photo.detect import DetectionError, detect_faces
 from puppet.runtime.normals import VertexNormals
 from puppet.view.renderer import Camera, Renderer
@@ -259,15 +260,16 @@ def _combine(face: Face, normals: np.ndarray, lifts: np.ndarray, facing: np.ndar
     for i in np.flatnonzero(chosen >= 0):  # over the views the choice used
         use = _views_used(found & np.isfinite(lifts[:, i]).all(axis=1), on_skin[:, i], facing[:, i])
         spread[i] = np.median(np.linalg.norm(lifts[use, i] - vertices[chosen[i]], axis=1))
-    missing = sorted({MEDIAPIPE_FDP[i] for i in MEDIAPIPE_FDP if chosen[i] < 0} & set(FDP_NEEDED))
+    taken = found_fdps()
+    missing = sorted({taken[i] for i in taken if chosen[i] < 0} & set(FDP_NEEDED))
     if missing:
         raise DetectionError(f"{name}: the face was found but FDP(s) {missing} were seen in no view "
                              "(give its --landmarks, or correct them: puppet pick-landmarks)")
-    fdp = {fid: int(chosen[i]) for i, fid in sorted(MEDIAPIPE_FDP.items(), key=lambda kv: kv[1]) if chosen[i] >= 0}
+    fdp = {fid: int(chosen[i]) for i, fid in sorted(taken.items(), key=lambda kv: kv[1]) if chosen[i] >= 0}
     sides = chosen[list(FACE_SIDES)]
     width = float(np.linalg.norm(np.subtract(*vertices[sides])) if (sides >= 0).all()
                   else np.ptp(vertices[list(fdp.values())] @ rotation[0]))  # else the feature points' span
-    agree = {MEDIAPIPE_FDP[i]: float(spread[i] / width) for i in MEDIAPIPE_FDP if chosen[i] >= 0}
+    agree = {taken[i]: float(spread[i] / width) for i in taken if chosen[i] >= 0}
     fdp |= carried_points(vertices, skin, chosen, list(fdp.values()))
     return FoundLandmarks(fdp=fdp, vertices=chosen, spread=agree, views_found=int(found.sum()),
                           views=views, rotation=rotation, face_width=width)
