@@ -6,12 +6,12 @@ Each recipe is a weighted sum of the artist's ARKit shapes of the default face
 shipped rig (``fit_faps`` over the whole skin, within the face's limits; the eyeballs held still,
 and the lips' mid-line where the jaw does not drop: ``MIDLIP``; in joy the lip corners first,
 then the rest around them: ``CORNERS_FIRST``; the lip corners' raise past the Greta editor's
-slider end, ``CORNERS_RAISED``), made left/right symmetric, rounded to whole FAPU, and then eased where the
-sum folds (unless it raises the corners past the editor's end and folds only what the fold guard
-holds, ``held_by_guard``: joy): while a triangle is turned over, the FAP pair (a FAP and its
-mirror) whose easing to 90% unfolds most is eased (the artist's joy itself folds a few triangles
-where cheek and smile meet). What is
-written is what the face shows (``FapEngine.shown``: an eased lip FAP's twin follows it). Run
+slider end, ``CORNERS_RAISED``), made left/right symmetric, rounded to whole FAPU, and then
+eased where the sum folds (unless it raises the corners past the editor's end and folds only
+what the fold guard holds, ``held_by_guard``: joy): while a triangle is turned over, the FAP
+pair (a FAP and its mirror) whose easing to 90% unfolds most is eased (the artist's joy itself
+folds a few triangles where cheek and smile meet). What is written is what the face shows
+(``FapEngine.shown``: an eased lip FAP's twin follows it). Run
 ``tools/builders/build_default_rig.py`` after it: the rig's guard watches what these shapes fold.
 
 Fitting the sum beat summing the shapes' own fits (``arkit_faps.json``, eyeballs zeroed): before
@@ -113,9 +113,9 @@ def held_by_guard(runtime: Runtime, values: np.ndarray) -> bool:
     (``puppet.runtime.sliverguard``) watching the triangles it folds holds them all, moving no
     vertex more than ``GUARD_MOVE``. The shipped rig watches what the shipped poses fold (its
     ``guarded``, listed by ``tools/builders/build_default_rig.py`` from this table; ``runtime``
-    watches none, ``fitting_runtime``): joy's lip
-    corners raised as far as the artist's smile fold a few hidden slivers inside the corners,
-    which the guard holds by moving them at most a millimetre."""
+    watches none, ``fitting_runtime``): joy's lip corners raised as far as the artist's smile
+    fold a few hidden slivers inside the corners, which the guard holds by moving them at most a
+    millimetre."""
     triangles = np.asarray(runtime.face.triangles)
     plain = runtime.deform_faps(values)
     turned = folded_triangles(runtime.rest, plain, triangles)
@@ -226,9 +226,9 @@ def main(argv: list[str] | None = None) -> int:
         for number, (name, units) in recipes.items():
             D = artist_shape(examples, units)
             residuals[(kind, number)] = relative_residual(runtime, built[kind][number], D)
+            turned = folds(runtime, built[kind][number])[0]
             print(f"  {kind[:-1]} {number:>2} {name:<9} {relative_residual(runtime, before[kind][number], D):.3f} -> "
-                  f"{residuals[(kind, number)]:.3f}   ({folds(runtime, built[kind][number])[0]} folds, "
-                  f"{'held by the guard' if folds(runtime, built[kind][number])[0] else 'none shown'})")
+                  f"{residuals[(kind, number)]:.3f}   ({turned} folds, {'held by the guard' if turned else 'none shown'})")
     if not args.check:
         write(TABLE, built, residuals)
         print(f"{TABLE}: expressions 1-6 and visemes {', '.join(map(str, VISEMES))} written")
