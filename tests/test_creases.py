@@ -2,11 +2,13 @@
 on its hinge line and nothing elsewhere; rest and rigid motions bend nothing; a bound from a
 reference pose lets that pose through and catches a sharper one."""
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from puppet.runtime.creases import MARGIN, CreaseReference, Hinges
+from puppet.runtime.creases import MARGIN, CreaseReference, Hinges, largest_bend_near
 
 
 def sheet(n: int = 6) -> tuple[np.ndarray, np.ndarray]:
@@ -70,3 +72,16 @@ def test_a_reference_pose_bounds_the_same_pose_and_catches_a_sharper_one():
     assert sharper[on_line].all() and not sharper[~on_line].any()
     allowed = reference.allowed(vertices, nearest, hinge)
     assert (np.abs(hinges.bend(vertices, bent(vertices, 0.4), triangles)) > allowed).sum() == 6
+
+
+def test_the_largest_bend_near_a_point_sees_the_hinge_only_within_reach():
+    """On a sheet standing in for a face (its skin all of it, 2 wide), the bend near a point on the
+    hinge line is the sheet's angle; near a point farther from the line than the reach, nothing."""
+    vertices, triangles = sheet(6)
+    on_line, far = 3 * 7 + 3, 0  # the middle vertex (x = 0) and a corner (x = -1)
+    face = SimpleNamespace(vertices=vertices, triangles=triangles, parts={"skin": np.arange(len(vertices))},
+                           feature_vertices={"on": on_line, "far": far})
+    posed = bent(vertices, 0.5)
+    assert largest_bend_near(face, posed, ("on",), 0.1) == pytest.approx(np.degrees(0.5))
+    assert largest_bend_near(face, posed, ("far",), 0.3) == 0.0
+    assert largest_bend_near(face, posed, ("far", "on"), 0.1) == pytest.approx(np.degrees(0.5))

@@ -18,11 +18,11 @@ from tools.builders.build_high_level_faps import CORNERS_RAISED, MARKER, unfolde
 
 EXAMPLES = shared_assets() / "makehuman" / "faceunits_arkit"
 
-RESIDUAL_AT_MOST = {("expressions", 1): 0.56, ("expressions", 2): 0.50, ("expressions", 3): 0.34,
+RESIDUAL_AT_MOST = {("expressions", 1): 0.52, ("expressions", 2): 0.50, ("expressions", 3): 0.34,
                     ("expressions", 4): 0.30, ("expressions", 5): 0.60, ("expressions", 6): 0.35,
                     ("visemes", 13): 0.41, ("visemes", 14): 0.36}
 """|V(f) - V0 - D| / |D| against the summed artist shape, as tools/builders/build_high_level_faps.py
-measures it (0.524, 0.473, 0.313, 0.274, 0.573, 0.315, 0.376, 0.332) plus about 0.03. The hand-made
+measures it (0.483, 0.473, 0.313, 0.274, 0.573, 0.315, 0.376, 0.332) plus about 0.03. The hand-made
 tables before them left 0.75, 0.83, 1.16, 0.66, 1.05, 0.50, 0.56, 0.66."""
 
 FACS_BUILT = [("expressions", n) for n in EXPRESSIONS] + [("visemes", n) for n in VISEMES]
@@ -65,9 +65,8 @@ def test_a_recipe_is_the_sum_of_its_units_shapes():
 
 def test_joy_raises_both_lip_corners_and_the_lower_lids(runtime, face):
     """The artist lifts the corners 746 MNS; the hand-made joy 200, this one 672 (past the Greta
-    editor's 600 MNS: ``test_joy_lifts_the_lip_corners_...``). The cheek raiser (AU6) shows as the lower lids pushed up
-    and the cheeks puffed, not by lift_cheek, whose motion creases the cheek
-    (``test_joy_creases_no_cheek``)."""
+    editor's 600 MNS: ``test_joy_lifts_the_lip_corners_...``). The cheek raiser (AU6) shows as the lower lids pushed up,
+    the cheeks puffed and lifted (``test_joy_lifts_the_cheekbones_within_the_crease_bound``)."""
     joy = _pose(runtime, "expressions", 1)
     for corner in ("8.3", "8.4"):
         assert _moved(face, joy, corner, 1, "MNS0") >= 600
@@ -109,7 +108,8 @@ def test_joy_s_lower_lip_keeps_under_the_upper_one_beside_the_corners(runtime, f
 def test_joy_creases_no_cheek(runtime, face):
     """Near the cheekbones (within 0.08 face widths of 5.3 and 5.4) no skin edge bends more than
     20 degrees beyond its rest angle: the artist's own smile bends them at most 8, a joy with
-    lift_cheek 167 (the fit's choice) 56, a bright crease under each eye."""
+    lift_cheek 167 (the fit's choice) 56, a bright crease under each eye; joy lowers it until
+    they bend no more (``build_high_level_faps.within_crease``)."""
     joy = _pose(runtime, "expressions", 1)
     triangles = np.asarray(face.triangles)
     edges = np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]]), axis=1)
@@ -132,6 +132,15 @@ def test_joy_creases_no_cheek(runtime, face):
         near = np.linalg.norm(face.vertices[edges].mean(axis=1) - face.vertices[face.feature_vertices[cheekbone]], axis=1)
         near = (near < 0.08 * width) & skin[edges].all(axis=1)
         assert near.sum() > 20 and extra[near].max() < 20.0
+
+
+def test_joy_lifts_the_cheekbones_within_the_crease_bound(runtime, face):
+    """The cheek raiser lifts the cheekbones' points (5.3, 5.4) by lift_cheek: 4.7 mm, where the
+    artist's smile lifts them 9.2 (held at 0 for the crease, joy left them where they were); past
+    that, lift_cheek's motion creases the skin under the eyes (``test_joy_creases_no_cheek``)."""
+    joy = _pose(runtime, "expressions", 1)
+    for cheekbone in ("5.3", "5.4"):
+        assert _moved(face, joy, cheekbone, 1, "ENS0") > 60
 
 
 def test_joy_curves_the_lips_up_toward_the_corners(runtime, face):

@@ -117,3 +117,22 @@ class CreaseReference:
         ``nearest`` reference edges bend as they do with the reference in pose ``posed``."""
         rates = np.abs(self.hinges.bend_from(self.angles, posed, self.triangles)) / np.maximum(self.hinge, 1e-12)
         return hinge * rates[nearest].max(axis=1) + MARGIN
+
+
+def largest_bend_near(face, positions: np.ndarray, points: tuple[str, ...], within: float) -> float:
+    """The largest bend (degrees, either way) in ``positions`` of the skin's interior edges whose
+    midpoints lie within ``within`` face widths (the skin's extent in x) of feature points
+    ``points``: a crease where a viewer looks for one (under the eyes in a smile)."""
+    rest = np.asarray(face.vertices, float)
+    triangles = np.asarray(face.triangles)
+    hinges = Hinges.of(triangles)
+    skin = np.zeros(len(rest), dtype=bool)
+    skin[face.parts["skin"]] = True
+    width = np.ptp(rest[face.parts["skin"], 0])
+    places = hinges.midpoints(rest)
+    near = np.zeros(len(places), dtype=bool)
+    for point in points:
+        near |= np.linalg.norm(places - rest[face.feature_vertices[point]], axis=1) < within * width
+    near &= skin[hinges.edges].all(axis=1)
+    bend = hinges.bend(rest, np.asarray(positions, float), triangles)
+    return float(np.degrees(np.abs(bend[near]).max(initial=0.0)))

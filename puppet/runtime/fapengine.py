@@ -36,7 +36,9 @@ file; index 0 = FAP 1) into the runtime's inputs: control point displacements an
   - then the rig's ``fap_follow``: of two FAPs whose feature points lie a hair's breadth apart
     (an inner and an outer lip point), the one with the larger value leads and the other follows just
     enough that the inner lip never slides through the outer one (their range of difference narrows
-    as the two move together: ``puppet.runtime.follow``).
+    as the two move together: ``puppet.runtime.follow``);
+  - then the cheeks' crease limit: lift_cheek lowered as far as the skin under the eye needs, with
+    whatever else the frame moves (``puppet.runtime.creaselimit``).
 
   ``shown(values)`` gives the values the face then shows, which is what ``encode`` measures back;
   within these limits they are the values themselves (``puppet.runtime.foldlimits`` finds reach and follow).
@@ -66,6 +68,7 @@ from puppet.face import rigid
 from puppet.fap.highlevel import expand
 from puppet.fap.table import N_FAPS, fap, faps
 from puppet.runtime import follow
+from puppet.runtime.creaselimit import CreaseLimit
 from puppet.runtime.lastmade import LastMade
 from puppet.runtime.lidclosure import LidClosure
 from puppet.runtime.lids import LID_FAPS, LID_PAIRS, LID_PARTS
@@ -164,7 +167,12 @@ class FapEngine:
         outside = rows[:, :, 0] * v[a, None] + rows[:, :, 1] * v[b, None] - rows[:, :, 2]
         for k in np.flatnonzero(outside.max(axis=1, initial=0.0) > 0):  # the pairs share no FAP
             v[a[k]], v[b[k]] = follow.follower(rows[k], v[a[k]], v[b[k]])
+        self._creases.limit(v)
         return v
+
+    @functools.cached_property
+    def _creases(self) -> CreaseLimit:
+        return CreaseLimit(self)
 
     # -- decoding ------------------------------------------------------------------------
 

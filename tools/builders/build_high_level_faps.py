@@ -4,14 +4,15 @@ puppet/data/high_level_faps.yaml from their FACS recipes (puppet/fap/facs.py).
 Each recipe is a weighted sum of the artist's ARKit shapes of the default face
 (``../shared/assets/makehuman/faceunits_arkit``). Its FAPs are fitted to that summed shape on the
 shipped rig (``fit_faps`` over the whole skin, within the face's limits; the eyeballs held still,
-and the lips' mid-line where the jaw does not drop: ``MIDLIP``; in joy the lip corners first,
-then the rest around them: ``CORNERS_FIRST``; the lip corners' raise past the Greta editor's
-slider end, ``CORNERS_RAISED``), made left/right symmetric, rounded to whole FAPU, and then
-eased where the sum folds (unless it raises the corners past the editor's end and folds only
-what the fold guard holds, ``held_by_guard``: joy): while a triangle is turned over, the FAP
-pair (a FAP and its mirror) whose easing to 90% unfolds most is eased (the artist's joy itself
-folds a few triangles where cheek and smile meet). What is written is what the face shows
-(``FapEngine.shown``: an eased lip FAP's twin follows it). Run
+and the lips' mid-line where the jaw does not drop: ``MIDLIP``; in joy the lip corners first, then
+the rest around them: ``CORNERS_FIRST``; the lip corners' raise past the Greta editor's slider
+end, ``CORNERS_RAISED``; joy's lift_cheek lowered until the skin under the eyes bends no more than
+``CHEEK_CREASE``, the rest refitted around it: ``within_crease``), made left/right symmetric,
+rounded to whole FAPU, and then eased where the sum folds (unless it raises the corners past the
+editor's end and folds only what the fold guard holds, ``held_by_guard``: joy): while a triangle
+is turned over, the FAP pair (a FAP and its mirror) whose easing to 90% unfolds most is eased (the
+artist's joy itself folds a few triangles where cheek and smile meet). What is written is what the
+face shows (``FapEngine.shown``: an eased lip FAP's twin follows it). Run
 ``tools/builders/build_default_rig.py`` after it: the rig's guard watches what these shapes fold.
 
 Fitting the sum beat summing the shapes' own fits (``arkit_faps.json``, eyeballs zeroed): before
@@ -42,6 +43,7 @@ from puppet.face.examples import load_examples
 from puppet.fap.facs import EXPRESSIONS, VISEMES, artist_shape, describe
 from puppet.fap.highlevel import high_level_faps
 from puppet.fap.table import N_FAPS, clamp_ranges, fap
+from puppet.runtime.creases import largest_bend_near
 from puppet.runtime.fapcalibration import fit_faps, mirror_fap, relative_residual
 from puppet.runtime.musclesolver import folded_triangles
 from puppet.runtime.runtime import Runtime
@@ -60,15 +62,25 @@ UPPER_LIP_SIDES = (8, 9, 55, 56)
 corners are fitted (``CORNERS_FIRST``): fitted together, the upper lip beside the corners rises
 instead of them, which turns the smile into a pout (docs/realism_facs.png shows the smile)."""
 LIFT_CHEEKS = (41, 42)
-"""lift_l_cheek and lift_r_cheek, held at 0 in joy: at the 167 ENS the fit gives them, their
-calibrated motion bends the skin under each eye 56 degrees along a line, a bright crease (the
-artist's smile: 8); without them the cheek raiser shows as the lower lids pushed up and the
-cheeks puffed (residual 0.61 with them, 0.66 without)."""
-HELD = {("expressions", 1): LIFT_CHEEKS}
-"""FAPs held at 0 in one shape, besides the eyeballs and the mid-line lips."""
+"""lift_l_cheek and lift_r_cheek: their calibrated motion lifts the cheekbone's point (5.3, 5.4)
+faster than the skin around it, so that past about 100 ENS in joy the skin under each eye bends
+along a line, a bright crease (at the 167 ENS joy's fit gives them: 56 degrees; the artist's
+smile: 8). Joy keeps them within ``CHEEK_CREASE`` (``within_crease``)."""
+CHEEKBONES = ("5.3", "5.4")
+CHEEK_NEAR = 0.08
+"""Face widths around the cheekbones' points where joy's crease is measured."""
+CHEEK_CREASE = 20.0
+"""Degrees: the most a shape may bend a skin edge near the cheekbones beyond its rest angle (the
+artist's smile bends them 8; joy without lift_cheek, 13)."""
+CREASE_BOUNDED = {("expressions", 1): LIFT_CHEEKS}
+"""Shapes whose FAPs named here are lowered until the cheeks bend no more than ``CHEEK_CREASE``."""
+CREASE_STEPS = 6
+"""Halvings of the share of their fitted value that crease-bounded FAPs keep."""
+CREASE_ROUNDS = 3
+"""Times the crease-bounded FAPs are lowered and the rest refitted before they are dropped."""
 CORNERS_FIRST = {("expressions", 1): UPPER_LIP_SIDES}
 """Shapes whose lip corners are fitted first, with these FAPs held too, and the rest of the shape
-fitted again around the corners with them free (``around_corners``): joy's corners lift 11.9 mm
+fitted again around the corners with them free (``around``): joy's corners lift 11.9 mm
 (the artist's 13.2), and the upper lip beside them rises with them. Held at 0 throughout, the
 lower lip rose 7 mm past the upper lip's inner edge beside the corners (the artist's: 1.3 mm);
 fitted with the corners, the corners lifted 11.1 mm."""
@@ -154,25 +166,59 @@ def unfolded(runtime: Runtime, values: np.ndarray) -> np.ndarray:
     return values
 
 
-def around_corners(runtime: Runtime, shape: np.ndarray, first: np.ndarray, held: tuple[int, ...]) -> np.ndarray:
-    """``first``'s lip corners (``CORNERS_RAISED``), with every other FAP fitted again (``held``
-    kept at 0) to what those corners leave of ``shape``."""
-    corners = np.zeros(N_FAPS)
-    index = [n - 1 for n in CORNERS_RAISED]
-    corners[index] = first[index]
-    left = shape - (runtime.deform_faps(corners) - runtime.deform_faps(np.zeros(N_FAPS)))
-    return corners + fit_faps(runtime, left, held=held + CORNERS_RAISED)
+def around(runtime: Runtime, shape: np.ndarray, first: np.ndarray, kept: tuple[int, ...],
+           held: tuple[int, ...]) -> np.ndarray:
+    """``first``'s FAPs ``kept``, with every other FAP fitted again (``held`` kept at 0) to what
+    those leave of ``shape``."""
+    fixed = np.zeros(N_FAPS)
+    index = [n - 1 for n in kept]
+    fixed[index] = first[index]
+    left = shape - (runtime.deform_faps(fixed) - runtime.deform_faps(np.zeros(N_FAPS)))
+    return fixed + fit_faps(runtime, left, held=held + kept)
+
+
+def cheek_crease(runtime: Runtime, values: np.ndarray) -> float:
+    """The largest bend (degrees) near the cheekbones in the pose ``values``."""
+    return largest_bend_near(runtime.face, runtime.deform_faps(values), CHEEKBONES, CHEEK_NEAR)
+
+
+def within_crease(runtime: Runtime, shape: np.ndarray, values: np.ndarray, bounded: tuple[int, ...],
+                  kept: tuple[int, ...], held: tuple[int, ...]) -> np.ndarray:
+    """``values`` with the FAPs ``bounded`` lowered to the largest share of their value
+    (``CREASE_STEPS`` halvings) that bends the cheeks no more than ``CHEEK_CREASE``, and the
+    FAPs other than those and ``kept`` fitted again around them; again while the refit bends
+    them more (``CREASE_ROUNDS`` at most, then the bounded FAPs are dropped)."""
+    index = [n - 1 for n in bounded]
+    for _ in range(CREASE_ROUNDS):
+        if cheek_crease(runtime, values) <= CHEEK_CREASE:
+            return values
+        good, bad = 0.0, 1.0
+        for _ in range(CREASE_STEPS):
+            share = (good + bad) / 2
+            trial = values.copy()
+            trial[index] = np.round(values[index] * share)
+            good, bad = (share, bad) if cheek_crease(runtime, trial) <= CHEEK_CREASE else (good, share)
+        lowered = values.copy()
+        lowered[index] = np.round(values[index] * good)
+        values = symmetric(around(runtime, shape, lowered, kept + bounded, held))
+    if cheek_crease(runtime, values) <= CHEEK_CREASE:
+        return values
+    values[index] = 0
+    return symmetric(around(runtime, shape, values, kept + bounded, held))
 
 
 def build(runtime: Runtime, examples: dict[str, np.ndarray]) -> dict[str, dict[int, np.ndarray]]:
     """{"expressions" / "visemes": {number: 68 FAP values}} for every recipe of ``puppet.fap.facs``."""
     def values(kind: str, number: int, units: dict[int, float]) -> np.ndarray:
-        held = EYEBALLS + (MIDLIP if kind == "expressions" and 26 not in units else ()) + HELD.get((kind, number), ())
+        held = EYEBALLS + (MIDLIP if kind == "expressions" and 26 not in units else ())
         shape = artist_shape(examples, units)
         first = CORNERS_FIRST.get((kind, number))
-        fitted = fit_faps(runtime, shape, held=held + (first or ()), past_editor=CORNERS_RAISED)
+        bounded = CREASE_BOUNDED.get((kind, number), ())
+        fitted = fit_faps(runtime, shape, held=held + (first + bounded if first else ()), past_editor=CORNERS_RAISED)
         if first:
-            fitted = around_corners(runtime, shape, symmetric(fitted), held)
+            fitted = around(runtime, shape, symmetric(fitted), CORNERS_RAISED, held)
+        if bounded:
+            fitted = within_crease(runtime, shape, symmetric(fitted), bounded, CORNERS_RAISED if first else (), held)
         eased = unfolded(runtime, symmetric(fitted))
         return np.round(runtime.faps.shown(eased))  # the lip pairs as they follow each other on the face
 

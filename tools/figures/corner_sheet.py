@@ -18,9 +18,14 @@ each view's row of the other checkout above this one's, folded triangles marked 
   lower lid 60) and as the artists' blink closes it (800 and 224: the lids meet);
 * ``--corner frown`` (``docs/frown_blink_corners.png``): the same eye closing under a frown (the
   right brows lowered as far as the face takes them; 700, 1002, 1004, 1024 IRISD: with shapes
-  sampled for the lid alone, the outer corner jumped 2.5 mm between the middle two).
+  sampled for the lid alone, the outer corner jumped 2.5 mm between the middle two);
+* ``--corner cheek`` (``docs/cheek_crease.png``): the skin under the left eye in joy, in the ARKit
+  route's smile (mouthSmile and cheekSquint at full, both sides: ``puppet/data/arkit_faps.json``'s
+  rows summed) and in cheekSquintLeft alone, three-quarter (rows 1-2) and front (rows 3-4): where
+  lift_cheek creased it (``puppet.runtime.creaselimit``).
 
-    PYTHONPATH=. python tools/figures/corner_sheet.py --before DIR [--corner mouth|eye|blink|close|frown] [--out PNG]
+    PYTHONPATH=. python tools/figures/corner_sheet.py --before DIR [--corner mouth|smile|eye|blink|close|frown|cheek]
+        [--out PNG]
 
 ``--before`` is a checkout of the project (e.g. ``git worktree add /tmp/before REV``); its tiles
 are rendered by running this script there (``--tiles``), with its own face, rig and renderer.
@@ -43,6 +48,8 @@ RED = (230, 20, 20)
 EVERY_MUSCLE = "every"  # stands for every muscle of the face at 0.5
 FROWN = {"raise_r_i_eyebrow": -220.0, "raise_r_m_eyebrow": -180.0, "raise_r_o_eyebrow": -140.0}
 """The slider box's right brow slider at the bottom of its travel (the face caps it at its reach)."""
+LIVE_SMILE = ("mouthSmileLeft", "mouthSmileRight", "cheekSquintLeft", "cheekSquintRight")
+"""A phone's full smile on the ARKit route: these blendshapes at 1."""
 CORNERS = {
     "mouth": {"out": "mouth_corner.png", "centre": ("8.3",), "shift": (0.0, -0.15, 0.0),
               "views": ((0.6, 0.0, 1.2), (0.0, 0.0, 1.5)),  # camera offsets, dm: three-quarter, front
@@ -65,9 +72,27 @@ CORNERS = {
               "poses": [{"fap": {"close_t_r_eyelid": 900.0}}, {"fap": {"close_t_r_eyelid": 1024.0}},
                         {"fap": {"close_t_r_eyelid": 900.0, "close_b_r_eyelid": 60.0}},
                         {"fap": {"close_t_r_eyelid": 800.0, "close_b_r_eyelid": 224.0}}]},
+    "cheek": {"out": "cheek_crease.png", "centre": ("5.3",), "shift": (0.0, 0.1, 0.0),
+              "views": ((0.9, 0.1, 1.3), (0.0, 0.0, 1.6)),
+              "poses": [{"expression": (1, 63, 0, 0)}, {"arkit": LIVE_SMILE}, {"arkit": ("cheekSquintLeft",)}]},
 }
 """Per corner: the sheet's file in docs/, the feature points whose middle (shifted) the camera
-looks at, the views and the poses (``Runtime.deform_faps`` arguments)."""
+looks at, the views and the poses (``Runtime.deform_faps`` arguments, or ``arkit``: ARKit blendshapes at 1)."""
+
+
+def arkit_pose(names: tuple[str, ...]) -> dict:
+    """The ``deform_faps`` arguments of the ARKit blendshapes ``names`` at 1, their rows in this
+    checkout's ``puppet/data/arkit_faps.json`` summed."""
+    import json
+
+    import puppet
+
+    rows = json.loads((Path(puppet.__file__).parent / "data" / "arkit_faps.json").read_text())["faps"]
+    values: dict[str, float] = {}
+    for name in names:
+        for fap_name, value in rows[name].items():
+            values[fap_name] = values.get(fap_name, 0.0) + value
+    return {"fap": values}
 
 
 def tiles(corner: str) -> list[np.ndarray]:
@@ -88,6 +113,8 @@ def tiles(corner: str) -> list[np.ndarray]:
             for pose in spec["poses"]:
                 if pose.get("muscles") == EVERY_MUSCLE:
                     pose = {"muscles": dict.fromkeys(runtime.muscle_names, 0.5)}
+                if "arkit" in pose:
+                    pose = arkit_pose(pose["arkit"])
                 vertices = runtime.deform_faps(**pose)
                 rigid = runtime.fap_controls(pose.get("fap"))[1]
                 image = renderer.render(vertices, runtime.normals(vertices, rigid)).copy()
