@@ -24,7 +24,7 @@ import functools
 
 import numpy as np
 
-from puppet.runtime.creases import Hinges
+from puppet.runtime.creases import Hinges, near_edges
 
 LIMITED = {41: "5.3", 42: "5.4"}
 """lift_l_cheek, lift_r_cheek: the FAP and the feature point around which it creases the skin."""
@@ -116,14 +116,9 @@ class CreaseLimit:
         rest = np.asarray(face.vertices, dtype=float)
         triangles = np.asarray(face.triangles, dtype=np.int64)
         hinges = Hinges.of(triangles)
-        skin = np.zeros(len(rest), dtype=bool)
-        skin[face.parts["skin"]] = True
-        width = np.ptp(rest[face.parts["skin"], 0])
-        places = hinges.midpoints(rest)
-        side = np.full(len(places), -1)
+        side = np.full(len(hinges.edges), -1)
         for k, number in enumerate(self.numbers):
-            near = np.linalg.norm(places - rest[face.feature_vertices[LIMITED[number]]], axis=1) < NEAR * width
-            side[near & skin[hinges.edges].all(axis=1) & (side < 0)] = k
+            side[near_edges(face, hinges, LIMITED[number], NEAR) & (side < 0)] = k
         B = runtime.B if runtime.mode == "precomputed" else runtime._folded()
         return _watched(hinges, side, triangles, rest, B, engine._translations.reshape(len(runtime.control_points), 3, -1))
 

@@ -119,20 +119,23 @@ class CreaseReference:
         return hinge * rates[nearest].max(axis=1) + MARGIN
 
 
-def largest_bend_near(face, positions: np.ndarray, points: tuple[str, ...], within: float) -> float:
-    """The largest bend (degrees, either way) in ``positions`` of the skin's interior edges whose
-    midpoints lie within ``within`` face widths (the skin's extent in x) of feature points
-    ``points``: a crease where a viewer looks for one (under the eyes in a smile)."""
+def near_edges(face, hinges: Hinges, point: str, within: float) -> np.ndarray:
+    """Mask over ``hinges`` (the face's interior edges): the skin's edges whose midpoints lie within
+    ``within`` face widths (the skin's extent in x) of feature point ``point``."""
     rest = np.asarray(face.vertices, float)
-    triangles = np.asarray(face.triangles)
-    hinges = Hinges.of(triangles)
     skin = np.zeros(len(rest), dtype=bool)
     skin[face.parts["skin"]] = True
     width = np.ptp(rest[face.parts["skin"], 0])
-    places = hinges.midpoints(rest)
-    near = np.zeros(len(places), dtype=bool)
-    for point in points:
-        near |= np.linalg.norm(places - rest[face.feature_vertices[point]], axis=1) < within * width
-    near &= skin[hinges.edges].all(axis=1)
+    distance = np.linalg.norm(hinges.midpoints(rest) - rest[face.feature_vertices[point]], axis=1)
+    return (distance < within * width) & skin[hinges.edges].all(axis=1)
+
+
+def largest_bend_near(face, positions: np.ndarray, points: tuple[str, ...], within: float) -> float:
+    """The largest bend (degrees, either way) in ``positions`` of the skin's edges ``near_edges``
+    of any of ``points``: a crease where a viewer looks for one (under the eyes in a smile)."""
+    rest = np.asarray(face.vertices, float)
+    triangles = np.asarray(face.triangles)
+    hinges = Hinges.of(triangles)
+    near = np.any([near_edges(face, hinges, point, within) for point in points], axis=0)
     bend = hinges.bend(rest, np.asarray(positions, float), triangles)
     return float(np.degrees(np.abs(bend[near]).max(initial=0.0)))

@@ -43,6 +43,7 @@ from puppet.face.examples import load_examples
 from puppet.fap.facs import EXPRESSIONS, VISEMES, artist_shape, describe
 from puppet.fap.highlevel import high_level_faps
 from puppet.fap.table import N_FAPS, clamp_ranges, fap
+from puppet.runtime import creaselimit
 from puppet.runtime.creases import largest_bend_near
 from puppet.runtime.fapcalibration import fit_faps, mirror_fap, relative_residual
 from puppet.runtime.musclesolver import folded_triangles
@@ -66,14 +67,12 @@ LIFT_CHEEKS = (41, 42)
 faster than the skin around it, so that past about 100 ENS in joy the skin under each eye bends
 along a line, a bright crease (at the 167 ENS joy's fit gives them: 56 degrees; the artist's
 smile: 8). Joy keeps them within ``CHEEK_CREASE`` (``within_crease``)."""
-CHEEKBONES = ("5.3", "5.4")
-CHEEK_NEAR = 0.08
-"""Face widths around the cheekbones' points where joy's crease is measured."""
-CHEEK_CREASE = 20.0
-"""Degrees: the most a shape may bend a skin edge near the cheekbones beyond its rest angle (the
-artist's smile bends them 8; joy without lift_cheek, 13)."""
+CHEEK_CREASE = np.degrees(creaselimit.BOUND)
+"""Degrees: the most a shape may bend a skin edge near the cheekbones beyond its rest angle, as at
+pose time (``puppet.runtime.creaselimit``; the artist's smile bends them 8, joy without lift_cheek 13)."""
 CREASE_BOUNDED = {("expressions", 1): LIFT_CHEEKS}
-"""Shapes whose FAPs named here are lowered until the cheeks bend no more than ``CHEEK_CREASE``."""
+"""Shapes whose FAPs named here are lowered until the cheeks bend no more than ``CHEEK_CREASE``
+(the pose-time limit then leaves them as they are, and the rest of the shape is refitted around them)."""
 CREASE_STEPS = 6
 """Halvings of the share of their fitted value that crease-bounded FAPs keep."""
 CREASE_ROUNDS = 3
@@ -179,7 +178,8 @@ def around(runtime: Runtime, shape: np.ndarray, first: np.ndarray, kept: tuple[i
 
 def cheek_crease(runtime: Runtime, values: np.ndarray) -> float:
     """The largest bend (degrees) near the cheekbones in the pose ``values``."""
-    return largest_bend_near(runtime.face, runtime.deform_faps(values), CHEEKBONES, CHEEK_NEAR)
+    return largest_bend_near(runtime.face, runtime.deform_faps(values), tuple(creaselimit.LIMITED.values()),
+                             creaselimit.NEAR)
 
 
 def within_crease(runtime: Runtime, shape: np.ndarray, values: np.ndarray, bounded: tuple[int, ...],
