@@ -14,8 +14,8 @@ value is not 0, the bend of the skin's interior edges within ``NEAR`` face width
 point (``puppet.runtime.creases``), from the frame's translations spread by DFFD onto those few
 vertices (exact for the FAPs' own and calibrated motions; the rigid parts' carried points, which
 do not reach the cheekbones, are left out). Where the largest bend passes ``BOUND`` and more than
-the frame would bend without the FAP, the FAP is lowered (``STEPS`` halvings) until it does not;
-what a file says is never changed. About 30 microseconds a frame when a cheek FAP is not 0.
+the frame would bend without the FAP, the FAP is lowered until it does not;
+what a file says is never changed.
 """
 
 from __future__ import annotations
@@ -33,38 +33,42 @@ NEAR = 0.08
 BOUND = np.radians(20.0)
 """The most a watched edge may bend beyond its rest angle through the FAP (the artist's smile
 bends them 8 degrees; joy without lift_cheek 13)."""
-STEPS = 8
-"""Halvings of the share of its value a lowered FAP keeps."""
+SHARES = 17
+"""Shares of its value a lowered FAP is tried at in one go, twice (coarse, then fine): the share it
+keeps is found to 1/256 (1 ENS of lift_cheek's 209 reach on the default face)."""
 
 
 class _Watch:
-    """The watched edges over the few vertices their two triangles touch: each edge's ends and its
-    triangles' corners (coordinates as rows, so the bends are a few whole-array steps on a few
-    dozen columns), the rest angles, which limited FAP each edge is watched for (``side``: its
-    index in ``CreaseLimit.numbers``), and the vertices' displacement per unit of each FAP (3n, 68)."""
+    """One limited FAP's watched edges over the few vertices their two triangles touch: each edge's
+    ends and its triangles' corners (coordinates as rows, so the bends are a few whole-array steps on
+    a few dozen columns), the rest angles, and the vertices' displacement per unit of each FAP (3n, 68)."""
 
-    def __init__(self, hinges: Hinges, triangles: np.ndarray, rest: np.ndarray, response: np.ndarray,
-                 side: np.ndarray) -> None:
+    def __init__(self, hinges: Hinges, triangles: np.ndarray, rest: np.ndarray, response: np.ndarray) -> None:
         self.ends = hinges.edges.T
         self.corners = np.r_[triangles[hinges.left], triangles[hinges.right]].T  # (3, 2E): the left triangles, then the right
         self.count = len(hinges.edges)
         self.rest = np.ascontiguousarray(rest.T)
         self.response = response
-        self.side = side
         self.angles = hinges.dihedral(rest, triangles)
 
-    def bends(self, displacement: np.ndarray) -> np.ndarray:
-        """Each watched edge's bend (radians, either way) for the vertices' ``displacement`` (3n,)."""
-        x = self.rest + displacement.reshape(-1, 3).T
-        p0, p1, p2 = (x[:, c] for c in self.corners)
+    def bends(self, displacements: np.ndarray) -> np.ndarray:
+        """Each watched edge's bend (S, E; radians, either way) for each of the vertices'
+        ``displacements`` (S, 3n), in one go."""
+        x = self.rest + displacements.reshape(len(displacements), -1, 3).transpose(0, 2, 1)
+        p0, p1, p2 = (x[:, :, c] for c in self.corners)
         u, w = p1 - p0, p2 - p0
-        n = np.array([u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2], u[0] * w[1] - u[1] * w[0]])
-        n1, n2 = n[:, : self.count], n[:, self.count:]
-        axis = x[:, self.ends[1]] - x[:, self.ends[0]]
-        across = np.array([n1[1] * n2[2] - n1[2] * n2[1], n1[2] * n2[0] - n1[0] * n2[2], n1[0] * n2[1] - n1[1] * n2[0]])
-        sine = (across * axis).sum(axis=0) / np.sqrt((axis * axis).sum(axis=0))
-        angle = np.arctan2(sine, (n1 * n2).sum(axis=0))
+        n = _cross(u, w)
+        n1, n2 = n[:, :, : self.count], n[:, :, self.count:]
+        axis = x[:, :, self.ends[1]] - x[:, :, self.ends[0]]
+        sine = (_cross(n1, n2) * axis).sum(axis=1) / np.sqrt((axis * axis).sum(axis=1))
+        angle = np.arctan2(sine, (n1 * n2).sum(axis=1))
         return np.abs(np.pi - np.remainder(np.pi - (angle - self.angles), 2 * np.pi))
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Cross products of coordinate-row batches (S, 3, m)."""
+    return np.stack([a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1], a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
+                     a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]], axis=1)
 
 
 class CreaseLimit:
@@ -78,60 +82,53 @@ class CreaseLimit:
 
     def limit(self, v: np.ndarray) -> None:
         """Lower the limited FAPs of the shown values ``v`` (68,) in place where they crease."""
-        lifted = [k for k, number in enumerate(self.numbers) if v[number - 1] != 0]
-        if not lifted:
-            return
-        watch = self._watch
-        full = watch.response @ v
-        bends = watch.bends(full)
-        for k in lifted:
-            mine = watch.side == k
-            if bends[mine].max(initial=0.0) > BOUND:
-                full = self._lowered(watch, mine, self.numbers[k] - 1, full, v)
-
-    def _lowered(self, watch: _Watch, mine: np.ndarray, column: int, full: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """Lower ``v[column]`` until the edges ``mine`` bend no more than ``BOUND`` or than they bend
-        without it; the watched vertices' displacement ``full`` then."""
-        own = watch.response[:, column] * v[column]
-
-        def bend(share: float) -> float:
-            return float(watch.bends(full - (1.0 - share) * own)[mine].max())
-
-        allowed = max(BOUND, bend(0.0))
-        if bend(1.0) <= allowed:
-            return full
-        good, bad = 0.0, 1.0
-        for _ in range(STEPS):
-            share = (good + bad) / 2
-            good, bad = (share, bad) if bend(share) <= allowed else (good, share)
-        v[column] *= good
-        return full - (1.0 - good) * own
+        for k, number in enumerate(self.numbers):
+            if v[number - 1] == 0:
+                continue
+            watch = self._watches[k]
+            full = watch.response @ v
+            if watch.bends(full[None]).max() > BOUND:
+                v[number - 1] *= _kept(watch, full, watch.response[:, number - 1] * v[number - 1])
 
     @functools.cached_property
-    def _watch(self) -> _Watch:
-        """The watch of every limited FAP's edges, made on first use (a runtime that never lifts a
-        cheek never pays)."""
+    def _watches(self) -> list[_Watch]:
+        """Each limited FAP's watch, made on first use (a runtime that never lifts a cheek never pays)."""
         engine = self.engine
         face, runtime = engine.face, engine.runtime
         rest = np.asarray(face.vertices, dtype=float)
         triangles = np.asarray(face.triangles, dtype=np.int64)
         hinges = Hinges.of(triangles)
-        side = np.full(len(hinges.edges), -1)
-        for k, number in enumerate(self.numbers):
-            side[near_edges(face, hinges, LIMITED[number], NEAR) & (side < 0)] = k
         B = runtime.B if runtime.mode == "precomputed" else runtime._folded()
-        return _watched(hinges, side, triangles, rest, B, engine._translations.reshape(len(runtime.control_points), 3, -1))
+        moves = engine._translations.reshape(len(runtime.control_points), 3, -1)
+        return [_watched(hinges, near_edges(face, hinges, LIMITED[number], NEAR), triangles, rest, B, moves)
+                for number in self.numbers]
 
 
-def _watched(hinges: Hinges, side: np.ndarray, triangles: np.ndarray, rest: np.ndarray, B, moves: np.ndarray) -> _Watch:
-    """The watch of the edges with a ``side`` (-1: not watched): their two triangles' vertices
+def _kept(watch: _Watch, full: np.ndarray, own: np.ndarray) -> float:
+    """The share of its value a FAP keeps whose part of the watched vertices' displacement ``full``
+    is ``own``: the largest on a grid of ``SHARES`` from 0 to 1, refined once on as fine a grid up
+    to the next, that bends the edges no more than ``BOUND`` or than they bend without it."""
+    def bends(shares: np.ndarray) -> np.ndarray:
+        return watch.bends(full - np.outer(1.0 - shares, own)).max(axis=1)
+
+    coarse = np.linspace(0.0, 1.0, SHARES)
+    bend = bends(coarse)
+    allowed = max(BOUND, bend[0])
+    if bend[-1] <= allowed:
+        return 1.0
+    first = int(np.argmax(bend > allowed))  # the first share that bends past it (not 0: that one is allowed)
+    fine = np.linspace(coarse[first - 1], coarse[first], SHARES)
+    return float(fine[int(np.argmax(bends(fine) > allowed)) - 1])
+
+
+def _watched(hinges: Hinges, near: np.ndarray, triangles: np.ndarray, rest: np.ndarray, B, moves: np.ndarray) -> _Watch:
+    """The watch of the edges ``near`` (a mask over ``hinges``): their two triangles' vertices
     renumbered, and those vertices' response to each FAP, DFFD's rows ``B`` over the active points'
     ``moves`` (K, 3, 68)."""
-    near = side >= 0
     left, right = hinges.left[near], hinges.right[near]
     vertices, local = np.unique(triangles[np.r_[left, right]], return_inverse=True)
     count = int(near.sum())
     rows = np.asarray(B[vertices][:, : moves.shape[0]].todense(), dtype=float)
     response = np.einsum("vk,kaf->vaf", rows, moves).reshape(-1, moves.shape[2])
     local_hinges = Hinges(np.searchsorted(vertices, hinges.edges[near]), np.arange(count), np.arange(count, 2 * count))
-    return _Watch(local_hinges, local.reshape(-1, 3), rest[vertices], response, side[near])
+    return _Watch(local_hinges, local.reshape(-1, 3), rest[vertices], response)
