@@ -91,6 +91,40 @@ def test_the_chin_and_lid_creases_are_carried_to_the_default_faces_own_places():
         assert np.linalg.norm(vertices[carried[fdp]] - vertices[face.feature_vertices[fdp]]) < 0.01 * width, fdp
 
 
+def test_a_feature_point_no_view_sees_head_on_is_taken_from_all_the_views_that_see_it():
+    """A lip corner in its crease is seen within ``MIN_FACING`` of head-on by no view: taken from
+    the most frontal alone, on a shape-model face that was a view turned 25 degrees which saw the
+    upper lip in front of the corner, and the inner corner 2.5 fell on 2.2's vertex (the rig
+    refused the face). All the views that see a feature point vote now; another landmark seen
+    so (the face oval's, edge-on) is still taken from the most frontal one."""
+    from puppet.view.meshlandmarks import MIN_FACING, _views_used
+
+    seen = np.ones(5, dtype=bool)
+    facing = np.array([0.14, 0.48, 0.09, 0.32, 0.03])  # 2.5 on that face: view 1 the turned one
+    assert facing.max() < MIN_FACING and _views_used(seen, seen, facing, True).all()
+    assert _views_used(seen, seen, facing, False).tolist() == [False, True, False, False, False]
+    facing[2] = 0.9
+    assert _views_used(seen, seen, facing, True).tolist() == [False, False, True, False, False]
+
+
+def test_two_feature_points_found_on_one_vertex_are_set_apart():
+    """Two feature points snapped to one vertex stop the rig (a control point on each): the one
+    whose lifts lie nearer keeps it, the other takes the nearest vertex no other point holds (on a
+    shape-model face, the lower inner lip's middle and side, 2.3 and 2.8)."""
+    from puppet.view.meshlandmarks import N_MESH, _distinct
+
+    vertices = np.c_[np.arange(10.0), np.zeros(10), np.zeros(10)]
+    rows = {None: (np.arange(10), cKDTree(vertices))}
+    middle, side = 14, 402  # MediaPipe's 2.3 and 2.8
+    chosen = np.full(N_MESH, -1)
+    chosen[[middle, side]] = 5
+    lifts = np.full((2, N_MESH, 3), np.nan)
+    lifts[:, middle] = [[5.0, 0.1, 0.0], [5.1, 0.0, 0.0]]
+    lifts[:, side] = [[4.4, 0.0, 0.0], [4.2, 0.0, 0.0]]
+    _distinct(chosen, vertices, rows, lifts, np.ones(2, dtype=bool))
+    assert (chosen[middle], chosen[side]) == (5, 4)
+
+
 @needs_detector
 @pytest.mark.parametrize("turn", TURNS)
 def test_a_face_turned_in_its_file_is_found_the_same(found, turn, tmp_path):
