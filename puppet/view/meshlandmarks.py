@@ -258,9 +258,9 @@ def _combine(face: Face, normals: np.ndarray, lifts: np.ndarray, facing: np.ndar
         near = among[tree.query(lifts[use, i])[1]]
         cost = np.linalg.norm(vertices[near][:, None] - lifts[use, i][None], axis=2).sum(axis=1)
         chosen[i] = near[np.argmin(cost)]
+    _distinct(chosen, vertices, rows, lifts, found)
     _apart(chosen, vertices, rows, lifts, found, rotation[1])
     _outside(chosen, vertices, rows[None], lifts, found, rotation[0])
-    _distinct(chosen, vertices, rows, lifts, found)
     for i in np.flatnonzero(chosen >= 0):  # over the views the choice used
         use = _views_used(found & np.isfinite(lifts[:, i]).all(axis=1), on_skin[:, i], facing[:, i],
                           i in MEDIAPIPE_FDP)
