@@ -258,9 +258,10 @@ def _combine(face: Face, normals: np.ndarray, lifts: np.ndarray, facing: np.ndar
         near = among[tree.query(lifts[use, i])[1]]
         cost = np.linalg.norm(vertices[near][:, None] - lifts[use, i][None], axis=2).sum(axis=1)
         chosen[i] = near[np.argmin(cost)]
-    _distinct(chosen, vertices, rows, lifts, found)
     _apart(chosen, vertices, rows, lifts, found, rotation[1])
     _outside(chosen, vertices, rows[None], lifts, found, rotation[0])
+    _distinct(chosen, vertices, rows, lifts, found)
+    _apart(chosen, vertices, rows, lifts, found, rotation[1])  # a point set apart can cross its pair
     for i in np.flatnonzero(chosen >= 0):  # over the views the choice used
         use = _views_used(found & np.isfinite(lifts[:, i]).all(axis=1), on_skin[:, i], facing[:, i],
                           i in MEDIAPIPE_FDP)
@@ -408,17 +409,29 @@ def _distinct(chosen: np.ndarray, vertices: np.ndarray, rows: dict[str | None, t
               lifts: np.ndarray, found: np.ndarray) -> None:
     """No two feature points on one vertex (in place): the rig puts a control point on each, and
     two in one place stop it. On a shape-model face whose upper lip stands over the lower one,
-    the lower inner lip's middle and side (2.3, 2.8) snapped to one vertex. The points claim
-    their vertices nearest first (their mean lift's distance from it); one that finds its vertex
-    held takes the nearest vertex of its row (``_row``) that no other holds."""
+    the lower inner lip's middle and side (2.3, 2.8) snapped to one vertex. Of the points on one
+    vertex, the one that would move farthest from its lifts' mean keeps it; the others take the
+    nearest vertex of their row (``_row``) that no point holds."""
     target = {i: np.nanmean(lifts[found, i], axis=0) for i in found_fdps() if chosen[i] >= 0}
-    held: set[int] = set()
-    for i in sorted(target, key=lambda i: np.linalg.norm(vertices[chosen[i]] - target[i])):
-        if chosen[i] in held:
-            among, tree = _row(rows, MEDIAPIPE_FDP[i])
-            near = among[tree.query(target[i], k=min(len(among), 24))[1]]
-            chosen[i] = next((int(v) for v in near if v not in held), chosen[i])
-        held.add(int(chosen[i]))
+    held = {int(chosen[i]) for i in target}
+
+    def elsewhere(i: int) -> int | None:
+        among, tree = _row(rows, MEDIAPIPE_FDP[i])
+        near = among[tree.query(target[i], k=min(len(among), 24))[1]]
+        return next((int(v) for v in near if v not in held), None)
+
+    def cost(i: int) -> float:
+        other = elsewhere(i)
+        return np.inf if other is None else float(np.linalg.norm(vertices[other] - target[i])
+                                                  - np.linalg.norm(vertices[chosen[i]] - target[i]))
+
+    for vertex in sorted(held):
+        group = [i for i in target if chosen[i] == vertex]
+        for i in sorted(group, key=cost)[:-1]:
+            other = elsewhere(i)
+            if other is not None:
+                chosen[i] = other
+                held.add(other)
 
 
 def skin_vertices(vertices: np.ndarray, triangles: np.ndarray, lifts: np.ndarray) -> np.ndarray:
