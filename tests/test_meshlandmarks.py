@@ -91,6 +91,40 @@ def test_the_chin_and_lid_creases_are_carried_to_the_default_faces_own_places():
         assert np.linalg.norm(vertices[carried[fdp]] - vertices[face.feature_vertices[fdp]]) < 0.01 * width, fdp
 
 
+def test_a_feature_point_no_view_sees_head_on_is_taken_from_all_the_views_that_see_it():
+    """A lip corner in its crease is seen within ``MIN_FACING`` of head-on by no view: taken from
+    the most frontal alone, on a shape-model face that was a view turned 25 degrees which saw the
+    upper lip in front of the corner, and the inner corner 2.5 fell on 2.2's vertex (the rig
+    refused the face). All the views that see a feature point vote now; another landmark seen
+    so (the face oval's, edge-on) is still taken from the most frontal one."""
+    from puppet.view.meshlandmarks import MIN_FACING, _views_used
+
+    seen = np.ones(5, dtype=bool)
+    facing = np.array([0.14, 0.48, 0.09, 0.32, 0.03])  # 2.5 on that face: view 1 the turned one
+    assert facing.max() < MIN_FACING and _views_used(seen, seen, facing, True).all()
+    assert _views_used(seen, seen, facing, False).tolist() == [False, True, False, False, False]
+    facing[2] = 0.9
+    assert _views_used(seen, seen, facing, True).tolist() == [False, False, True, False, False]
+
+
+def test_two_feature_points_found_on_one_vertex_are_set_apart():
+    """Two feature points snapped to one vertex stop the rig (a control point on each): the one
+    whose lifts lie nearer keeps it, the other takes the nearest vertex no other point holds (on a
+    shape-model face, the lower inner lip's middle and side, 2.3 and 2.8)."""
+    from puppet.view.meshlandmarks import N_MESH, _distinct
+
+    vertices = np.c_[np.arange(10.0), np.zeros(10), np.zeros(10)]
+    rows = {None: (np.arange(10), cKDTree(vertices))}
+    middle, side = 14, 402  # MediaPipe's 2.3 and 2.8
+    chosen = np.full(N_MESH, -1)
+    chosen[[middle, side]] = 5
+    lifts = np.full((2, N_MESH, 3), np.nan)
+    lifts[:, middle] = [[5.0, 0.1, 0.0], [5.1, 0.0, 0.0]]
+    lifts[:, side] = [[4.4, 0.0, 0.0], [4.2, 0.0, 0.0]]
+    _distinct(chosen, vertices, rows, lifts, np.ones(2, dtype=bool))
+    assert (chosen[middle], chosen[side]) == (5, 4)
+
+
 @needs_detector
 @pytest.mark.parametrize("turn", TURNS)
 def test_a_face_turned_in_its_file_is_found_the_same(found, turn, tmp_path):
@@ -209,6 +243,26 @@ def test_a_face_of_another_shape_rigs_from_its_found_landmarks(tmp_path, capsys,
     shaped, eyes = np.asarray(face.vertices, float) + model.offsets(weights), 1024 * face.fapu["ES0"]
     for mid in ("2.2", "2.3"):  # on the lips' edges: lifted onto a tooth between them, 2.2 took the wall behind
         assert abs(shaped[fv[mid], 2] - shaped[face.feature_vertices[mid], 2]) < 0.03 * eyes
+
+
+@needs_detector
+@pytest.mark.slow
+def test_a_face_whose_upper_lip_stands_over_the_lower_rigs_from_its_found_landmarks(tmp_path, capsys):
+    """Seed 3 of the shape model (as above): its upper lip stands over the lower. The inner lip
+    corner 2.5, seen head-on by no view, was taken from a turned view that saw the upper lip in
+    front of it and fell on 2.2's vertex; taken from all the views, 2.3 and 2.8 then fell on one
+    vertex. ``puppet rig`` refused the face both times; each point now has a vertex of its own."""
+    from puppet.photo.shapemodel import load_shape_model
+
+    face, model = default_face(), load_shape_model()
+    weights = np.random.default_rng(3).normal(size=len(model)) * 2.0
+    vertices = np.asarray(face.vertices, float) + model.offsets(weights)
+    mesh = write_bare_obj(tmp_path / "shaped.obj", vertices, face.triangles)
+    assert cli.main(["rig", str(mesh), "-o", str(tmp_path / "me")]) == 0, capsys.readouterr().err
+    found = read_landmarks(tmp_path / "me" / "landmarks.json", len(vertices))
+    assert len(set(found.values())) == len(found)
+    width = np.linalg.norm(np.subtract(*vertices[[face.feature_vertices["3.7"], face.feature_vertices["3.12"]]]))
+    assert np.linalg.norm(vertices[found["2.5"]] - vertices[face.feature_vertices["2.5"]]) < 0.15 * width
 
 
 @needs_detector

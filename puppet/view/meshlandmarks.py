@@ -20,8 +20,10 @@ points ``puppet rig`` needs.
    mesh's position, interpolated: what unprojecting the depth buffer gives, without its precision
    loss); a landmark's pixel reads its 3D point there. Each lift is snapped to the nearest skin
    vertex (the skin: the connected component most landmarks land on). A landmark is taken from
-   the views that see its surface within ``MIN_FACING`` of head-on (the most frontal one when none
-   does): of their vertices, the one nearest all their lifts (a medoid: it stays on the surface).
+   the views that see its surface within ``MIN_FACING`` of head-on (when none does: a feature
+   point from all that see it, another landmark from the most frontal one): of their vertices,
+   the one nearest all their lifts (a medoid: it stays on the surface). No two feature points
+   share a vertex (``_distinct``).
 4. **Feature points.** MediaPipe landmark -> FDP as ``face-from-photo`` reads them
    (``puppet.photo.build.MEDIAPIPE_FDP``: eye corners and lids, brows, nose, lips), and the
    default face's other feature points (chin, lid creases, jaw line, cheeks, ears, hairline)
@@ -248,7 +250,8 @@ def _combine(face: Face, normals: np.ndarray, lifts: np.ndarray, facing: np.ndar
     spread = np.full(N_MESH, np.nan)
     on_skin = _on_skin(vertices, skin, lifts)
     for i in range(N_MESH):
-        use = _views_used(found & np.isfinite(lifts[:, i]).all(axis=1), on_skin[:, i], facing[:, i])
+        use = _views_used(found & np.isfinite(lifts[:, i]).all(axis=1), on_skin[:, i], facing[:, i],
+                          i in MEDIAPIPE_FDP)
         if not use.any():
             continue
         among, tree = _row(rows, MEDIAPIPE_FDP.get(i))
@@ -257,8 +260,11 @@ def _combine(face: Face, normals: np.ndarray, lifts: np.ndarray, facing: np.ndar
         chosen[i] = near[np.argmin(cost)]
     _apart(chosen, vertices, rows, lifts, found, rotation[1])
     _outside(chosen, vertices, rows[None], lifts, found, rotation[0])
+    _distinct(chosen, vertices, rows, lifts, found)
+    _apart(chosen, vertices, rows, lifts, found, rotation[1])  # a point set apart can cross its pair
     for i in np.flatnonzero(chosen >= 0):  # over the views the choice used
-        use = _views_used(found & np.isfinite(lifts[:, i]).all(axis=1), on_skin[:, i], facing[:, i])
+        use = _views_used(found & np.isfinite(lifts[:, i]).all(axis=1), on_skin[:, i], facing[:, i],
+                          i in MEDIAPIPE_FDP)
         spread[i] = np.median(np.linalg.norm(lifts[use, i] - vertices[chosen[i]], axis=1))
     taken = found_fdps()
     missing = sorted({taken[i] for i in taken if chosen[i] < 0} & set(FDP_NEEDED))
@@ -275,16 +281,27 @@ def _combine(face: Face, normals: np.ndarray, lifts: np.ndarray, facing: np.ndar
                           views=views, rotation=rotation, face_width=width)
 
 
-def _views_used(seen: np.ndarray, on_skin: np.ndarray, facing: np.ndarray) -> np.ndarray:
+def _views_used(seen: np.ndarray, on_skin: np.ndarray, facing: np.ndarray, feature: bool) -> np.ndarray:
     """The views a landmark is taken from (module docstring, 3), of those that ``seen`` it: the ones
     that lift it onto the skin where any does (``_on_skin``), and of those the ones that see its
-    surface within ``MIN_FACING`` of head-on, else the most frontal. All False where none saw it."""
+    surface within ``MIN_FACING`` of head-on, else all of them for a ``feature`` point (an FDP),
+    the most frontal for another landmark. All False where none saw it.
+
+    A feature point no view sees head-on is a lip corner in its crease: taken from the most
+    frontal view alone, on a shape-model face (seen at most 0.48 head-on) it came from a view
+    turned 25 degrees that saw the upper lip in front of it, the inner corner 2.5 fell on 2.2's
+    vertex (21% of the face width off) and the rig refused the face; among all the views, such a
+    view is outvoted (7% off). The other landmarks seen so are the face oval's, seen edge-on,
+    which only feed the warp (``carriedpoints``): from all the views they spread over each view's
+    outline, and MediaPipe's canonical face's carried jaw angles moved from 18% to 26% off."""
     if (seen & on_skin).any():
         seen = seen & on_skin
     if not seen.any():
         return seen
     use = seen & (facing >= MIN_FACING)
-    return use if use.any() else seen & (facing == facing[seen].max())
+    if use.any() or feature:
+        return use if use.any() else seen
+    return seen & (facing == facing[seen].max())
 
 
 def _on_skin(vertices: np.ndarray, skin: np.ndarray, lifts: np.ndarray) -> np.ndarray:
@@ -386,6 +403,35 @@ def _outside(chosen: np.ndarray, vertices: np.ndarray, skin: tuple[np.ndarray, c
         beyond = near[side * (vertices[near] @ across - vertices[chosen[j]] @ across) > 0]
         if len(beyond):
             chosen[i] = beyond[0]
+
+
+def _distinct(chosen: np.ndarray, vertices: np.ndarray, rows: dict[str | None, tuple[np.ndarray, cKDTree]],
+              lifts: np.ndarray, found: np.ndarray) -> None:
+    """No two feature points on one vertex (in place): the rig puts a control point on each, and
+    two in one place stop it. On a shape-model face whose upper lip stands over the lower one,
+    the lower inner lip's middle and side (2.3, 2.8) snapped to one vertex. Of the points on one
+    vertex, the one that would move farthest from its lifts' mean keeps it; the others take the
+    nearest vertex of their row (``_row``) that no point holds."""
+    target = {i: np.nanmean(lifts[found, i], axis=0) for i in found_fdps() if chosen[i] >= 0}
+    held = {int(chosen[i]) for i in target}
+
+    def elsewhere(i: int) -> int | None:
+        among, tree = _row(rows, MEDIAPIPE_FDP[i])
+        near = among[tree.query(target[i], k=min(len(among), 24))[1]]
+        return next((int(v) for v in near if v not in held), None)
+
+    def cost(i: int) -> float:
+        other = elsewhere(i)
+        return np.inf if other is None else float(np.linalg.norm(vertices[other] - target[i])
+                                                  - np.linalg.norm(vertices[chosen[i]] - target[i]))
+
+    for vertex in sorted(held):
+        group = [i for i in target if chosen[i] == vertex]
+        for i in sorted(group, key=cost)[:-1]:
+            other = elsewhere(i)
+            if other is not None:
+                chosen[i] = other
+                held.add(other)
 
 
 def skin_vertices(vertices: np.ndarray, triangles: np.ndarray, lifts: np.ndarray) -> np.ndarray:
