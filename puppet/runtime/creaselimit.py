@@ -15,7 +15,9 @@ point (``puppet.runtime.creases``), from the frame's translations spread by DFFD
 vertices (exact for the FAPs' own and calibrated motions; the rigid parts' carried points, which
 do not reach the cheekbones, are left out). Where the largest bend passes ``BOUND`` and more than
 the frame would bend without the FAP, the FAP is lowered until it does not;
-what a file says is never changed.
+what a file says is never changed. Its price (``FapEngine.shown``, 2 idle cores): 0.11 ms a frame with a
+cheek lifted (joy: 0.04 -> 0.15 ms), 0.76 ms a frame where it lowers both (the live smile held: 0.05 ->
+0.81 ms), nothing where no cheek moves.
 """
 
 from __future__ import annotations
