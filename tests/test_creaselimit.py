@@ -10,6 +10,7 @@ from hypothesis import strategies as st
 
 import puppet
 from puppet.fap.table import fap
+from puppet.runtime import creaselimit
 from puppet.runtime.creaselimit import BOUND
 from puppet.runtime.creases import largest_bend_near
 
@@ -78,3 +79,10 @@ def test_lift_cheek_never_creases_the_cheek_more_than_the_rest_of_the_frame(face
     without = _cheeks(face, runtime, values)
     values[LIFTS] += lift
     assert _cheeks(face, runtime, values) <= max(np.degrees(BOUND), without) + SLACK
+
+
+def test_a_mesh_with_no_skin_edge_near_the_cheekbone_shows_lift_cheek_as_it_is(face, monkeypatch):
+    monkeypatch.setattr(creaselimit, "NEAR", 0.0)
+    values = np.zeros(68)
+    values[LIFTS] = 200.0
+    np.testing.assert_array_equal(puppet.Runtime(face).faps.shown(values)[LIFTS], values[LIFTS])

@@ -89,7 +89,7 @@ class CreaseLimit:
                 continue
             watch = self._watches[k]
             full = watch.response @ v
-            if watch.bends(full[None]).max() > BOUND:
+            if watch.count and watch.bends(full[None]).max() > BOUND:  # a mesh may have no skin edge near the point
                 v[number - 1] *= _kept(watch, full, watch.response[:, number - 1] * v[number - 1])
 
     @functools.cached_property
