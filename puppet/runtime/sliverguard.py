@@ -211,7 +211,7 @@ class SliverGuard:
         positions = near[self._inside]
         shaped = self._shape(positions, rigid, displacements)
         near[self._inside] = positions
-        fixed = self._last.get("fixed", near.tobytes(), lambda: self._fixed(near.copy()))
+        fixed = self._last.get("fixed", near.tobytes(), lambda: self._fixed(near))
         if len(fixed) or shaped:
             out[self.vertices] = (fixed if len(fixed) else near)[self._inside]
         return bool(len(fixed))
@@ -229,17 +229,17 @@ class SliverGuard:
         return shaped
 
     def _fixed(self, near: np.ndarray) -> np.ndarray:
-        """``near`` (the positions of the watched vertices and the ring around them) fixed, or none
-        (0, 3) when nothing was about to fold or the fix would show more folded triangles than it
-        found: where a pose squeezes watched triangles that the springs cannot hold (the lips
-        pursed against a lip corner whose smile slivers are watched), their fallback draws the
-        skin toward rest by millimetres and turns the triangles around over instead."""
-        found = near.copy()
+        """``near`` (the positions of the watched vertices and the ring around them, left as they are) fixed,
+        as a new array, or none (0, 3) when nothing was about to fold or the fix would show more folded
+        triangles than it found: where a pose squeezes watched triangles that the springs cannot hold (the
+        lips pursed against a lip corner whose smile slivers are watched), their fallback draws the skin
+        toward rest by millimetres and turns the triangles around over instead."""
         positions = near[self._inside]
         if not self.constraints.guard(positions):
             return np.zeros((0, 3))
-        near[self._inside] = positions
-        return near if self._folds(near) <= self._folds(found) else np.zeros((0, 3))
+        fixed = near.copy()
+        fixed[self._inside] = positions
+        return fixed if self._folds(fixed) <= self._folds(near) else np.zeros((0, 3))
 
     def _folds(self, near: np.ndarray) -> int:
         """How many of the triangles around the watched vertices ``near`` turns over."""
