@@ -44,6 +44,17 @@ def test_the_auto_rig_is_deterministic(default):
     assert rig_to_dict(build_rig(default)) == rig_to_dict(build_rig(load_face()))
 
 
+def test_an_opening_jaw_drops_the_lower_lip_s_sides_less_than_its_middle(default):
+    """The jaw's share tapers across the lower lip to the corners' half, so at open_jaw 400 its
+    sides (8.7, 8.8) drop 0.72 as far as its middle (8.2), as in the artist's jawOpen (0.76); they
+    dropped 0.95 as far, and every open mouth's fit pulled the middle down past them into a V."""
+    runtime = Runtime(default, build_rig(default, calibrated=False))
+    drop = runtime.deform_faps(fap={"open_jaw": 400.0}) - runtime.deform_faps()
+    middle = drop[default.feature_vertices["8.2"], 1]
+    for side in ("8.7", "8.8"):
+        assert 0.6 < drop[default.feature_vertices[side], 1] / middle < 0.85
+
+
 def test_regions_cover_every_skin_vertex_once(default):
     assert _covered_once(default, build_rig(default))
 

@@ -9,6 +9,7 @@ import pytest
 
 from puppet.bench.assets import shared_assets
 from puppet.face.examples import load_examples
+from puppet.face.lipsag import lower_lip_sag
 from puppet.fap.facs import EXPRESSIONS, VISEMES, artist_shape, blendshapes
 from puppet.fap.highlevel import high_level_faps
 from puppet.fap.table import clamp_ranges
@@ -18,12 +19,16 @@ from tools.builders.build_high_level_faps import CORNERS_RAISED, MARKER, unfolde
 
 EXAMPLES = shared_assets() / "makehuman" / "faceunits_arkit"
 
-RESIDUAL_AT_MOST = {("expressions", 1): 0.52, ("expressions", 2): 0.50, ("expressions", 3): 0.34,
-                    ("expressions", 4): 0.30, ("expressions", 5): 0.60, ("expressions", 6): 0.35,
-                    ("visemes", 13): 0.41, ("visemes", 14): 0.36}
+RESIDUAL_AT_MOST = {("expressions", 1): 0.47, ("expressions", 2): 0.46, ("expressions", 3): 0.36,
+                    ("expressions", 4): 0.30, ("expressions", 5): 0.59, ("expressions", 6): 0.30,
+                    ("visemes", 13): 0.42, ("visemes", 14): 0.36}
 """|V(f) - V0 - D| / |D| against the summed artist shape, as tools/builders/build_high_level_faps.py
-measures it (0.483, 0.473, 0.313, 0.274, 0.573, 0.315, 0.376, 0.332) plus about 0.03. The hand-made
+measures it (0.438, 0.430, 0.332, 0.266, 0.561, 0.269, 0.386, 0.334) plus about 0.03. The hand-made
 tables before them left 0.75, 0.83, 1.16, 0.66, 1.05, 0.50, 0.56, 0.66."""
+
+SAG_PAST_ARTIST = 0.02
+"""Face units (2 mm): how much further than the artist's same shape an open mouth may drop the
+lower lip's middle below its sides (``puppet.face.lipsag``)."""
 
 FACS_BUILT = [("expressions", n) for n in EXPRESSIONS] + [("visemes", n) for n in VISEMES]
 
@@ -190,9 +195,12 @@ def _mouth(face, vertices: np.ndarray) -> tuple[float, float]:
 
 @pytest.mark.parametrize("number", [13, 14])
 def test_o_and_u_narrow_the_mouth(runtime, face, number):
+    """O narrows the corners to 0.935 of neutral's width, U to 0.768 (the artist 0.867 and 0.810).
+    O narrowed them to 0.920 before its lower lip stopped coming to a point
+    (``test_an_open_mouth_s_lower_lip_stays_round``): refitted, it gives up 0.8 mm of narrowing."""
     width, _ = _mouth(face, _pose(runtime, "visemes", number))
     neutral, _ = _mouth(face, face.vertices)
-    assert width <= 0.92 * neutral
+    assert width <= 0.94 * neutral
 
 
 def test_o_is_round_and_u_pushes_the_lips_forward(runtime, face):
@@ -250,3 +258,15 @@ def test_the_tool_rewrites_only_what_follows_its_marker(tmp_path):
     text = table.read_text()
     assert text.startswith(kept + MARKER)
     assert "open_jaw: 300" in text and "open_jaw: 1\n" not in text and "joy: AU6 cheek raiser" in text
+
+
+@pytest.mark.parametrize("kind, number", [("expressions", 4), ("expressions", 6), ("visemes", 13)])
+def test_an_open_mouth_s_lower_lip_stays_round(runtime, face, examples, kind, number):
+    """Fear, surprise and O drop the lower lip's middle below its sides (8.7, 8.8) no more than
+    2 mm past the artist's same shapes (fear 0.9 mm, the artist's 1.6). While the jaw carried the
+    lip's sides as far as its middle, the fits pulled the middle down past them: 8.7, 8.8 and
+    10.5 mm against the artist's 1.6, 3.0 and 6.4, a V under the mouth."""
+    rest = runtime.deform_faps()
+    recipes = EXPRESSIONS if kind == "expressions" else VISEMES
+    sag = lower_lip_sag(face, _pose(runtime, kind, number) - rest)
+    assert sag <= lower_lip_sag(face, artist_shape(examples, recipes[number][1])) + SAG_PAST_ARTIST

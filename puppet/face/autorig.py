@@ -473,6 +473,20 @@ class _Builder:
                 carried = {"attach": "jaw", "attach_weight": max(share, 0.05)} if share > 0 else {}
                 self._add(region, f"{region}_grid_{vertex}", "active", vertex=int(vertex), **carried)
 
+    def _lip_taper(self, xyz: np.ndarray) -> np.ndarray:
+        """The jaw's share of a lower-lip feature point at ``xyz`` (..., 3): whole on the mid-line,
+        falling linearly across the lip to the corners' own share (``CORNER_JAW_SHARE``) at their
+        width, as the lip drops in the artist's jawOpen (its sides three quarters as far as its
+        middle); whole again from the lower lip's outer edge (8.2) down to the chin (2.1). Carried
+        whole right up to the corners, the lip's sides dropped as far as its middle, and the fit of
+        every open mouth pulled the middle down past them into a V. The skin grid around keeps
+        its whole share: its calibrated motions follow the lip (tapered too, they pulled the grid
+        beside the inner lip's corners back past the lip's edge, folding it from open_jaw 750)."""
+        across = np.clip(np.abs(xyz[..., 0]) / abs(self.fp["8.3"][0]), 0, 1)
+        lip_y, chin_y = self.fp["8.2"][1], self.fp["2.1"][1]
+        on_lip = np.clip((xyz[..., 1] - chin_y) / (lip_y - chin_y), 0, 1)
+        return 1 - (1 - CORNER_JAW_SHARE) * across * on_lip
+
     def _midline_anchors(self, region: str) -> None:
         """Fixed anchors down the mid-line, so one side's motion does not leak to the other."""
         verts = np.flatnonzero(self.region_of == region)
@@ -537,7 +551,7 @@ class _Builder:
             self._fdp("upper_mouth", f, "active", attach="jaw", attach_weight=CORNER_JAW_SHARE)
             self._fdp("lower_mouth", f, "active")
         for f in LOWER_JAW:
-            self._fdp("lower_mouth", f, "active", attach="jaw")
+            self._fdp("lower_mouth", f, "active", attach="jaw", attach_weight=float(self._lip_taper(self.fp[f])))
         for name, (contour, keys) in LIP_LINES.items():
             region = "upper_mouth" if name.startswith("upper") else "lower_mouth"
             points = self._lip_points(name, contour, keys, region)

@@ -11,6 +11,9 @@ beside a tooth is not counted as one (FXAA blends neighbours, and on a closed mo
 one or two pixels it turned lip edges into "teeth"). A closed mouth has an almost empty area and
 shows neither.
 
+An open mouth's lower lip should stay round: ``main`` also prints how far each pose drops the
+lower lip's middle below its sides (``puppet.face.lipsag``), in millimetres of the default face.
+
 The teeth a viewer sees first are the upper central incisors, in the middle of the opening; side
 teeth toward the corners alone read as a gap-toothed mouth. So the area is also split into its
 middle third (by the columns between its leftmost and rightmost pixel) and the sides, and the upper
@@ -31,7 +34,9 @@ from pathlib import Path
 import numpy as np
 from PIL import Image, ImageDraw
 
+from puppet.face.default import DEFAULT_UNIT_MM
 from puppet.face.examples import load_examples
+from puppet.face.lipsag import lower_lip_sag
 from puppet.fap.facs import EXPRESSIONS, artist_shape
 from puppet.view.renderer import Renderer
 
@@ -171,11 +176,14 @@ def main(argv: list[str] | None = None) -> None:
     poses: dict[str, dict] = {f"open_jaw {v:.0f}": {"fap": {"open_jaw": v}} for v in (0.0, OPEN_JAW)}
     poses |= {f"expression {k}": {"expression": (k, 63, 0, 0)} for k in range(1, 7)}
     artist = artist_shapes(face, runtime, load_examples(face, args.artist)) if args.artist else {}
+    rest = runtime.deform_faps()
     for name, pose in poses.items():
-        print(_figures(name, mouth_pixels(face, runtime, pose=pose)))
+        sag = lower_lip_sag(face, runtime.deform_faps(**pose) - rest)
+        print(_figures(name, mouth_pixels(face, runtime, pose=pose), sag))
         if name in artist:
             posed = face.vertices + artist[name]
-            print(_figures("  artist", posed_mouth_pixels(face, posed, runtime.normals(posed))))
+            print(_figures("  artist", posed_mouth_pixels(face, posed, runtime.normals(posed)),
+                           lower_lip_sag(face, artist[name])))
 
 
 def artist_shapes(face, runtime, examples: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
@@ -190,10 +198,10 @@ def artist_shapes(face, runtime, examples: dict[str, np.ndarray]) -> dict[str, n
     return out
 
 
-def _figures(name: str, m: MouthPixels) -> str:
+def _figures(name: str, m: MouthPixels, sag: float) -> str:
     return (f"{name:14s}: area {m.area:5d} px, dark {m.dark_fraction:6.1%}, teeth {m.teeth_fraction:6.1%} "
             f"(middle third {m.middle_teeth_fraction:6.1%}, upper {m.middle_upper_teeth_fraction:6.1%}; "
-            f"sides {m.side_teeth_fraction:6.1%})")
+            f"sides {m.side_teeth_fraction:6.1%}); lower lip's middle {sag * DEFAULT_UNIT_MM:+5.1f} mm below its sides")
 
 
 if __name__ == "__main__":

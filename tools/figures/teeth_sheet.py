@@ -1,7 +1,9 @@
 """Draw the default face's parted mouths close up beside the artist's same shapes
-(``docs/teeth_closeup.png``): open_jaw 400 and the expressions whose lips part (fear, disgust,
-surprise), the rig's pose in the top row and the artist's in the bottom one, each labelled with
-the share of the opening's middle third that shows upper teeth (``puppet.view.mouthcheck``).
+(``docs/teeth_closeup.png``): open_jaw 400, the expressions whose lips part (fear, disgust,
+surprise) and joy, the rig's pose in the top row and the artist's in the bottom one, each labelled
+with the share of the opening's middle third that shows upper teeth (``puppet.view.mouthcheck``)
+and how far the lower lip's middle sags below its sides (``puppet.face.lipsag``: a V where it
+should stay round).
 The artist's shapes move the skin only, so their teeth stay at rest (module ``mouthcheck``'s
 ``artist_shapes``).
 
@@ -20,13 +22,15 @@ from PIL import Image, ImageDraw
 
 import puppet
 from puppet.bench.assets import shared_assets
+from puppet.face.default import DEFAULT_UNIT_MM
 from puppet.face.examples import load_examples
+from puppet.face.lipsag import lower_lip_sag
 from puppet.view.mouthcheck import OPEN_JAW, artist_shapes, posed_mouth_pixels
 from puppet.view.renderer import Renderer
 
-POSES = {f"open_jaw {OPEN_JAW:.0f}": {"fap": {"open_jaw": OPEN_JAW}}, "expression 4": {"expression": (4, 63, 0, 0)},
-         "expression 5": {"expression": (5, 63, 0, 0)}, "expression 6": {"expression": (6, 63, 0, 0)}}
-NAMES = {"expression 4": "fear", "expression 5": "disgust", "expression 6": "surprise"}
+POSES = {f"open_jaw {OPEN_JAW:.0f}": {"fap": {"open_jaw": OPEN_JAW}}} | {
+    f"expression {k}": {"expression": (k, 63, 0, 0)} for k in (4, 5, 6, 1)}
+NAMES = {"expression 4": "fear", "expression 5": "disgust", "expression 6": "surprise", "expression 1": "joy"}
 WIDTH, HEIGHT, STRIP = 400, 300, 16
 SPREAD = 1.6  # the close-up frames the inner lip line this much wider than it is
 
@@ -38,6 +42,13 @@ def close_up(face, vertices: np.ndarray, normals: np.ndarray) -> np.ndarray:
     with Renderer.for_face(face, width=WIDTH, height=HEIGHT, detail=False) as renderer:
         renderer.aim((lips - centre) * SPREAD + centre, view="front")
         return renderer.render(vertices, normals)
+
+
+def figures(face, posed: np.ndarray, normals: np.ndarray) -> str:
+    """The label's figures: upper teeth in the middle third, and the lower lip's sag in mm."""
+    shown = posed_mouth_pixels(face, posed, normals).middle_upper_teeth_fraction
+    sag = lower_lip_sag(face, posed - face.vertices) * DEFAULT_UNIT_MM
+    return f"upper teeth in the middle {shown:.0%}, lip sag {sag:+.1f} mm"
 
 
 def tile(image: np.ndarray, text: str) -> Image.Image:
@@ -59,12 +70,10 @@ def main() -> None:
         label = NAMES.get(name, name)
         vertices = runtime.deform_faps(**pose)
         normals = runtime.normals(vertices, runtime.fap_controls(**pose)[1])
-        shown = posed_mouth_pixels(face, vertices, normals).middle_upper_teeth_fraction
-        rows[0].append(tile(close_up(face, vertices, normals), f"{label}: rig, upper teeth in the middle {shown:.0%}"))
+        rows[0].append(tile(close_up(face, vertices, normals), f"{label}: rig, " + figures(face, vertices, normals)))
         posed = face.vertices + artist[name]
         normals = runtime.normals(posed)
-        shown = posed_mouth_pixels(face, posed, normals).middle_upper_teeth_fraction
-        rows[1].append(tile(close_up(face, posed, normals), f"{label}: artist, upper teeth in the middle {shown:.0%}"))
+        rows[1].append(tile(close_up(face, posed, normals), f"{label}: artist, " + figures(face, posed, normals)))
     sheet = Image.new("RGB", (WIDTH * len(POSES), 2 * (HEIGHT + STRIP)), "white")
     for r, row in enumerate(rows):
         for c, image in enumerate(row):
