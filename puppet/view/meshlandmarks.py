@@ -24,6 +24,12 @@ points ``puppet rig`` needs.
    point from all that see it, another landmark from the most frontal one): of their vertices,
    the one nearest all their lifts (a medoid: it stays on the surface). No two feature points
    share a vertex (``_distinct``).
+   **The eyes**: a bare mesh's eyes render skin-coloured, and MediaPipe can see a slit under them
+   (on a shape-model face, the upper lids on the lower lid). The lids' middles and the eye corners
+   are taken from the eye opening's edge instead, where the front view of the skin alone sees
+   through the lids (``_lid_edges``): on the two shape-model faces of ``transfer_check.py --found``
+   the transfer's residual went from 0.421 / 0.414 to 0.396 / 0.393 (from the given landmarks:
+   0.351 / 0.358).
 4. **Feature points.** MediaPipe landmark -> FDP as ``face-from-photo`` reads them
    (``puppet.photo.build.MEDIAPIPE_FDP``: eye corners and lids, brows, nose, lips), and the
    default face's other feature points (chin, lid creases, jaw line, cheeks, ears, hairline)
@@ -33,7 +39,8 @@ points ``puppet rig`` needs.
 
 How sure: the views the face was found in, and the agreement between views, per feature point
 the median distance of its lifts from the chosen vertex, in % of the face's width (between
-MediaPipe's face-side points 234 and 454). A mesh where no view shows a face is refused in one
+MediaPipe's face-side points 234 and 454; for the lids and corners taken from the eye opening,
+how far MediaPipe's own lie from them). A mesh where no view shows a face is refused in one
 line (``DetectionError``). On the default face, ICT-FaceKit and MediaPipe's canonical face, the
 points found lie within 2-2.5% of the face width of the given ones (median;
 ``tools/checks/landmark_accuracy.py``).
@@ -136,8 +143,9 @@ def find_landmarks(face: Face, name: str, *, size: int = SIZE, keep: str | Path 
         folder = Path(keep) if keep is not None else Path(scratch)
         folder.mkdir(parents=True, exist_ok=True)
         frames, tried = _find_face(shots, folder, name, say)
-        rotation, lifts, facing, found = _views(shots, folder, name, frames)
-    return _combine(face, shots.normals, lifts, facing, found, tried + len(VIEWS) * len(frames), rotation, name)
+        rotation, lifts, facing, found, front = _views(shots, folder, name, frames)
+        return _combine(face, shots.normals, lifts, facing, found, tried + len(VIEWS) * len(frames), rotation, name,
+                        lambda skin: (front, shots.skin_surface(front, skin)))
 
 
 def found_face(mesh: Face, name: str, *, step: Callable[[str], None] | None = None) -> tuple[Face, FoundLandmarks]:
@@ -218,11 +226,11 @@ def project(camera: Camera, points: np.ndarray, size: tuple[int, int]) -> np.nda
 
 
 def _views(shots: Shots, folder: Path, name: str, frames: list[tuple[np.ndarray, np.ndarray]]
-           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, Camera]:
     """The face seen in each of ``VIEWS`` in each of the ``frames``, framed on its landmarks (one
     detector run), and of the frames the one whose front view's landmarks fit the default face's
     best (``_fit``): (its rotation, the landmarks lifted per view (V, 468, 3), facing (V, 468): cos
-    of the surface's angle to the view, whether each view found the face (V,))."""
+    of the surface's angle to the view, whether each view found the face (V,), its front view's camera)."""
     cameras = []
     for rotation, first in frames:
         face_points = first[:N_MESH][np.isfinite(first[:N_MESH]).all(axis=1)]
@@ -235,12 +243,15 @@ def _views(shots: Shots, folder: Path, name: str, frames: list[tuple[np.ndarray,
     points = np.stack([p[:N_MESH] for p, _ in lifts[views]])
     facing = np.stack([f[:N_MESH] for _, f in lifts[views]])
     rotation = frames[best][0] if fits[best] is None else fits[best][1]
-    return rotation, points, facing, np.array(found[views], dtype=bool)
+    return rotation, points, facing, np.array(found[views], dtype=bool), cameras[best * n]
 
 
 def _combine(face: Face, normals: np.ndarray, lifts: np.ndarray, facing: np.ndarray, found: np.ndarray, views: int,
-             rotation: np.ndarray, name: str) -> FoundLandmarks:
-    """Per landmark, the skin vertex its views agree on (module docstring, 3), and the FDPs."""
+             rotation: np.ndarray, name: str,
+             front: Callable[[np.ndarray], tuple[Camera, np.ndarray]]) -> FoundLandmarks:
+    """Per landmark, the skin vertex its views agree on (module docstring, 3), the lids' middles
+    and the eye corners moved onto the eye opening's edge (``_lid_edges``; ``front(skin)``: the
+    front view's camera and the surface points of the skin alone it sees), and the FDPs."""
     if not found.any():
         raise DetectionError(f"no face found in {len(VIEWS)} rendered views of {name} turned to face the camera")
     vertices = np.asarray(face.vertices, float)
@@ -258,6 +269,7 @@ def _combine(face: Face, normals: np.ndarray, lifts: np.ndarray, facing: np.ndar
         near = among[tree.query(lifts[use, i])[1]]
         cost = np.linalg.norm(vertices[near][:, None] - lifts[use, i][None], axis=2).sum(axis=1)
         chosen[i] = near[np.argmin(cost)]
+    _lid_edges(chosen, vertices, normals, skin, *front(skin))
     _apart(chosen, vertices, rows, lifts, found, rotation[1])
     _outside(chosen, vertices, rows[None], lifts, found, rotation[0])
     _distinct(chosen, vertices, rows, lifts, found)
@@ -302,6 +314,113 @@ def _views_used(seen: np.ndarray, on_skin: np.ndarray, facing: np.ndarray, featu
     if use.any() or feature:
         return use if use.any() else seen
     return seen & (facing == facing[seen].max())
+
+
+EYES = ((386, 374, 263, 362), (159, 145, 33, 133))
+"""Per eye, MediaPipe's upper and lower lid middles (3.1 / 3.3, 3.2 / 3.4) and its corners."""
+MIN_GAP = 2  # pixels: a gap between the lids thinner than this in the front view is no eye opening
+DEPTH_WEIGHT = 0.25  # of a distance along the view, near a lid's edge: the lid's thickness lies along it
+DEEP = 0.3  # eye widths behind the lids: a surface seen so far behind, through the opening, is not a lid
+
+
+def _lid_edges(chosen: np.ndarray, vertices: np.ndarray, normals: np.ndarray, skin: np.ndarray, camera: Camera,
+               surface: np.ndarray) -> None:
+    """The lid middles and eye corners moved onto the eye opening's edge (in place). On a bare
+    mesh the eyes render skin-coloured; on a shape-model face MediaPipe saw a slit under the eye
+    and put the lids and corners there (the upper lids 8-9% of the face width low, on the lower
+    lid; the corners 3-5%), and the transfer's residual was 0.41 (0.36 from the given landmarks).
+
+    The eye opening is where the front view of the skin alone (``camera``; ``surface``: the skin's
+    points per pixel) sees nothing (a hole) or a surface ``DEEP`` behind the lids (the socket
+    behind the eyeball, the inside of the head), through them (``_gaps``); not where the whole mesh
+    shows the eyeball, which pokes through the upper lid on those faces (its edge lay 3.5-5% of the
+    face width above the lid's; painted for MediaPipe, it drew the lids there too). In the pixel
+    column midway between the corners found (MPEG-4's lid middles; MediaPipe's lay up to 3% of the
+    face width aside), within the eye's width of the lids found, the longest such gap is the
+    opening: the upper lid point takes the vertex nearest the skin seen just above it, the lower
+    one just below, of the skin vertices that face the camera (``normals``, ``MIN_FACING``),
+    nearness along the view counted at ``DEPTH_WEIGHT``: the lid curls back into the socket at its
+    edge, and the nearest vertex of all was one of its inner side's, 2-2.5% of the face width
+    behind the edge (or one beside it, in front). Each corner keeps the column it was found in
+    and takes the row of the opening's middle where the opening, followed from the middle column
+    (``_opening_middles``), comes nearest that column, and the front-facing vertex nearest the
+    surface seen there (or its own, where nothing is: a hole). Corners found on a vertex behind
+    the lids' edge (on a lid's inner side) with the lids moved onto the edge gave one face a
+    residual of 0.437, against 0.421 with neither moved and 0.396 with both; MediaPipe's corners
+    3-5% low gave the other 0.414, and 0.393 moved. A corner found well inside the opening, away
+    from its end, can take a vertex of the socket's wall behind it (it is seen there, facing the
+    camera): on the default face with its corners put 4% of its width low, one outer corner did.
+    An eye with no opening seen keeps its points."""
+    axes = camera.basis() * [[1.0], [1.0], [DEPTH_WEIGHT]]
+    back = axes[2] / DEPTH_WEIGHT
+    front = skin[normals[skin] @ back >= MIN_FACING]
+    if not len(front):
+        return
+    edge_tree, front_tree = cKDTree(vertices[front] @ axes.T), cKDTree(vertices[front])
+    height, width = surface.shape[:2]
+    for upper, lower, *corners in EYES:
+        points = chosen[[upper, lower, *corners]]
+        if (points < 0).any():
+            continue
+        pixels = project(camera, vertices[points], (width, height))
+        span = int(np.linalg.norm(pixels[2] - pixels[3]))
+        middle, centre = int((pixels[0, 1] + pixels[1, 1]) / 2), int((pixels[2, 0] + pixels[3, 0]) / 2)
+        if not (0 <= middle < height and 0 <= centre < width):
+            continue
+        rows = np.arange(max(middle - span, 0), min(middle + span + 1, height))
+        columns = np.arange(max(centre - span, 0), min(centre + span + 1, width))
+        block = surface[rows][:, columns]
+        deep = DEEP * np.linalg.norm(np.subtract(*vertices[points[2:]]))
+        near = block @ back  # NaN where nothing is seen: no lid
+        lid = near >= vertices[points[:2]].mean(axis=0) @ back - deep
+        j = centre - columns[0]
+        gaps = _gaps(lid[:, j], near[:, j], deep / 2, MIN_GAP)
+        if not gaps:
+            continue
+        _, top, bottom = max(gaps)
+        chosen[upper] = front[edge_tree.query(block[top - 1, j] @ axes.T)[1]]
+        chosen[lower] = front[edge_tree.query(block[bottom, j] @ axes.T)[1]]
+        for corner, x in zip(corners, pixels[2:, 0]):
+            column = int(np.clip(x - columns[0], 0, len(columns) - 1))
+            middles = _opening_middles(lid, near, deep / 2, j, (top, bottom), 1 if column > j else -1)
+            point = block[middles[min(middles, key=lambda c: abs(c - column))], column]
+            if not np.isfinite(point).all():
+                point = vertices[chosen[corner]]
+            chosen[corner] = front[front_tree.query(point)[1]]
+
+
+def _gaps(lid: np.ndarray, near: np.ndarray, jump: float, shortest: int) -> list[tuple[int, int, int]]:
+    """The runs of other pixels in a pixel column (top first) that sees lid skin where ``lid``,
+    with lid skin above and below, ``shortest`` pixels long at least, seen through the lids: at
+    each end, the lid pixel nearer the camera than the run's (``near``, NaN where nothing is seen)
+    by ``jump`` at least (or the run's pixel sees nothing). Where the skin merely turns away from
+    the camera beside an eye (a temple deeper than the lids) it crosses the lids' depth smoothly,
+    and an eye's opening followed there ran into it. (length, first, after last) each."""
+    change = np.flatnonzero(np.diff(lid.astype(int))) + 1
+    starts, ends = change[lid[change - 1]], change[~lid[change - 1]]
+    runs = [(int(end - start), int(start), int(end)) for start in starts for end in ends[ends > start][:1]]
+    with np.errstate(invalid="ignore"):
+        return [run for run in runs if run[0] >= shortest and not near[run[1]] > near[run[1] - 1] - jump
+                and not near[run[2] - 1] > near[run[2]] - jump]
+
+
+def _opening_middles(lid: np.ndarray, near: np.ndarray, jump: float, column: int, gap: tuple[int, int],
+                     step: int) -> dict[int, int]:
+    """{pixel column: the row of the eye opening's middle there}: the opening followed from its
+    ``gap`` (rows, first and after last) in ``column`` of ``lid`` (rows, columns: where lid skin is
+    seen; ``near``, ``jump``: as ``_gaps`` takes them) column by column (``step``: +1 right, -1
+    left), each column's gap the longest that overlaps the one before, to the column where none does."""
+    top, bottom = gap
+    middles = {column: (top + bottom - 1) // 2}
+    while 0 <= column + step < lid.shape[1]:
+        overlapping = [run for run in _gaps(lid[:, column + step], near[:, column + step], jump, 1)
+                       if run[1] < bottom and run[2] > top]
+        if not overlapping:
+            break
+        _, top, bottom = max(overlapping)
+        column += step
+        middles[column] = (top + bottom - 1) // 2
+    return middles
 
 
 def _on_skin(vertices: np.ndarray, skin: np.ndarray, lifts: np.ndarray) -> np.ndarray:
@@ -484,6 +603,20 @@ class Shots:
         reach = np.linalg.norm(np.ptp(self.vertices, axis=0))
         return Camera(eye=target + rotation.T @ (distance * direction), target=target, up=rotation.T @ [0.0, 1.0, 0.0],
                       fov=FOV, near=max(distance - reach, distance / 100), far=distance + reach)
+
+    def skin_surface(self, camera: Camera, skin: np.ndarray) -> np.ndarray:
+        """The surface points (H, W, 3) of the skin alone (the triangles whose corners are all
+        ``skin`` vertices) seen by ``camera``, NaN where none is: through an eye opening, what lies
+        behind the eyeball (``_lid_edges``)."""
+        triangles = np.asarray(self.face.triangles)
+        alone = triangles[np.isin(triangles, skin).all(axis=1)]
+        shifted = replace(camera, eye=camera.eye - self.centre, target=camera.target - self.centre)
+        with self.ctx:
+            skin_pass = SurfacePass(self.ctx, self.vertices - self.centre, alone, (self.size, self.size))
+            try:
+                return skin_pass.points(shifted) + self.centre
+            finally:
+                skin_pass.release()
 
     def shoot(self, camera: Camera) -> tuple[np.ndarray, np.ndarray]:
         """(the render (H, W, 3) uint8, the surface point per pixel (H, W, 3) file coordinates, NaN
