@@ -69,7 +69,7 @@ def test_a_recipe_is_the_sum_of_its_units_shapes():
 
 
 def test_joy_raises_both_lip_corners_and_the_lower_lids(runtime, face):
-    """The artist lifts the corners 746 MNS; the hand-made joy 200, this one 672 (past the Greta
+    """The artist lifts the corners 746 MNS; the hand-made joy 200, this one 688 (past the Greta
     editor's 600 MNS: ``test_joy_lifts_the_lip_corners_...``). The cheek raiser (AU6) shows as the lower lids pushed up,
     the cheeks puffed and lifted (``test_joy_lifts_the_cheekbones_within_the_crease_bound``)."""
     joy = _pose(runtime, "expressions", 1)
@@ -82,7 +82,7 @@ def test_joy_raises_both_lip_corners_and_the_lower_lids(runtime, face):
 def test_joy_lifts_the_lip_corners_nine_tenths_of_the_artist_s_smile_with_no_fold(runtime, face, examples):
     """The artist's joy lifts the outer corners 13.2 mm. Capped at the Greta editor's 600 MNS and
     eased where the corner slivers fold, joy lifted them 9.3 mm (70%); fitted past the editor's
-    end, with the fold guard holding the hidden slivers inside the corners, 11.9 mm."""
+    end, with the fold guard holding the hidden slivers inside the corners, 12.2 mm."""
     joy = _pose(runtime, "expressions", 1)
     artist = face.vertices + artist_shape(examples, EXPRESSIONS[1][1])
     for corner in ("8.3", "8.4"):
@@ -140,7 +140,7 @@ def test_joy_creases_no_cheek(runtime, face):
 
 
 def test_joy_lifts_the_cheekbones_within_the_crease_bound(runtime, face):
-    """The cheek raiser lifts the cheekbones' points (5.3, 5.4) by lift_cheek: 4.7 mm, where the
+    """The cheek raiser lifts the cheekbones' points (5.3, 5.4) by lift_cheek: 5.3 mm, where the
     artist's smile lifts them 9.2 (held at 0 for the crease, joy left them where they were); past
     that, lift_cheek's motion creases the skin under the eyes (``test_joy_creases_no_cheek``)."""
     joy = _pose(runtime, "expressions", 1)
