@@ -195,7 +195,7 @@ def test_a_channel_on_the_lids_takes_them_at_once_and_idle_comes_back_when_it_re
 @pytest.mark.parametrize("target, parts", [
     ("  - {eyes: yaw, source: box.ch1, range: [-20, 20]}", ("eyes",)),
     ("  - {head: pitch, source: box.ch1, range: [0, 10]}", ("breath",)),
-    ("  - {expression: joy, source: box.ch1}", ("blink", "breath")),  # lids, nostrils
+    ("  - {expression: disgust, source: box.ch1}", ("blink", "breath")),  # lids, nostrils (nose wrinkler)
     ("  - {muscle: orbicularis_oculi_r, source: box.ch1}", ("blink",)),
     ("  - {fap: stretch_l_nose, source: box.ch1, range: [0, 100]}", ("breath",)),
 ])
@@ -211,7 +211,7 @@ def test_each_part_yields_to_whatever_writes_its_faps(target, parts):
 
 @pytest.mark.parametrize("trigger, parts", [
     ("{mode: hold, faps: {close_t_l_eyelid: 600}, attack: 0.1, release: 0.2}", ("blink",)),
-    ("{mode: hold, expression: surprise, attack: 0.1, release: 0.2}", ("blink", "breath")),  # lids, nostrils
+    ("{mode: hold, expression: disgust, attack: 0.1, release: 0.2}", ("blink", "breath")),  # lids, nostrils
     ("{mode: hold, faps: {yaw_l_eyeball: 20000}, attack: 0.1, release: 0.2}", ("eyes",)),
     ("{mode: hold, faps: {head_pitch: 3000}, attack: 0.1, release: 0.2}", ("breath",)),
 ])
