@@ -1,15 +1,13 @@
 """The cheeks' crease limit (``puppet.runtime.creaselimit``): lift_cheek lowered at pose time where
 the skin under the eye would crease, whatever else the frame moves; nothing else changed."""
 
-import json
-from pathlib import Path
-
 import numpy as np
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import puppet
 from puppet.fap.table import fap
+from puppet.live.arkitroute import shipped_vectors
 from puppet.runtime import creaselimit
 from puppet.runtime.creaselimit import BOUND
 from puppet.runtime.creases import largest_bend_near
@@ -17,7 +15,6 @@ from puppet.runtime.creases import largest_bend_near
 CHEEKBONES = ("5.3", "5.4")
 LIFTS = [40, 41]  # lift_l_cheek, lift_r_cheek (0-based)
 SLACK = 0.5  # degrees: the limit's linear model leaves out the rigid parts' carried points
-ARKIT = Path(puppet.__file__).parent / "data" / "arkit_faps.json"
 
 
 def _cheeks(face, runtime, values: np.ndarray) -> float:
@@ -25,7 +22,7 @@ def _cheeks(face, runtime, values: np.ndarray) -> float:
 
 
 def _arkit(*names: str) -> np.ndarray:
-    rows = json.loads(ARKIT.read_text())["faps"]
+    rows = shipped_vectors()["faps"]
     values = np.zeros(68)
     for name in names:
         for fap_name, value in rows[name].items():

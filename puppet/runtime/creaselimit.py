@@ -26,7 +26,7 @@ import functools
 
 import numpy as np
 
-from puppet.runtime.creases import Hinges, near_edges
+from puppet.runtime.creases import Hinges, near_edges, wrapped
 
 LIMITED = {41: "5.3", 42: "5.4"}
 """lift_l_cheek, lift_r_cheek: the FAP and the feature point around which it creases the skin."""
@@ -64,7 +64,7 @@ class _Watch:
         axis = x[:, :, self.ends[1]] - x[:, :, self.ends[0]]
         sine = (_cross(n1, n2) * axis).sum(axis=1) / np.sqrt((axis * axis).sum(axis=1))
         angle = np.arctan2(sine, (n1 * n2).sum(axis=1))
-        return np.abs(np.pi - np.remainder(np.pi - (angle - self.angles), 2 * np.pi))
+        return np.abs(wrapped(angle - self.angles))
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:

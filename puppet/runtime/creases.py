@@ -84,7 +84,12 @@ class Hinges:
 
     def bend_from(self, rest_angles: np.ndarray, posed: np.ndarray, triangles: np.ndarray) -> np.ndarray:
         """``bend`` from the rest's dihedral angles, found once for many poses."""
-        return np.pi - np.remainder(np.pi - (self.dihedral(posed, triangles) - rest_angles), 2 * np.pi)
+        return wrapped(self.dihedral(posed, triangles) - rest_angles)
+
+
+def wrapped(angles: np.ndarray) -> np.ndarray:
+    """Angle differences (radians) wrapped into (-pi, pi]: a bend through the flat angle is the short way round."""
+    return np.pi - np.remainder(np.pi - angles, 2 * np.pi)
 
 
 @dataclass(frozen=True)

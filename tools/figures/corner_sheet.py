@@ -83,11 +83,9 @@ looks at, the views and the poses (``Runtime.deform_faps`` arguments, or ``arkit
 def arkit_pose(names: tuple[str, ...]) -> dict:
     """The ``deform_faps`` arguments of the ARKit blendshapes ``names`` at 1, their rows in this
     checkout's ``puppet/data/arkit_faps.json`` summed."""
-    import json
+    from puppet.live.arkitroute import shipped_vectors
 
-    import puppet
-
-    rows = json.loads((Path(puppet.__file__).parent / "data" / "arkit_faps.json").read_text())["faps"]
+    rows = shipped_vectors()["faps"]
     values: dict[str, float] = {}
     for name in names:
         for fap_name, value in rows[name].items():
